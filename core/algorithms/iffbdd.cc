@@ -1,0 +1,161 @@
+#include "core/algorithms/iffbdd.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+
+namespace nupmpc::core {
+namespace {
+
+bool RowKindSupported(PriorKind kind) {
+  return kind == PriorKind::kNone || kind == PriorKind::kL1 || kind == PriorKind::kAtLeast ||
+         kind == PriorKind::kAtMost || kind == PriorKind::kBox;
+}
+
+}  // namespace
+
+absl::Status Iffbdd::CheckApplicable(const Problem& p) {
+  for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
+    const ScalarPrior& prior = p.input_priors[i];
+    if (!prior.has_gaussian()) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "iffbdd needs a Gaussian part (input weight R > 0) on every input; input_priors[", i, "] has none"));
+    }
+    if (!RowKindSupported(prior.kind)) {
+      return absl::FailedPreconditionError(absl::StrCat("iffbdd has no dual rule for input_priors[", i,
+                                                        "] of kind ", PriorKindName(prior.kind)));
+    }
+  }
+  for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
+    if (!RowKindSupported(p.output_priors[i].kind)) {
+      return absl::FailedPreconditionError(absl::StrCat("iffbdd has no dual rule for output_priors[", i,
+                                                        "] of kind ", PriorKindName(p.output_priors[i].kind)));
+    }
+  }
+  return absl::OkStatus();
+}
+
+Iffbdd::Iffbdd(const Problem& problem) {
+  bool inputs_constrained = false;
+  for (const ScalarPrior& prior : problem.input_priors) inputs_constrained |= prior.kind != PriorKind::kNone;
+  graph_ = BuildFactorGraph(problem, inputs_constrained);
+  fw_.Resize(graph_, /*keep_edges=*/false);
+  const int R = graph_.num_rows();
+  input_factor_.resize(graph_.input_prior.size());
+  nup_.resize(R);
+  row_factor_.resize(R);
+  gamma_.resize(R);
+  region_.resize(R);
+  polish_region_.resize(R);
+  costate_.setZero(graph_.M);
+  scratch_.setZero(graph_.M);
+  Refresh(problem);
+  ColdStart();
+}
+
+void Iffbdd::Refresh(const Problem& problem) {
+  RefreshFactorGraph(problem, &graph_);
+  for (std::size_t i = 0; i < input_factor_.size(); ++i) {
+    input_factor_[i] = ScalarFactor::GaussianPart(graph_.input_prior[i]);
+  }
+  LoadInputMoments(graph_, input_factor_.data(), &fw_);
+  // Hard boxes keep γ = (b-a)/2 exactly ([LL-dual] eq. 59); others keep their adapted γ.
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    const ScalarPrior& prior = graph_.row_prior[r];
+    if (prior.kind == PriorKind::kBox && prior.is_hard()) gamma_[r] = GammaInitial(prior);
+  }
+}
+
+void Iffbdd::ColdStart() {
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    nup_[r] = ScalarFactor{};
+    gamma_[r] = GammaInitial(graph_.row_prior[r]);
+    region_[r] = Region::kInside;
+  }
+  has_regions_ = false;
+}
+
+void Iffbdd::ShiftWarmStart() {
+  // Sources are always rows of a later step, i.e. higher indices: ascending order is safe.
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    const int src = graph_.row_shift_source[r];
+    nup_[r] = nup_[src];
+    gamma_[r] = gamma_[src];
+    region_[r] = region_[src];
+  }
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    const ScalarPrior& prior = graph_.row_prior[r];
+    if (prior.kind == PriorKind::kBox && prior.is_hard()) gamma_[r] = GammaInitial(prior);
+  }
+}
+
+int Iffbdd::Iterate(PrimalIterate* out) {
+  for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], nup_[r]);
+  RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_);
+  const int changed = static_cast<int>(Backward(Pass::kIterate, out));
+  has_regions_ = true;
+  return changed;
+}
+
+double Iffbdd::Polish(PrimalIterate* out) {
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    const ScalarPrior& prior = graph_.row_prior[r];
+    row_factor_[r] = prior.kind == PriorKind::kNone ? ScalarFactor::GaussianPart(prior)
+                                                    : PieceFactor(prior, prior.slope, polish_region_[r]);
+  }
+  RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_);
+  return Backward(Pass::kPolish, out);
+}
+
+double Iffbdd::Backward(Pass pass, PrimalIterate* out) {
+  const FactorGraph& g = graph_;
+  Eigen::VectorXd& xt = costate_;  // x̃: the dual of the state
+  xt.setZero();
+  int changed = 0;
+  double residual = 0.0;
+  for (int n = g.N; n >= 0; --n) {
+    for (int r = g.row_begin[n + 1] - 1; r >= g.row_begin[n]; --r) {
+      const ScalarPrior& prior = g.row_prior[r];
+      if (prior.kind == PriorKind::kNone && !prior.has_gaussian()) continue;
+      const double V_e = fw_.s(r);
+      if (!(V_e > 0.0)) continue;  // output fixed by data (§9.3): ỹ = 0, no update
+      const double m_e = fw_.yhat(r) - fw_.v.col(r).dot(xt);
+      const Message msg{m_e, V_e};
+      double y_dual;
+      if (pass == Pass::kIterate) {
+        const Decision d = Decide(prior, prior.slope, msg);
+        y_dual = (m_e - d.z) / V_e;  // Moreau: the exact dual decision
+        if (prior.kind != PriorKind::kNone) {
+          if (d.region != region_[r]) ++changed;
+          region_[r] = d.region;
+          gamma_[r] = std::max(gamma_[r], GammaNext(prior, FoldGaussianPart(prior, msg)));
+          const double nup_dual = prior.has_gaussian() ? y_dual - (d.z - prior.mean) / prior.variance : y_dual;
+          nup_[r] = DualNupFactor(prior, nup_dual, gamma_[r]);
+        }
+      } else {
+        const double z = CombineWithMessage(row_factor_[r], m_e, V_e);
+        y_dual = (m_e - z) / V_e;
+        if (prior.kind != PriorKind::kNone) {
+          const Decision d = Decide(prior, prior.slope, msg);
+          residual = std::max(residual, std::abs(d.z - z));
+          polish_region_[r] = d.region;
+        }
+      }
+      if (y_dual != 0.0) xt.noalias() += y_dual * g.c(r);
+    }
+    if (n == 0) break;
+    const int j = n - 1;
+    for (int l = 0; l < g.L; ++l) {
+      out->u(l, j) = fw_.mU(l, j) - fw_.VU(l, j) * g.B(j).col(l).dot(xt);
+    }
+    scratch_.noalias() = g.A(j).transpose() * xt;
+    xt = scratch_;
+  }
+  scratch_.noalias() = g.m0;
+  scratch_.noalias() -= g.V0 * xt;
+  out->x0 = scratch_.head(g.base_M);
+  return pass == Pass::kIterate ? changed : residual;
+}
+
+}  // namespace nupmpc::core

@@ -1,0 +1,53 @@
+#ifndef NUPMPC_CORE_ALGORITHMS_IFFBDD_H_
+#define NUPMPC_CORE_ALGORITHMS_IFFBDD_H_
+
+#include <vector>
+
+#include "absl/status/status.h"
+#include "core/algorithms/outer_iteration.h"
+#include "core/message_passing/forward_filter.h"
+#include "core/model/factor_graph.h"
+#include "core/priors/scalar_rules.h"
+
+namespace nupmpc::core {
+
+// IFFBDD ([LL-dual] Alg. 2; nup-algorithms.md §9): forward Kalman filter with dual-NUP
+// Gaussians on the constrained rows, backward dual deciding of each row's multiplier ỹ,
+// inputs recovered from the costate. Input constraints enter through state augmentation
+// (§9.6). Needs a Gaussian part on every input; rows may carry box, half-space (hard or
+// soft) and L1 priors.
+class Iffbdd final : public OuterIteration {
+ public:
+  // Why this problem cannot run IFFBDD (OkStatus if it can).
+  static absl::Status CheckApplicable(const Problem& problem);
+  explicit Iffbdd(const Problem& problem);
+
+  Algorithm algorithm() const override { return Algorithm::kIffbdd; }
+  void Refresh(const Problem& problem) override;
+  void ColdStart() override;
+  void ShiftWarmStart() override;
+  int Iterate(PrimalIterate* out) override;
+  void AdoptRegionsForPolish() override { polish_region_ = region_; }
+  double Polish(PrimalIterate* out) override;
+  bool has_regions() const override { return has_regions_; }
+
+ private:
+  enum class Pass { kIterate, kPolish };
+  // The backward dual-deciding pass; returns the region changes (kIterate) or the
+  // deciding residual (kPolish).
+  double Backward(Pass pass, PrimalIterate* out);
+
+  FactorGraph graph_;
+  ForwardFilterWorkspace fw_;
+  std::vector<ScalarFactor> input_factor_;  ///< Gaussian parts of the inputs (fixed)
+  std::vector<ScalarFactor> nup_;           ///< dual-NUP factor per row (the carried state)
+  std::vector<ScalarFactor> row_factor_;    ///< nup_ × Gaussian part, what the filter sees
+  std::vector<double> gamma_;               ///< γ per row (§9.5)
+  std::vector<Region> region_, polish_region_;
+  Eigen::VectorXd costate_, scratch_;
+  bool has_regions_ = false;
+};
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_ALGORITHMS_IFFBDD_H_

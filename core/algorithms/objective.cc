@@ -1,0 +1,73 @@
+#include "core/algorithms/objective.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/priors/scalar_rules.h"
+
+namespace nupmpc::core {
+
+void ObjectiveEvaluator::Prepare(const Problem& p) {
+  x_.setZero(p.num_states, p.horizon + 1);
+  y_.setZero(p.num_outputs, p.horizon + 1);
+  dx_.setZero(p.num_states);
+  tmp_.setZero(p.num_states);
+  x0_free_ = !p.initial_state_fixed();
+  if (x0_free_) v0_llt_.compute(p.initial_covariance);
+  double scale = 0.0;
+  const auto visit = [&scale](const ScalarPrior& prior) {
+    if (!prior.is_constraint() || !prior.is_hard()) return;
+    if (prior.kind != PriorKind::kAtMost) scale = std::max(scale, std::abs(prior.lower));
+    if (prior.kind != PriorKind::kAtLeast) scale = std::max(scale, std::abs(prior.upper));
+  };
+  std::for_each(p.input_priors.begin(), p.input_priors.end(), visit);
+  std::for_each(p.output_priors.begin(), p.output_priors.end(), visit);
+  bound_scale_ = scale > 0.0 ? scale : 1.0;
+}
+
+ObjectiveEvaluator::Result ObjectiveEvaluator::Evaluate(const Problem& p, const PrimalIterate& it) {
+  Result r;
+  const int N = p.horizon, L = p.num_inputs, K = p.num_outputs;
+  x_.col(0) = it.x0.head(p.num_states);
+  if (x0_free_) {
+    dx_ = x_.col(0) - p.initial_mean;
+    tmp_ = dx_;
+    v0_llt_.solveInPlace(tmp_);
+    r.objective += 0.5 * dx_.dot(tmp_);
+  }
+  for (int n = 0; n <= N; ++n) {
+    if (n > 0) {
+      x_.col(n).noalias() = p.A_at(n - 1) * x_.col(n - 1);
+      x_.col(n).noalias() += p.B_at(n - 1) * it.u.col(n - 1);
+      if (!p.state_offset.empty()) {
+        x_.col(n) += p.state_offset.size() == 1 ? p.state_offset[0] : p.state_offset[n - 1];
+      }
+    }
+    if (K > 0) {
+      y_.col(n).noalias() = p.C_at(n) * x_.col(n);
+      for (int k = 0; k < K; ++k) {
+        const double y = y_(k, n) + p.output_offset_at(n, k);
+        y_(k, n) = y;
+        const ScalarPrior& prior = p.output_prior(n, k);
+        r.objective += PriorCost(prior, y);
+        r.max_violation = std::max(r.max_violation, HardViolation(prior, y));
+      }
+    }
+    if (n < N) {
+      for (int l = 0; l < L; ++l) {
+        const double u = it.u(l, n);
+        const ScalarPrior& prior = p.input_prior(n, l);
+        r.objective += PriorCost(prior, u);
+        r.max_violation = std::max(r.max_violation, HardViolation(prior, u));
+      }
+    }
+  }
+  if (p.terminal.has_value()) {
+    dx_ = x_.col(N) - p.terminal->target;
+    tmp_.noalias() = p.terminal->weight * dx_;
+    r.objective += 0.5 * dx_.dot(tmp_);
+  }
+  return r;
+}
+
+}  // namespace nupmpc::core

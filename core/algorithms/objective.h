@@ -1,0 +1,43 @@
+#ifndef NUPMPC_CORE_ALGORITHMS_OBJECTIVE_H_
+#define NUPMPC_CORE_ALGORITHMS_OBJECTIVE_H_
+
+#include "Eigen/Cholesky"
+#include "Eigen/Core"
+#include "core/algorithms/outer_iteration.h"
+#include "core/problem.h"
+
+namespace nupmpc::core {
+
+// Simulates a primal iterate (x[0], u) through the model and evaluates the objective J
+// (nup-algorithms.md §2; the benchmark convention with constants) and the largest
+// violation of a hard constraint. Independent of the message passing: it works on the
+// Problem itself, so it also checks the algorithms.
+class ObjectiveEvaluator {
+ public:
+  struct Result {
+    double objective = 0.0;
+    double max_violation = 0.0;
+  };
+
+  // Allocates the trajectories and factors V0 (call again after the problem changes).
+  void Prepare(const Problem& problem);
+  Result Evaluate(const Problem& problem, const PrimalIterate& iterate);
+
+  // Trajectories of the last Evaluate(): states M × (N+1), outputs K × (N+1).
+  const Eigen::MatrixXd& states() const { return x_; }
+  const Eigen::MatrixXd& outputs() const { return y_; }
+  // Largest finite bound magnitude of the hard constraints (1 if none is nonzero): the
+  // scale of the relative violation tolerance.
+  double bound_scale() const { return bound_scale_; }
+
+ private:
+  Eigen::MatrixXd x_, y_;
+  Eigen::VectorXd dx_, tmp_;
+  Eigen::LLT<Eigen::MatrixXd> v0_llt_;
+  bool x0_free_ = false;
+  double bound_scale_ = 1.0;
+};
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_ALGORITHMS_OBJECTIVE_H_

@@ -1,0 +1,59 @@
+#ifndef NUPMPC_CORE_ALGORITHMS_OUTER_ITERATION_H_
+#define NUPMPC_CORE_ALGORITHMS_OUTER_ITERATION_H_
+
+#include "Eigen/Core"
+#include "core/options.h"
+#include "core/problem.h"
+
+namespace nupmpc::core {
+
+// The primal iterate every algorithm produces: x[0] and the inputs (L × N, column n = u[n]).
+struct PrimalIterate {
+  Eigen::VectorXd x0;
+  Eigen::MatrixXd u;
+  void Resize(int M, int L, int N) {
+    x0.setZero(M);
+    u.setZero(L, N);
+  }
+};
+
+// One NUP algorithm: its graph, its workspace and the per-scalar state it carries between
+// iterations and between solves (the warm start). The solve loop (stopping, limits,
+// polish scheduling, objective evaluation) lives in the driver, not here.
+//
+// Contract: construction allocates everything; Iterate(), Polish(), ShiftWarmStart()
+// and ColdStart() never allocate.
+class OuterIteration {
+ public:
+  virtual ~OuterIteration() = default;
+  virtual Algorithm algorithm() const = 0;
+
+  // Copies new values (same shape) of the problem into the graph (x0, references, bounds,
+  // matrices). Keeps the carried NUP state.
+  virtual void Refresh(const Problem& problem) = 0;
+  // Forgets the carried state: the next Iterate() starts from the papers' initialisation.
+  virtual void ColdStart() = 0;
+  // Receding horizon: the state of step n+1 becomes the state of step n; the last step
+  // keeps its own (nup-algorithms.md §10).
+  virtual void ShiftWarmStart() = 0;
+
+  // One message-passing pass plus NUP updates. Writes the primal iterate and returns how
+  // many scalars changed region (active set) since the previous pass, or -1 if the
+  // algorithm does not track regions.
+  virtual int Iterate(PrimalIterate* out) = 0;
+
+  // Active-set polish: freezes the regions seen in the last Iterate() (or the carried ones).
+  virtual void AdoptRegionsForPolish() = 0;
+  // Solves the problem with every scalar restricted to its polish region (kinks pinned,
+  // smooth pieces Gaussian/linear) with one exact message-passing pass, writes that
+  // candidate, and returns the deciding-rule residual max |prox(κ; m_e, V_e) - z|: zero
+  // (to rounding) iff the candidate is optimal. Afterwards the polish regions are the
+  // ones the true deciding rule chose (a primal-dual active-set correction).
+  virtual double Polish(PrimalIterate* out) = 0;
+  // Whether regions from a previous solve are available (a warm polish is worth trying).
+  virtual bool has_regions() const = 0;
+};
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_ALGORITHMS_OUTER_ITERATION_H_

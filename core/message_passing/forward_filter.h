@@ -1,0 +1,45 @@
+#ifndef NUPMPC_CORE_MESSAGE_PASSING_FORWARD_FILTER_H_
+#define NUPMPC_CORE_MESSAGE_PASSING_FORWARD_FILTER_H_
+
+#include <vector>
+
+#include "Eigen/Core"
+#include "core/model/factor_graph.h"
+#include "core/priors/scalar_factor.h"
+
+namespace nupmpc::core {
+
+// Storage of the forward Kalman filter with sequential scalar updates
+// (nup-algorithms.md §3.1). Sized once for a graph; the filter never allocates.
+struct ForwardFilterWorkspace {
+  // Per row r, the values before the row's factor is applied.
+  Eigen::MatrixXd v;     ///< M × R: v = V c
+  Eigen::VectorXd s;     ///< cᵀ V c (prior variance of the row's output)
+  Eigen::VectorXd yhat;  ///< cᵀ m + d (prior mean)
+  Eigen::VectorXd G, g;  ///< gain terms; 0 when the row carried no factor or was skipped
+  // Post-update edges per step (only when requested; the MBF smoother needs them).
+  Eigen::MatrixXd m_post;  ///< M × (N+1)
+  Eigen::MatrixXd V_post;  ///< M × M(N+1), block n at columns [nM, nM+M)
+  // Input factors in moment form for the time update (per input scalar).
+  Eigen::MatrixXd mU, VU;  ///< L × N
+  // Scratch.
+  Eigen::VectorXd m;
+  Eigen::MatrixXd V, AV, BD;
+
+  void Resize(const FactorGraph& graph, bool keep_edges);
+};
+
+// Runs the filter with the given scalar factors: `input_factor` (N·L, must have a moment
+// form: Gaussian inputs) and `row_factor` (one per row; empty factors are skipped).
+// Degenerate rows (prior variance ≈ 0 with a pinned factor, §12.2) are skipped.
+void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
+                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws);
+
+// Writes the moment form of the input factors into ws->mU / ws->VU. Separate because
+// IFFBDD's inputs stay fixed across iterations.
+void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor,
+                      ForwardFilterWorkspace* ws);
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_MESSAGE_PASSING_FORWARD_FILTER_H_

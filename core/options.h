@@ -1,0 +1,73 @@
+#ifndef NUPMPC_CORE_OPTIONS_H_
+#define NUPMPC_CORE_OPTIONS_H_
+
+#include <atomic>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace nupmpc::core {
+
+// Which outer iteration runs (nup-algorithms.md §4).
+enum class Algorithm {
+  kAuto,    ///< choose from the priors present (§4 selection rule)
+  kIake,    ///< IAKE / IRLGE: smoother + NUP updates; general, hard constraints need finite slope
+  kIbffd,   ///< backward information filter, forward deciding: convex priors on inputs only
+  kIffbdd,  ///< forward Kalman filter, backward dual deciding: convex priors on outputs (+ inputs)
+};
+const char* AlgorithmName(Algorithm algorithm);
+absl::StatusOr<Algorithm> ParseAlgorithm(const std::string& name);
+
+// Setup-time options: fixed when a Session is created. Per-solve limits are in SolveLimits.
+struct SolverOptions {
+  Algorithm algorithm = Algorithm::kAuto;
+
+  // Relative change of the objective between iterations, |J_i - J_{i-1}| ≤ tol·|J_i|
+  // (nup-algorithms.md §11). Together with the violation test below.
+  double objective_tolerance = 1e-10;
+
+  // Max constraint violation accepted at convergence, relative to the problem's bound
+  // scale (largest finite bound magnitude, at least 1e-3). Also the accuracy the
+  // active-set polish must reach to be accepted.
+  double violation_tolerance = 1e-9;
+
+  // Active-set polish: once the set of active constraints has not changed for this
+  // many iterations, solve the equality-constrained problem exactly with one extra
+  // message-passing pass and accept it if it satisfies the optimality conditions.
+  // 0 disables polishing (the plain algorithms of the papers).
+  int polish_after_stable_iterations = 2;
+  // Primal-dual active-set corrections tried after a failed polish before the plain
+  // iteration resumes.
+  int polish_rounds = 4;
+
+  // IAKE: slope used for hard constraints (IRLGE needs a finite penalty; it must exceed
+  // the constraint's Lagrange multiplier to be exact, §6.2).
+  double iake_hard_slope = 1e4;
+  // IAKE: NUP variances of constraint priors are floored at this times (bound scale)²
+  // to avoid zero-variance sticking (§6.3).
+  double iake_variance_floor = 0.0;
+
+  // IBFFD: initial slopes of hard half-spaces / boxes before adaptation (§8.3).
+  double ibffd_initial_halfspace_slope = 5.0;
+  double ibffd_initial_box_slope = 10.0;
+
+  // Default per-solve iteration cap (SolveLimits may lower it).
+  int max_iterations = 5000;
+};
+
+absl::Status Validate(const SolverOptions& options);
+
+// Per-solve limits and control.
+struct SolveLimits {
+  int max_iterations = 0;                ///< 0: use SolverOptions.max_iterations
+  double time_limit_seconds = 0.0;       ///< 0: none; wall time for the whole solve
+  const std::atomic<bool>* cancel = nullptr;  ///< checked once per iteration; may be null
+  bool warm_start = true;                ///< start from the session's carried state if any
+};
+
+absl::Status Validate(const SolveLimits& limits);
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_OPTIONS_H_

@@ -1,0 +1,103 @@
+#ifndef NUPMPC_CORE_PRIORS_SCALAR_PRIOR_H_
+#define NUPMPC_CORE_PRIORS_SCALAR_PRIOR_H_
+
+#include <cstdint>
+#include <limits>
+
+namespace nupmpc::core {
+
+inline constexpr double kInfinity = std::numeric_limits<double>::infinity();
+
+// The non-Gaussian part of a scalar prior. Costs κ(z) use the one slope unit of
+// nup-algorithms.md §1.1 (the outside slope s, which is also the exact-penalty
+// weight); slope = +∞ means a hard constraint (only for half-spaces and boxes).
+enum class PriorKind : std::uint8_t {
+  kNone,       ///< only the Gaussian part (or nothing: a free scalar)
+  kL1,         ///< s |z - lower|                       (Laplace; `lower` is the centre)
+  kHuber,      ///< Huber around `lower` with radius r: z²/(2r²)+s²r²/2 inside, s|z| outside
+  kAtLeast,    ///< z ≥ lower  (cost s (lower - z)_+)
+  kAtMost,     ///< z ≤ upper  (cost s (z - upper)_+)
+  kBox,        ///< lower ≤ z ≤ upper (cost s dist(z, [lower, upper]))
+};
+
+// A prior on one scalar (one input or output component at one step): an optional
+// Gaussian part N(mean, variance) times an optional kind κ. Gaussian priors
+// (quadratic costs, tracking references) are kind kNone with a finite variance;
+// a free scalar has kind kNone and variance +∞. A constrained scalar that also has
+// a quadratic cost carries both parts (nup-algorithms.md §5.3).
+//
+// Stored flat (one per scalar per step) so that NUP updates are a switch over
+// `kind` with no virtual dispatch and no allocation.
+struct ScalarPrior {
+  PriorKind kind = PriorKind::kNone;
+  double mean = 0.0;            ///< Gaussian part: mean (reference)
+  double variance = kInfinity;  ///< Gaussian part: variance > 0 (1/weight); +∞ = none
+  double lower = 0.0;           ///< kAtLeast/kBox lower bound; kL1/kHuber centre
+  double upper = 0.0;           ///< kAtMost/kBox upper bound
+  double slope = kInfinity;     ///< outside slope s > 0; +∞ = hard (half-space/box only)
+  double radius = 1.0;          ///< kHuber radius r > 0
+
+  bool has_gaussian() const { return variance < kInfinity; }
+  bool is_hard() const { return slope == kInfinity; }
+  bool is_constraint() const {
+    return kind == PriorKind::kAtLeast || kind == PriorKind::kAtMost || kind == PriorKind::kBox;
+  }
+
+  static ScalarPrior Free() { return {}; }
+  static ScalarPrior Gaussian(double mean, double variance) {
+    ScalarPrior p;
+    p.mean = mean;
+    p.variance = variance;
+    return p;
+  }
+  static ScalarPrior Box(double lower, double upper, double slope = kInfinity) {
+    ScalarPrior p;
+    p.kind = PriorKind::kBox;
+    p.lower = lower;
+    p.upper = upper;
+    p.slope = slope;
+    return p;
+  }
+  static ScalarPrior AtLeast(double lower, double slope = kInfinity) {
+    ScalarPrior p;
+    p.kind = PriorKind::kAtLeast;
+    p.lower = lower;
+    p.slope = slope;
+    return p;
+  }
+  static ScalarPrior AtMost(double upper, double slope = kInfinity) {
+    ScalarPrior p;
+    p.kind = PriorKind::kAtMost;
+    p.upper = upper;
+    p.slope = slope;
+    return p;
+  }
+  static ScalarPrior L1(double centre, double slope) {
+    ScalarPrior p;
+    p.kind = PriorKind::kL1;
+    p.lower = centre;
+    p.slope = slope;
+    return p;
+  }
+  static ScalarPrior Huber(double centre, double radius, double slope) {
+    ScalarPrior p;
+    p.kind = PriorKind::kHuber;
+    p.lower = centre;
+    p.radius = radius;
+    p.slope = slope;
+    return p;
+  }
+  // Adds a Gaussian part (quadratic cost ½(z-mean)²/variance) to any kind.
+  ScalarPrior WithGaussian(double m, double v) const {
+    ScalarPrior p = *this;
+    p.mean = m;
+    p.variance = v;
+    return p;
+  }
+};
+
+const char* PriorKindName(PriorKind kind);
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_PRIORS_SCALAR_PRIOR_H_

@@ -1,0 +1,246 @@
+#include "core/session/session.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "absl/strings/str_cat.h"
+#include "core/algorithms/select.h"
+#include "core/util/status_macros.h"
+
+namespace nupmpc::core {
+namespace {
+
+bool AnyInputConstrained(const Problem& p) {
+  for (const ScalarPrior& prior : p.input_priors) {
+    if (prior.kind != PriorKind::kNone) return true;
+  }
+  return false;
+}
+
+absl::Status CheckSameShape(const Problem& session, const Problem& update) {
+  const auto mismatch = [](const char* field, std::size_t got, std::size_t want) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("Problem.", field, " = ", got, " does not match the session's ", want));
+  };
+  if (update.num_states != session.num_states) return mismatch("num_states", update.num_states, session.num_states);
+  if (update.num_inputs != session.num_inputs) return mismatch("num_inputs", update.num_inputs, session.num_inputs);
+  if (update.num_outputs != session.num_outputs) {
+    return mismatch("num_outputs", update.num_outputs, session.num_outputs);
+  }
+  if (update.horizon != session.horizon) return mismatch("horizon", update.horizon, session.horizon);
+  if (update.A.size() != session.A.size()) return mismatch("A (number of matrices)", update.A.size(), session.A.size());
+  if (update.B.size() != session.B.size()) return mismatch("B (number of matrices)", update.B.size(), session.B.size());
+  if (update.C.size() != session.C.size()) return mismatch("C (number of matrices)", update.C.size(), session.C.size());
+  if (update.terminal.has_value() != session.terminal.has_value()) {
+    return absl::FailedPreconditionError("Problem.terminal: presence does not match the session's");
+  }
+  return absl::OkStatus();
+}
+
+bool AllFinite(const PrimalIterate& it) { return it.x0.allFinite() && it.u.allFinite(); }
+
+}  // namespace
+
+const char* SolveStatusName(SolveStatus status) {
+  switch (status) {
+    case SolveStatus::kConverged: return "converged";
+    case SolveStatus::kIterationLimit: return "iteration_limit";
+    case SolveStatus::kTimeLimit: return "time_limit";
+    case SolveStatus::kNumericalError: return "numerical_error";
+    case SolveStatus::kCancelled: return "cancelled";
+  }
+  return "unknown";
+}
+
+Session::Session(Problem problem, SolverOptions options)
+    : problem_(std::move(problem)), options_(options) {}
+
+absl::StatusOr<std::unique_ptr<Session>> Session::Create(Problem problem, SolverOptions options) {
+  NUPMPC_RETURN_IF_ERROR(Validate(problem));
+  NUPMPC_RETURN_IF_ERROR(Validate(options));
+  std::unique_ptr<Session> session(new Session(std::move(problem), options));
+  NUPMPC_RETURN_IF_ERROR(session->Rebuild());
+  return session;
+}
+
+absl::Status Session::Rebuild() {
+  NUPMPC_ASSIGN_OR_RETURN(algorithm_, MakeOuterIteration(problem_, options_));
+  inputs_constrained_ = AnyInputConstrained(problem_);
+  evaluator_.Prepare(problem_);
+  current_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
+  candidate_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
+  best_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
+  has_warm_state_ = false;
+  return absl::OkStatus();
+}
+
+absl::Status Session::SetInitialState(const Eigen::VectorXd& x0) {
+  if (x0.size() != problem_.num_states) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("initial_state: expected size ", problem_.num_states, ", got ", x0.size()));
+  }
+  if (!x0.allFinite()) return absl::InvalidArgumentError("initial_state: contains a non-finite number");
+  problem_.initial_mean = x0;
+  algorithm_->Refresh(problem_);
+  return absl::OkStatus();
+}
+
+absl::Status Session::Update(const Problem& problem) {
+  NUPMPC_RETURN_IF_ERROR(CheckSameShape(problem_, problem));
+  NUPMPC_RETURN_IF_ERROR(Validate(problem));
+  NUPMPC_ASSIGN_OR_RETURN(const Algorithm selected, SelectAlgorithm(problem, options_.algorithm));
+  const bool same_graph = selected == algorithm_->algorithm() &&
+                          (selected != Algorithm::kIffbdd || AnyInputConstrained(problem) == inputs_constrained_);
+  if (!same_graph) {
+    // The new priors need another algorithm (or augmentation): build it on a copy first so
+    // that a failure leaves the session untouched.
+    SolverOptions forced = options_;
+    forced.algorithm = selected;
+    NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<OuterIteration> rebuilt, MakeOuterIteration(problem, forced));
+    problem_ = problem;
+    algorithm_ = std::move(rebuilt);
+    inputs_constrained_ = AnyInputConstrained(problem_);
+    has_warm_state_ = false;
+  } else {
+    problem_ = problem;
+    algorithm_->Refresh(problem_);
+  }
+  evaluator_.Prepare(problem_);
+  return absl::OkStatus();
+}
+
+void Session::ShiftWarmStart() {
+  if (!has_warm_state_) return;
+  algorithm_->ShiftWarmStart();
+  // The carried primal iterate moves too (it is what a cancelled solve would return).
+  const int N = problem_.horizon;
+  for (int n = 0; n + 1 < N; ++n) best_.u.col(n) = best_.u.col(n + 1);
+}
+
+void Session::ResetWarmStart() {
+  algorithm_->ColdStart();
+  has_warm_state_ = false;
+}
+
+absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution* solution) {
+  NUPMPC_RETURN_IF_ERROR(Validate(limits));
+  const bool warm = limits.warm_start && has_warm_state_;
+  if (!warm) algorithm_->ColdStart();
+  const auto start = std::chrono::steady_clock::now();
+  SolveSummary summary = RunLoop(limits, warm);
+  summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  summary.warm_started = warm;
+  summary.algorithm = algorithm_->algorithm();
+  has_warm_state_ = summary.status != SolveStatus::kNumericalError;
+  if (!has_warm_state_) algorithm_->ColdStart();
+  summary.message = absl::StrCat(AlgorithmName(summary.algorithm), ": ", SolveStatusName(summary.status),
+                                 " after ", summary.iterations, " iterations", summary.polished ? " (polished)" : "",
+                                 ", J = ", summary.objective, ", max violation = ", summary.max_violation);
+  if (solution != nullptr) {
+    evaluator_.Evaluate(problem_, best_);
+    solution->inputs = best_.u.transpose();
+    solution->states = evaluator_.states().transpose();
+    solution->outputs = evaluator_.outputs().transpose();
+  }
+  return summary;
+}
+
+SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  const int max_iterations =
+      limits.max_iterations > 0 ? std::min(limits.max_iterations, options_.max_iterations) : options_.max_iterations;
+  const double violation_tolerance = options_.violation_tolerance * evaluator_.bound_scale();
+  const bool polish_enabled = options_.polish_after_stable_iterations > 0;
+
+  SolveSummary summary;
+  summary.status = SolveStatus::kIterationLimit;
+  bool have_finite = false;
+
+  // Tries the active-set polish (up to 1 + polish_rounds passes); true if it was accepted.
+  const auto try_polish = [&]() {
+    for (int round = 0; round <= options_.polish_rounds && summary.iterations < max_iterations; ++round) {
+      const double residual = algorithm_->Polish(&candidate_);
+      ++summary.iterations;
+      if (!(residual <= violation_tolerance) || !AllFinite(candidate_)) continue;
+      const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_);
+      if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
+        std::swap(best_, candidate_);
+        summary.objective = r.objective;
+        summary.max_violation = r.max_violation;
+        summary.polished = true;
+        summary.status = SolveStatus::kConverged;
+        return true;
+      }
+    }
+    return false;
+  };
+  const auto stop_requested = [&]() {
+    if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) {
+      summary.status = SolveStatus::kCancelled;
+      return true;
+    }
+    if (limits.time_limit_seconds > 0.0 &&
+        std::chrono::duration<double>(Clock::now() - start).count() >= limits.time_limit_seconds) {
+      summary.status = SolveStatus::kTimeLimit;
+      return true;
+    }
+    return false;
+  };
+
+  // A warm start carries the previous active set: if it is still right, one exact pass
+  // finishes the solve (restarting from the optimum takes one iteration).
+  if (warm && polish_enabled && algorithm_->has_regions()) {
+    algorithm_->AdoptRegionsForPolish();
+    if (try_polish()) return summary;
+  }
+
+  double previous_objective = std::numeric_limits<double>::quiet_NaN();
+  int stable = 0;
+  int polish_wait = options_.polish_after_stable_iterations;
+  while (summary.iterations < max_iterations) {
+    if (stop_requested()) break;
+    const int changed = algorithm_->Iterate(&current_);
+    ++summary.iterations;
+    const ObjectiveEvaluator::Result r =
+        AllFinite(current_) ? evaluator_.Evaluate(problem_, current_) : ObjectiveEvaluator::Result{NAN, NAN};
+    if (!std::isfinite(r.objective) || !std::isfinite(r.max_violation)) {
+      summary.status = SolveStatus::kNumericalError;
+      break;
+    }
+    std::swap(best_, current_);
+    have_finite = true;
+    summary.objective = r.objective;
+    summary.max_violation = r.max_violation;
+    const bool objective_settled =
+        std::abs(r.objective - previous_objective) <= options_.objective_tolerance * std::abs(r.objective);
+    if (objective_settled && r.max_violation <= violation_tolerance) {
+      summary.status = SolveStatus::kConverged;
+      break;
+    }
+    previous_objective = r.objective;
+
+    stable = changed == 0 ? stable + 1 : 0;
+    if (polish_enabled && changed >= 0 && stable >= polish_wait) {
+      algorithm_->AdoptRegionsForPolish();
+      if (try_polish()) break;
+      // The active set was not right yet: wait longer before the next attempt.
+      stable = 0;
+      polish_wait = std::min(2 * polish_wait + 1, 64);
+    }
+  }
+  if (!have_finite) {
+    // No iterate of this solve survived (limits hit first, or a breakdown): report the
+    // carried plan as it is. It is usable after an error only if it is finite.
+    const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
+    summary.objective = r.objective;
+    summary.max_violation = r.max_violation;
+    summary.usable_after_error = false;
+  } else {
+    summary.usable_after_error = summary.status == SolveStatus::kNumericalError;
+  }
+  return summary;
+}
+
+}  // namespace nupmpc::core

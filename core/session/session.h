@@ -1,0 +1,64 @@
+#ifndef NUPMPC_CORE_SESSION_SESSION_H_
+#define NUPMPC_CORE_SESSION_SESSION_H_
+
+#include <memory>
+
+#include "Eigen/Core"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/algorithms/objective.h"
+#include "core/algorithms/outer_iteration.h"
+#include "core/options.h"
+#include "core/problem.h"
+#include "core/solution.h"
+
+namespace nupmpc::core {
+
+// A problem of fixed shape, the algorithm's workspace, and the warm-start state carried
+// from one solve to the next (acados' memory/workspace split; OSQP's three update levels):
+//
+//  * Create(problem, options): validates, picks the algorithm, allocates everything.
+//  * SetInitialState / Update: new x0, references, bounds, matrices of the same shape.
+//    Validated before anything changes: a rejected update leaves the session as it was.
+//  * Solve(limits): per-solve iteration cap, wall-time limit, cancel flag, warm or cold.
+//    The iteration loop allocates nothing.
+//  * ShiftWarmStart(): receding horizon; the carried state moves one step earlier.
+//
+// Thread safety: none; one thread uses a session at a time.
+class Session {
+ public:
+  static absl::StatusOr<std::unique_ptr<Session>> Create(Problem problem, SolverOptions options = {});
+
+  const Problem& problem() const { return problem_; }
+  const SolverOptions& options() const { return options_; }
+  Algorithm algorithm() const { return algorithm_->algorithm(); }
+
+  absl::Status SetInitialState(const Eigen::VectorXd& x0);
+  // Replaces the problem's values. The shape (dimensions, horizon, which matrices vary
+  // per step, terminal cost present) must match: FAILED_PRECONDITION otherwise.
+  absl::Status Update(const Problem& problem);
+
+  void ShiftWarmStart();
+  void ResetWarmStart();
+  bool has_warm_start() const { return has_warm_state_; }
+
+  absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution);
+  absl::StatusOr<SolveSummary> Solve(Solution* solution) { return Solve(SolveLimits{}, solution); }
+
+ private:
+  Session(Problem problem, SolverOptions options);
+  absl::Status Rebuild();
+  SolveSummary RunLoop(const SolveLimits& limits, bool warm);
+
+  Problem problem_;
+  SolverOptions options_;
+  std::unique_ptr<OuterIteration> algorithm_;
+  bool inputs_constrained_ = false;  ///< part of the graph's shape for IFFBDD (augmentation)
+  ObjectiveEvaluator evaluator_;
+  PrimalIterate current_, candidate_, best_;
+  bool has_warm_state_ = false;
+};
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_SESSION_SESSION_H_

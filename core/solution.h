@@ -1,0 +1,47 @@
+#ifndef NUPMPC_CORE_SOLUTION_H_
+#define NUPMPC_CORE_SOLUTION_H_
+
+#include <string>
+
+#include "Eigen/Core"
+#include "core/options.h"
+
+namespace nupmpc::core {
+
+// How a solve ended. A call error (bad input) is an absl::Status instead.
+enum class SolveStatus {
+  kConverged,       ///< objective and violation tests met (or the polish verified optimality)
+  kIterationLimit,  ///< iteration cap reached; the last finite iterate is returned
+  kTimeLimit,       ///< wall-time limit reached
+  kNumericalError,  ///< a non-finite number appeared; the last finite iterate is returned
+  kCancelled,       ///< the cancel flag was raised
+};
+const char* SolveStatusName(SolveStatus status);
+
+struct SolveSummary {
+  SolveStatus status = SolveStatus::kNumericalError;
+  Algorithm algorithm = Algorithm::kAuto;  ///< the algorithm that ran (never kAuto)
+  int iterations = 0;                      ///< message-passing passes, polish passes included
+  double objective = 0.0;                  ///< J of the returned plan (benchmark convention)
+  double max_violation = 0.0;              ///< largest distance of a hard-constrained scalar to its set
+  bool polished = false;                   ///< the result was verified by the active-set polish
+  bool warm_started = false;
+  double solve_seconds = 0.0;
+  std::string message;                     ///< one line for logs and the CLI
+
+  // May u[0] be applied? True unless the solve broke down numerically before any
+  // finite iterate existed.
+  bool IsUsable() const { return status != SolveStatus::kNumericalError || usable_after_error; }
+  bool usable_after_error = false;
+};
+
+// The plan. Sizes: inputs N×L (row n = u[n]), states (N+1)×M, outputs (N+1)×K.
+struct Solution {
+  Eigen::MatrixXd inputs;
+  Eigen::MatrixXd states;
+  Eigen::MatrixXd outputs;
+};
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_SOLUTION_H_

@@ -1,0 +1,49 @@
+// nupmpc-bench: the core's speed and accuracy on benchmark instance files.
+//
+//   nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] FILE...
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "absl/flags/flag.h"
+#include "absl/flags/parse.h"
+#include "absl/flags/usage.h"
+#include "absl/strings/str_format.h"
+#include "core/session/session.h"
+#include "loadtest/benchmark_instance.h"
+#include "loadtest/bench_report.h"
+
+ABSL_FLAG(bool, json, false, "print one JSON object per instance per line");
+ABSL_FLAG(std::string, reference, "", "reference.json (default: the one beside each file)");
+ABSL_FLAG(std::string, algorithm, "auto", "auto, iake, ibffd or iffbdd");
+ABSL_FLAG(int, repeat, 5, "solves per instance; the median time is reported");
+ABSL_FLAG(bool, scaling, false, "also report time per horizon step across the masses_N* files given");
+ABSL_FLAG(int, max_iterations, 5000, "iteration cap per solve");
+
+int main(int argc, char** argv) {
+  absl::SetProgramUsageMessage(
+      "nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] FILE...");
+  std::vector<char*> files = absl::ParseCommandLine(argc, argv);
+  files.erase(files.begin());
+  if (files.empty()) {
+    std::fprintf(stderr, "nupmpc-bench: no instance files given (see --help)\n");
+    return 2;
+  }
+  nupmpc::bench::BenchOptions options;
+  options.json = absl::GetFlag(FLAGS_json);
+  options.reference = absl::GetFlag(FLAGS_reference);
+  options.repeat = std::max(1, absl::GetFlag(FLAGS_repeat));
+  options.max_iterations = absl::GetFlag(FLAGS_max_iterations);
+  options.scaling = absl::GetFlag(FLAGS_scaling);
+  absl::StatusOr<nupmpc::core::Algorithm> algorithm = nupmpc::core::ParseAlgorithm(absl::GetFlag(FLAGS_algorithm));
+  if (!algorithm.ok()) {
+    std::fprintf(stderr, "nupmpc-bench: --%s\n", std::string(algorithm.status().message()).c_str());
+    return 2;
+  }
+  options.algorithm = *algorithm;
+  std::vector<std::string> paths(files.begin(), files.end());
+  return nupmpc::bench::RunBenchmarks(paths, options);
+}
