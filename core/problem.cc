@@ -80,6 +80,11 @@ absl::Status ValidatePrior(const ScalarPrior& p, const char* field, int index) {
         absl::StrCat(Indexed(field, index), ".", member, " = ", value, "; ", rule));
   };
   if (!std::isfinite(p.mean)) return bad("mean", p.mean, "must be finite");
+  // NaN is rejected in every field, also in those the kind does not use.
+  for (const auto& [member, value] : {std::pair{"lower", p.lower}, std::pair{"upper", p.upper},
+                                      std::pair{"slope", p.slope}, std::pair{"radius", p.radius}}) {
+    if (std::isnan(value)) return bad(member, value, "must not be NaN");
+  }
   if (!(p.variance > 0.0)) return bad("variance", p.variance, "must be > 0 (use +inf for no Gaussian part)");
   if (std::isnan(p.variance)) return bad("variance", p.variance, "must not be NaN");
   const bool uses_lower = p.kind == PriorKind::kAtLeast || p.kind == PriorKind::kBox ||

@@ -29,6 +29,7 @@ class Iake final : public OuterIteration {
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
   void AdoptRegionsForPolish() override {}
+  void AcceptPolishRegions() override {}
   double Polish(PrimalIterate*) override { return kInfinity; }
   bool has_regions() const override { return false; }
 

@@ -55,11 +55,14 @@ double Ibffd::InitialSlope(const ScalarPrior& prior) const {
 }
 
 void Ibffd::ColdStart() {
-  // No NUP factor in the first pass: the backward filter sees only the Gaussian parts,
-  // so the first decisions are the unconstrained optimum projected by the deciding rule.
+  // §13 initialisation (validated): every input with a non-Gaussian prior starts from the
+  // NUP factor N(0, 1). (Starting from no factor, i.e. the unconstrained optimum, lets the
+  // adaptive slopes jump to huge values on stiff problems such as ibffd_2d, whose NUP
+  // variances 2|u-a|/s then shrink so much that the plain iteration stalls.)
   for (std::size_t i = 0; i < nup_.size(); ++i) {
-    nup_[i] = ScalarFactor{};
-    slope_[i] = InitialSlope(graph_.input_prior[i]);
+    const ScalarPrior& prior = graph_.input_prior[i];
+    nup_[i] = prior.kind == PriorKind::kNone ? ScalarFactor{} : ScalarFactor{0.0, 1.0, 0.0, 0.0};
+    slope_[i] = InitialSlope(prior);
     region_[i] = Region::kInside;
   }
   has_regions_ = false;

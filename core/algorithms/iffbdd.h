@@ -28,6 +28,7 @@ class Iffbdd final : public OuterIteration {
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
   void AdoptRegionsForPolish() override { polish_region_ = region_; }
+  void AcceptPolishRegions() override { region_ = polish_region_; }
   double Polish(PrimalIterate* out) override;
   bool has_regions() const override { return has_regions_; }
 

@@ -50,6 +50,9 @@ class OuterIteration {
   // (to rounding) iff the candidate is optimal. Afterwards the polish regions are the
   // ones the true deciding rule chose (a primal-dual active-set correction).
   virtual double Polish(PrimalIterate* out) = 0;
+  // The last polish was accepted: its (verified) regions become the carried state, so a
+  // warm restart from the optimum polishes once and is done.
+  virtual void AcceptPolishRegions() = 0;
   // Whether regions from a previous solve are available (a warm polish is worth trying).
   virtual bool has_regions() const = 0;
 };

@@ -167,6 +167,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
       const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_);
       if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
         std::swap(best_, candidate_);
+        algorithm_->AcceptPolishRegions();
         summary.objective = r.objective;
         summary.max_violation = r.max_violation;
         summary.polished = true;
