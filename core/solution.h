@@ -27,12 +27,14 @@ struct SolveSummary {
   bool polished = false;                   ///< the result was verified by the active-set polish
   bool warm_started = false;
   double solve_seconds = 0.0;
-  std::string message;                     ///< one line for logs and the CLI
 
   // May u[0] be applied? True unless the solve broke down numerically before any
   // finite iterate existed.
   bool IsUsable() const { return status != SolveStatus::kNumericalError || usable_after_error; }
   bool usable_after_error = false;
+
+  // One line for logs and the CLI. Built on demand so that a solve allocates nothing.
+  std::string Describe() const;
 };
 
 // The plan. Sizes: inputs N×L (row n = u[n]), states (N+1)×M, outputs (N+1)×K.

@@ -158,6 +158,7 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
                 "rel_gap", "max_viol", "status", "GFLOP/s");
   }
   for (const std::string& path : paths) {
+    if (std::filesystem::path(path).filename() == "reference.json") continue;  // not an instance
     absl::StatusOr<BenchmarkInstance> inst = LoadBenchmarkInstance(path);
     if (!inst.ok()) {
       std::fprintf(stderr, "nupmpc-bench: %s\n", std::string(inst.status().message()).c_str());

@@ -25,6 +25,7 @@ class Iake final : public OuterIteration {
 
   Algorithm algorithm() const override { return Algorithm::kIake; }
   void Refresh(const Problem& problem) override;
+  void RefreshInitialState(const Problem& problem) override { RefreshFactorGraphInitialState(problem, &graph_); }
   void ColdStart() override;
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;

@@ -24,6 +24,7 @@ class Iffbdd final : public OuterIteration {
 
   Algorithm algorithm() const override { return Algorithm::kIffbdd; }
   void Refresh(const Problem& problem) override;
+  void RefreshInitialState(const Problem& problem) override { RefreshFactorGraphInitialState(problem, &graph_); }
   void ColdStart() override;
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;

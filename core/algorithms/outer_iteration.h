@@ -31,6 +31,8 @@ class OuterIteration {
   // Copies new values (same shape) of the problem into the graph (x0, references, bounds,
   // matrices). Keeps the carried NUP state.
   virtual void Refresh(const Problem& problem) = 0;
+  // Cheaper Refresh for the common per-step update: only x[0]'s mean changed. No allocation.
+  virtual void RefreshInitialState(const Problem& problem) = 0;
   // Forgets the carried state: the next Iterate() starts from the papers' initialisation.
   virtual void ColdStart() = 0;
   // Receding horizon: the state of step n+1 becomes the state of step n; the last step

@@ -67,6 +67,11 @@ FactorGraph BuildFactorGraph(const Problem& problem, bool augment_inputs);
 // (no allocation). The caller guarantees the shape matches the one built.
 void RefreshFactorGraph(const Problem& problem, FactorGraph* graph);
 
+// Copies only x[0]'s mean (the per-step measurement). No allocation.
+inline void RefreshFactorGraphInitialState(const Problem& problem, FactorGraph* graph) {
+  graph->m0.head(problem.num_states) = problem.initial_mean;
+}
+
 }  // namespace nupmpc::core
 
 #endif  // NUPMPC_CORE_MODEL_FACTOR_GRAPH_H_

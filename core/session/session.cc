@@ -53,6 +53,12 @@ const char* SolveStatusName(SolveStatus status) {
   return "unknown";
 }
 
+std::string SolveSummary::Describe() const {
+  return absl::StrCat(AlgorithmName(algorithm), ": ", SolveStatusName(status), " after ", iterations, " iterations",
+                      polished ? " (polished)" : "", warm_started ? ", warm" : "", ", J = ", objective,
+                      ", max violation = ", max_violation);
+}
+
 Session::Session(Problem problem, SolverOptions options)
     : problem_(std::move(problem)), options_(options) {}
 
@@ -82,7 +88,7 @@ absl::Status Session::SetInitialState(const Eigen::VectorXd& x0) {
   }
   if (!x0.allFinite()) return absl::InvalidArgumentError("initial_state: contains a non-finite number");
   problem_.initial_mean = x0;
-  algorithm_->Refresh(problem_);
+  algorithm_->RefreshInitialState(problem_);
   return absl::OkStatus();
 }
 
@@ -134,9 +140,6 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   summary.algorithm = algorithm_->algorithm();
   has_warm_state_ = summary.status != SolveStatus::kNumericalError;
   if (!has_warm_state_) algorithm_->ColdStart();
-  summary.message = absl::StrCat(AlgorithmName(summary.algorithm), ": ", SolveStatusName(summary.status),
-                                 " after ", summary.iterations, " iterations", summary.polished ? " (polished)" : "",
-                                 ", J = ", summary.objective, ", max violation = ", summary.max_violation);
   if (solution != nullptr) {
     evaluator_.Evaluate(problem_, best_);
     solution->inputs = best_.u.transpose();

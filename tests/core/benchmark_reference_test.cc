@@ -61,12 +61,12 @@ TEST_P(BenchmarkReference, MatchesReferenceOptimum) {
   Solution solution;
   auto summary = (*session)->Solve(&solution);
   ASSERT_TRUE(summary.ok()) << summary.status();
-  EXPECT_EQ(summary->status, SolveStatus::kConverged) << summary->message;
+  EXPECT_EQ(summary->status, SolveStatus::kConverged) << summary->Describe();
   EXPECT_EQ(summary->algorithm, c.algorithm);
 
   const double gap = (summary->objective - ref.J_star) / std::abs(ref.J_star);
-  EXPECT_LE(std::abs(gap), 1e-6) << summary->message;
-  EXPECT_LE(summary->max_violation, 1e-6 * BoundScale(inst->problem)) << summary->message;
+  EXPECT_LE(std::abs(gap), 1e-6) << summary->Describe();
+  EXPECT_LE(summary->max_violation, 1e-6 * BoundScale(inst->problem)) << summary->Describe();
   // The plain IBFFD's inputs converge much more slowly than its objective on the stiff
   // ibffd_2d instances (Qf = 2e8: J is flat along some directions), so u is checked for the
   // default (polished) configuration.

@@ -53,7 +53,7 @@ TEST(WarmStart, ClosedLoopReachesEveryStepOptimumInFewIterations) {
     auto w = (*warm)->Solve(nullptr);
     auto c = (*cold)->Solve(cold_limits, nullptr);
     ASSERT_TRUE(w.ok() && c.ok());
-    EXPECT_EQ(w->status, SolveStatus::kConverged) << "step " << t << ": " << w->message;
+    EXPECT_EQ(w->status, SolveStatus::kConverged) << "step " << t << ": " << w->Describe();
     EXPECT_EQ(w->warm_started, t > 0);
     const double gap = std::abs(w->objective - ref.closed_loop_J_star[t]) / std::abs(ref.closed_loop_J_star[t]);
     EXPECT_LE(gap, 1e-6) << "step " << t;
@@ -277,8 +277,8 @@ TEST(NumericalSafety, IllConditionedProblemsNeverReturnNaN) {
     auto summary = (*session)->Solve(&solution);
     ASSERT_TRUE(summary.ok());
     EXPECT_TRUE(std::isfinite(summary->objective) || summary->status == SolveStatus::kNumericalError)
-        << AlgorithmName(algorithm) << ": " << summary->message;
-    EXPECT_TRUE(solution.inputs.allFinite()) << AlgorithmName(algorithm) << ": " << summary->message;
+        << AlgorithmName(algorithm) << ": " << summary->Describe();
+    EXPECT_TRUE(solution.inputs.allFinite()) << AlgorithmName(algorithm) << ": " << summary->Describe();
     EXPECT_TRUE(summary->IsUsable() == solution.inputs.allFinite());
   }
 }
