@@ -36,7 +36,7 @@ struct SolverOptions {
   // many iterations, solve the equality-constrained problem exactly with one extra
   // message-passing pass and accept it if it satisfies the optimality conditions.
   // 0 disables polishing (the plain algorithms of the papers).
-  int polish_after_stable_iterations = 2;
+  int polish_after_stable_iterations = 1;
   // Primal-dual active-set corrections tried after a failed polish before the plain
   // iteration resumes.
   int polish_rounds = 4;

@@ -22,6 +22,8 @@ ABSL_FLAG(std::string, algorithm, "auto", "auto, iake, ibffd or iffbdd");
 ABSL_FLAG(int, repeat, 5, "solves per instance; the median time is reported");
 ABSL_FLAG(bool, scaling, false, "also report time per horizon step across the masses_N* files given");
 ABSL_FLAG(int, max_iterations, 5000, "iteration cap per solve");
+ABSL_FLAG(int, polish_after, 1, "polish once the active set is unchanged for this many iterations (0: never)");
+ABSL_FLAG(int, polish_rounds, 4, "primal-dual active-set corrections after a failed polish");
 
 int main(int argc, char** argv) {
   absl::SetProgramUsageMessage(
@@ -38,6 +40,8 @@ int main(int argc, char** argv) {
   options.repeat = std::max(1, absl::GetFlag(FLAGS_repeat));
   options.max_iterations = absl::GetFlag(FLAGS_max_iterations);
   options.scaling = absl::GetFlag(FLAGS_scaling);
+  options.polish_after = absl::GetFlag(FLAGS_polish_after);
+  options.polish_rounds = absl::GetFlag(FLAGS_polish_rounds);
   absl::StatusOr<nupmpc::core::Algorithm> algorithm = nupmpc::core::ParseAlgorithm(absl::GetFlag(FLAGS_algorithm));
   if (!algorithm.ok()) {
     std::fprintf(stderr, "nupmpc-bench: --%s\n", std::string(algorithm.status().message()).c_str());

@@ -176,6 +176,8 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
     core::SolverOptions solver_options;
     solver_options.algorithm = options.algorithm;
     solver_options.max_iterations = options.max_iterations;
+    solver_options.polish_after_stable_iterations = options.polish_after;
+    solver_options.polish_rounds = options.polish_rounds;
     absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(inst->problem, solver_options);
     if (!session.ok()) {
       std::fprintf(stderr, "nupmpc-bench: %s: %s\n", inst->name.c_str(),

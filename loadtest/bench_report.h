@@ -16,6 +16,8 @@ struct BenchOptions {
   int repeat = 5;
   int max_iterations = 5000;
   bool scaling = false;
+  int polish_after = 1;
+  int polish_rounds = 4;
 };
 
 // Solves every file and prints one line (table row or JSON object) per instance, then the
