@@ -2,48 +2,36 @@
 
 #include <algorithm>
 
+#include "core/message_passing/fixed_size.h"
 #include "core/util/symmetrize.h"
 
 namespace nupmpc::core {
+namespace {
 
-void ForwardFilterWorkspace::Resize(const FactorGraph& graph, bool keep_edges) {
-  const int M = graph.M, R = graph.num_rows(), N = graph.N, L = graph.L;
-  v.setZero(M, R);
-  s.setZero(R);
-  yhat.setZero(R);
-  G.setZero(R);
-  g.setZero(R);
-  if (keep_edges) {
-    m_post.setZero(M, N + 1);
-    V_post.setZero(M, M * (N + 1));
-  }
-  mU.setZero(L, N);
-  VU.setZero(L, N);
-  m.setZero(M);
-  V.setZero(M, M);
-  AV.setZero(M, M);
-  BD.setZero(M, L);
-}
+// Scratch of the filter: stack objects for a fixed size, the workspace's for Dynamic.
+template <int MS>
+struct FilterScratch {
+  explicit FilterScratch(ForwardFilterWorkspace*) {}
+  StateMatrix<MS> V, AV;
+  StateVector<MS> m, t;
+};
+template <>
+struct FilterScratch<Eigen::Dynamic> {
+  explicit FilterScratch(ForwardFilterWorkspace* ws) : V(ws->V), AV(ws->AV), m(ws->m), t(ws->t) {}
+  Eigen::MatrixXd& V;
+  Eigen::MatrixXd& AV;
+  Eigen::VectorXd& m;
+  Eigen::VectorXd& t;
+};
 
-void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      ForwardFilterWorkspace* ws) {
-  for (int n = 0; n < graph.N; ++n) {
-    for (int l = 0; l < graph.L; ++l) {
-      const MomentForm mf = ToMoment(input_factor[n * graph.L + l]);
-      ws->mU(l, n) = mf.mean;
-      ws->VU(l, n) = mf.variance;  // callers guarantee mf.ok (Gaussian inputs)
-    }
-  }
-}
-
-void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws) {
-  if (input_factor != nullptr) LoadInputMoments(graph, input_factor, ws);
-  const int M = graph.M, N = graph.N;
-  Eigen::VectorXd& m = ws->m;
-  Eigen::MatrixXd& V = ws->V;
-  m = graph.m0;
-  V = graph.V0;
+template <int MS>
+void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws) {
+  const int M = graph.M, N = graph.N, L = graph.L;
+  FilterScratch<MS> s(ws);
+  auto& V = s.V;
+  auto& m = s.m;
+  V = ConstView<MS, MS>(graph.V0.data(), M, M);
+  m = ConstView<MS, 1>(graph.m0.data(), M, 1);
   for (int n = 0; n <= N; ++n) {
     // A pinned factor on a row whose prior variance is (numerically) zero carries no
     // information and would divide by ~0: skip it relative to the state's variance scale.
@@ -55,22 +43,30 @@ void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor
         // IFFBDD needs v, s, ŷ of every constrained row even when its factor is empty.
         if (graph.row_prior[r].kind == PriorKind::kNone) continue;
       }
-      const auto c = graph.c(r);
-      auto v = ws->v.col(r);
-      v.noalias() = V * c;
-      const double s = c.dot(v);
-      const double yhat = c.dot(m) + graph.row_d[r];
-      ws->s(r) = s;
+      const auto c = ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1);
+      Eigen::Map<StateVector<MS>> v(ws->v.col(r).data(), M);
+      const int unit = graph.row_unit[r];  // c = e_unit: no product needed (C = I, augmented inputs)
+      double sr, yhat;
+      if (unit >= 0) {
+        v = V.col(unit);
+        sr = v(unit);
+        yhat = m(unit) + graph.row_d[r];
+      } else {
+        v.noalias() = V * c;
+        sr = c.dot(v);
+        yhat = c.dot(m) + graph.row_d[r];
+      }
+      ws->s(r) = sr;
       ws->yhat(r) = yhat;
       if (f.empty()) continue;
       double G, g;
       if (f.V == kInfinity) {  // canonical (ξ, w); w = 0 is a pure linear factor
-        const double den = 1.0 + f.w * s;
+        const double den = 1.0 + f.w * sr;
         G = f.w / den;
         g = (f.xi - f.w * yhat) / den;
       } else {
         const MomentForm mf = ToMoment(f);
-        const double den = mf.variance + s;
+        const double den = mf.variance + sr;
         if (den <= 1e-13 * c.squaredNorm() * variance_scale) {
           // Degenerate: the output is already determined. s = 0 tells the backward
           // passes that this row has no extrinsic variance (§12.2).
@@ -91,18 +87,61 @@ void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor
       ws->V_post.middleCols(n * M, M) = V;
     }
     if (n == N) break;
-    const auto& A = graph.A(n);
-    const auto& B = graph.B(n);
+    const auto A = ConstView<MS, MS>(graph.A(n).data(), M, M);
+    const auto B = ConstView<MS, Eigen::Dynamic>(graph.B(n).data(), M, L);
     // m ← A m + B mU + cx;  V ← A V Aᵀ + B diag(VU) Bᵀ
-    ws->AV.col(0).noalias() = A * m;  // reuse AV's first column as scratch for the mean
-    m.noalias() = ws->AV.col(0);
+    s.t.noalias() = A * m;
+    m.noalias() = s.t;
     m.noalias() += B * ws->mU.col(n);
-    m += graph.cx.col(n);
-    ws->AV.noalias() = A * V;
-    V.noalias() = ws->AV * A.transpose();
-    ws->BD.noalias() = B * ws->VU.col(n).asDiagonal();
-    V.noalias() += ws->BD * B.transpose();
+    m += ConstView<MS, 1>(graph.cx.col(n).data(), M, 1);
+    s.AV.noalias() = A * V;
+    V.noalias() = s.AV * A.transpose();
+    if constexpr (MS == Eigen::Dynamic) {
+      ws->BD.noalias() = B * ws->VU.col(n).asDiagonal();  // large M: one GEMM beats L rank-1 updates
+      V.noalias() += ws->BD * B.transpose();
+    } else {
+      for (int l = 0; l < L; ++l) V.noalias() += ws->VU(l, n) * (B.col(l) * B.col(l).transpose());
+    }
   }
+}
+
+}  // namespace
+
+void ForwardFilterWorkspace::Resize(const FactorGraph& graph, bool keep_edges) {
+  const int M = graph.M, R = graph.num_rows(), N = graph.N, L = graph.L;
+  v.setZero(M, R);
+  s.setZero(R);
+  yhat.setZero(R);
+  G.setZero(R);
+  g.setZero(R);
+  if (keep_edges) {
+    m_post.setZero(M, N + 1);
+    V_post.setZero(M, M * (N + 1));
+  }
+  mU.setZero(L, N);
+  VU.setZero(L, N);
+  m.setZero(M);
+  t.setZero(M);
+  V.setZero(M, M);
+  AV.setZero(M, M);
+  BD.setZero(M, L);
+}
+
+void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor,
+                      ForwardFilterWorkspace* ws) {
+  for (int n = 0; n < graph.N; ++n) {
+    for (int l = 0; l < graph.L; ++l) {
+      const MomentForm mf = ToMoment(input_factor[n * graph.L + l]);
+      ws->mU(l, n) = mf.mean;
+      ws->VU(l, n) = mf.variance;  // callers guarantee mf.ok (Gaussian inputs)
+    }
+  }
+}
+
+void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
+                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws) {
+  if (input_factor != nullptr) LoadInputMoments(graph, input_factor, ws);
+  DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, keep_edges, ws); });
 }
 
 }  // namespace nupmpc::core

@@ -23,7 +23,7 @@ struct ForwardFilterWorkspace {
   // Input factors in moment form for the time update (per input scalar).
   Eigen::MatrixXd mU, VU;  ///< L × N
   // Scratch.
-  Eigen::VectorXd m;
+  Eigen::VectorXd m, t;
   Eigen::MatrixXd V, AV, BD;
 
   void Resize(const FactorGraph& graph, bool keep_edges);

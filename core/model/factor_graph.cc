@@ -134,6 +134,13 @@ void RefreshFactorGraph(const Problem& p, FactorGraph* graph) {
     }
   }
 
+  g.row_unit.resize(g.num_rows());
+  for (int r = 0; r < g.num_rows(); ++r) {
+    const auto c = g.c(r);
+    Eigen::Index i = 0;
+    const bool unit = c.cwiseAbs().maxCoeff(&i) == 1.0 && c(i) == 1.0 && c.cwiseAbs().sum() == 1.0;
+    g.row_unit[r] = unit ? static_cast<int>(i) : -1;
+  }
   for (int r = 0; r < g.num_rows(); ++r) {
     const RowOrigin& o = g.row_origin[r];
     switch (o.type) {

@@ -41,6 +41,7 @@ struct FactorGraph {
   RowMajorMatrix c_pool;         ///< rows cᵀ; row_c[r] indexes into it
   std::vector<int> row_begin;    ///< rows of step n are [row_begin[n], row_begin[n+1]); size N+2
   std::vector<int> row_c;
+  std::vector<int> row_unit;     ///< i if the row's c is the unit vector e_i, else -1
   std::vector<double> row_d;
   std::vector<ScalarPrior> row_prior;
   std::vector<RowOrigin> row_origin;

@@ -7,7 +7,8 @@ namespace nupmpc::core {
 
 // V ← (V + Vᵀ)/2 in place, without the temporary that `(V + V.transpose())` would need
 // (nup-algorithms.md §12.3: symmetrise after every step).
-inline void SymmetrizeInPlace(Eigen::MatrixXd& V) {
+template <typename Derived>
+inline void SymmetrizeInPlace(Eigen::MatrixBase<Derived>& V) {
   const Eigen::Index n = V.rows();
   for (Eigen::Index j = 0; j < n; ++j) {
     for (Eigen::Index i = j + 1; i < n; ++i) {

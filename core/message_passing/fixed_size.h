@@ -1,0 +1,44 @@
+#ifndef NUPMPC_CORE_MESSAGE_PASSING_FIXED_SIZE_H_
+#define NUPMPC_CORE_MESSAGE_PASSING_FIXED_SIZE_H_
+
+// Dispatch of the O(N) recursions to fixed-size Eigen kernels for small state dimensions.
+// Dynamic-size Eigen products of 3×3 or 12×12 matrices spend most of their time in size
+// checks and dispatch; with the size known at compile time the same code is unrolled and
+// vectorised. Fixed-size scratch lives on the stack (no heap), the dynamic fallback uses
+// the workspace, and both share one templated body.
+
+#include <utility>
+
+#include "Eigen/Core"
+
+namespace nupmpc::core {
+
+// State sizes with a compiled kernel (the rest use Eigen::Dynamic).
+#define NUPMPC_FIXED_STATE_SIZES(X) X(1) X(2) X(3) X(4) X(5) X(6) X(8) X(12) X(15) X(16)
+
+template <int MS>
+using StateMatrix = Eigen::Matrix<double, MS, MS>;
+template <int MS>
+using StateVector = Eigen::Matrix<double, MS, 1>;
+
+// Calls f.template operator()<MS>() with MS = M if M has a fixed kernel, else Eigen::Dynamic.
+template <typename F>
+decltype(auto) DispatchStateSize(int M, F&& f) {
+  switch (M) {
+#define NUPMPC_CASE(K) \
+  case K: return std::forward<F>(f).template operator()<K>();
+    NUPMPC_FIXED_STATE_SIZES(NUPMPC_CASE)
+#undef NUPMPC_CASE
+    default: return std::forward<F>(f).template operator()<Eigen::Dynamic>();
+  }
+}
+
+// A read-only view of a dense column-major M×K block as a (possibly fixed-size) matrix.
+template <int Rows, int Cols>
+Eigen::Map<const Eigen::Matrix<double, Rows, Cols>> ConstView(const double* data, int rows, int cols) {
+  return Eigen::Map<const Eigen::Matrix<double, Rows, Cols>>(data, rows, cols);
+}
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_MESSAGE_PASSING_FIXED_SIZE_H_
