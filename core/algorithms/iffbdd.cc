@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #include "absl/strings/str_cat.h"
+#include "core/message_passing/fixed_size.h"
 
 namespace nupmpc::core {
 namespace {
@@ -109,8 +111,15 @@ double Iffbdd::Polish(PrimalIterate* out) {
 }
 
 double Iffbdd::Backward(Pass pass, PrimalIterate* out) {
+  return DispatchStateSize(graph_.M, [&]<int MS>() { return BackwardImpl<MS>(pass, out); });
+}
+
+template <int MS>
+double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   const FactorGraph& g = graph_;
-  Eigen::VectorXd& xt = costate_;  // x̃: the dual of the state
+  const int M = g.M;
+  // x̃: the dual of the state (the costate). Fixed-size kernels keep it in a register block.
+  std::conditional_t<MS == Eigen::Dynamic, Eigen::VectorXd&, StateVector<MS>> xt = costate_;
   xt.setZero();
   int changed = 0;
   double residual = 0.0;
@@ -120,7 +129,7 @@ double Iffbdd::Backward(Pass pass, PrimalIterate* out) {
       if (prior.kind == PriorKind::kNone && !prior.has_gaussian()) continue;
       const double V_e = fw_.s(r);
       if (!(V_e > 0.0)) continue;  // output fixed by data (§9.3): ỹ = 0, no update
-      const double m_e = fw_.yhat(r) - fw_.v.col(r).dot(xt);
+      const double m_e = fw_.yhat(r) - ConstView<MS, 1>(fw_.v.col(r).data(), M, 1).dot(xt);
       const Message msg{m_e, V_e};
       double y_dual;
       if (pass == Pass::kIterate) {
@@ -142,15 +151,24 @@ double Iffbdd::Backward(Pass pass, PrimalIterate* out) {
           polish_region_[r] = d.region;
         }
       }
-      if (y_dual != 0.0) xt.noalias() += y_dual * g.c(r);
+      if (y_dual == 0.0) continue;
+      if (g.row_unit[r] >= 0) {
+        xt(g.row_unit[r]) += y_dual;
+      } else {
+        xt.noalias() += y_dual * ConstView<MS, 1>(g.c_pool.data() + static_cast<Eigen::Index>(g.row_c[r]) * M, M, 1);
+      }
     }
     if (n == 0) break;
     const int j = n - 1;
-    for (int l = 0; l < g.L; ++l) {
-      out->u(l, j) = fw_.mU(l, j) - fw_.VU(l, j) * g.B(j).col(l).dot(xt);
+    const auto B = ConstView<MS, Eigen::Dynamic>(g.B(j).data(), M, g.L);
+    for (int l = 0; l < g.L; ++l) out->u(l, j) = fw_.mU(l, j) - fw_.VU(l, j) * B.col(l).dot(xt);
+    auto next = ConstView<MS, MS>(g.A(j).data(), M, M).transpose() * xt;
+    if constexpr (MS == Eigen::Dynamic) {
+      scratch_.noalias() = next;
+      xt = scratch_;
+    } else {
+      xt = StateVector<MS>(next);
     }
-    scratch_.noalias() = g.A(j).transpose() * xt;
-    xt = scratch_;
   }
   scratch_.noalias() = g.m0;
   scratch_.noalias() -= g.V0 * xt;

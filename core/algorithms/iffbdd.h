@@ -38,6 +38,8 @@ class Iffbdd final : public OuterIteration {
   // The backward dual-deciding pass; returns the region changes (kIterate) or the
   // deciding residual (kPolish).
   double Backward(Pass pass, PrimalIterate* out);
+  template <int MS>
+  double BackwardImpl(Pass pass, PrimalIterate* out);
 
   FactorGraph graph_;
   ForwardFilterWorkspace fw_;
