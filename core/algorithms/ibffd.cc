@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "core/message_passing/fixed_size.h"
 #include "core/util/symmetrize.h"
 
 namespace nupmpc::core {
@@ -79,12 +80,15 @@ void Ibffd::ShiftWarmStart() {
   }
 }
 
-void Ibffd::MarginalizeInput(const ScalarFactor& f, const Eigen::Ref<const Eigen::VectorXd>& b,
-                             Eigen::MatrixXd& W, Eigen::Ref<Eigen::VectorXd> xi) {
-  // Message on the state before u enters: integrate u out of N(u; f)·μ(x + b u).
-  // Written with V in the numerator (H = V/(1 + V(w + q))) so V = 0 needs no 1/V (§8.1 [fix]).
-  z_.noalias() = W * b;
-  const double q = b.dot(z_);
+namespace {
+
+// Integrates input u with factor f out of the backward message (W, ξ) at the state it enters,
+// x + b u (§8.1). Written with V in the numerator (H = V/(1 + V(w + q))) so that V = 0 needs
+// no 1/V ([fix] of [LL-BFFD] eq. 28).
+template <int MS, typename WT, typename XT, typename BT, typename ZT>
+void MarginalizeInput(const ScalarFactor& f, const BT& b, WT& W, XT& xi, ZT& z) {
+  z.noalias() = W * b;
+  const double q = b.dot(z);
   const double bxi = b.dot(xi);
   double H, h;
   if (f.V == 0.0) {
@@ -100,43 +104,66 @@ void Ibffd::MarginalizeInput(const ScalarFactor& f, const Eigen::Ref<const Eigen
     H = 1.0 / den;
     h = (f.xi + bxi) / den;
   }
-  xi.noalias() -= h * z_;
-  W.noalias() -= H * (z_ * z_.transpose());
+  xi.noalias() -= h * z;
+  W.noalias() -= H * (z * z.transpose());
 }
 
-void Ibffd::BackwardFilter(const std::vector<ScalarFactor>& input_factor) {
+template <int MS>
+using MatrixView = Eigen::Map<Eigen::Matrix<double, MS, MS>>;
+template <int MS>
+using VectorView = Eigen::Map<StateVector<MS>>;
+
+}  // namespace
+
+template <int MS>
+void Ibffd::BackwardFilterImpl(const std::vector<ScalarFactor>& input_factor) {
   const FactorGraph& g = graph_;
-  const int M = g.M;
-  W_.setZero();
-  xi_.setZero();
+  const int M = g.M, L = g.L;
+  MatrixView<MS> W(W_.data(), M, M), AtW(AtW_.data(), M, M);
+  VectorView<MS> xi(xi_.data(), M), z(z_.data(), M);
+  W.setZero();
+  xi.setZero();
   for (int n = g.N; n >= 0; --n) {
     for (int r = g.row_begin[n]; r < g.row_begin[n + 1]; ++r) {
       const ScalarPrior& prior = g.row_prior[r];
       if (!prior.has_gaussian()) continue;
       const double w = 1.0 / prior.variance, xy = prior.mean / prior.variance;
-      const auto c = g.c(r);
-      W_.noalias() += w * (c * c.transpose());
-      xi_.noalias() += (xy - w * g.row_d[r]) * c;
+      const auto c = ConstView<MS, 1>(g.c_pool.data() + static_cast<Eigen::Index>(g.row_c[r]) * M, M, 1);
+      W.noalias() += w * (c * c.transpose());
+      xi.noalias() += (xy - w * g.row_d[r]) * c;
     }
-    W_step_.middleCols(n * M, M) = W_;
-    xi_step_.col(n) = xi_;
+    MatrixView<MS>(W_step_.data() + static_cast<Eigen::Index>(n) * M * M, M, M) = W;
+    VectorView<MS>(xi_step_.col(n).data(), M) = xi;
     if (n == 0) break;
     const int j = n - 1;
-    for (int l = g.L - 1; l >= 0; --l) MarginalizeInput(input_factor[j * g.L + l], g.B(j).col(l), W_, xi_);
+    const auto B = ConstView<MS, Eigen::Dynamic>(g.B(j).data(), M, L);
+    for (int l = L - 1; l >= 0; --l) MarginalizeInput<MS>(input_factor[j * L + l], B.col(l), W, xi, z);
     // ξ ← Aᵀ(ξ - W cx);  W ← Aᵀ W A
-    z_.noalias() = W_ * g.cx.col(j);
-    xi_ -= z_;
-    z_.noalias() = g.A(j).transpose() * xi_;
-    xi_ = z_;
-    AtW_.noalias() = g.A(j).transpose() * W_;
-    W_.noalias() = AtW_ * g.A(j);
-    SymmetrizeInPlace(W_);
+    const auto A = ConstView<MS, MS>(g.A(j).data(), M, M);
+    z.noalias() = W * ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
+    xi -= z;
+    z.noalias() = A.transpose() * xi;
+    xi = z;
+    AtW.noalias() = A.transpose() * W;
+    W.noalias() = AtW * A;
+    SymmetrizeInPlace(W);
   }
 }
 
+void Ibffd::BackwardFilter(const std::vector<ScalarFactor>& input_factor) {
+  DispatchStateSize(graph_.M, [&]<int MS>() { BackwardFilterImpl<MS>(input_factor); });
+}
+
 double Ibffd::ForwardDeciding(Pass pass, PrimalIterate* out) {
+  return DispatchStateSize(graph_.M, [&]<int MS>() { return ForwardDecidingImpl<MS>(pass, out); });
+}
+
+template <int MS>
+double Ibffd::ForwardDecidingImpl(Pass pass, PrimalIterate* out) {
   const FactorGraph& g = graph_;
   const int M = g.M, L = g.L;
+  VectorView<MS> x(x_.data(), M), z(z_.data(), M), xi(xi_.data(), M);
+  MatrixView<MS> W(W_.data(), M, M);
   if (g.x0_fixed) {
     x_ = g.m0;
   } else {
@@ -152,54 +179,56 @@ double Ibffd::ForwardDeciding(Pass pass, PrimalIterate* out) {
   int changed = 0;
   double residual = 0.0;
   for (int j = 0; j < g.N; ++j) {
-    z_.noalias() = g.A(j) * x_;
-    x_ = z_;
-    x_ += g.cx.col(j);
+    z.noalias() = ConstView<MS, MS>(g.A(j).data(), M, M) * x;
+    x = z;
+    x += ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
     if (L == 0) continue;
+    const auto B = ConstView<MS, Eigen::Dynamic>(g.B(j).data(), M, L);
     // Messages with inputs l+1..L-1 of this step marginalised: D_l for l = L-1..0.
-    D_.middleCols((L - 1) * M, M) = W_step_.middleCols((j + 1) * M, M);
-    d_.col(L - 1) = xi_step_.col(j + 1);
+    const auto D = [&](int l) { return MatrixView<MS>(D_.data() + static_cast<Eigen::Index>(l) * M * M, M, M); };
+    const auto d = [&](int l) { return VectorView<MS>(d_.col(l).data(), M); };
+    D(L - 1) = MatrixView<MS>(W_step_.data() + static_cast<Eigen::Index>(j + 1) * M * M, M, M);
+    d(L - 1) = VectorView<MS>(xi_step_.col(j + 1).data(), M);
     for (int l = L - 1; l >= 1; --l) {
-      W_ = D_.middleCols(l * M, M);
-      xi_ = d_.col(l);
-      MarginalizeInput(factor_[j * L + l], g.B(j).col(l), W_, xi_);
-      D_.middleCols((l - 1) * M, M) = W_;
-      d_.col(l - 1) = xi_;
+      W = D(l);
+      xi = d(l);
+      MarginalizeInput<MS>(factor_[j * L + l], B.col(l), W, xi, z);
+      D(l - 1) = W;
+      d(l - 1) = xi;
     }
     for (int l = 0; l < L; ++l) {
       const int i = j * L + l;
-      const auto b = g.B(j).col(l);
-      const auto W = D_.middleCols(l * M, M);
-      z_.noalias() = W * b;
-      const double V_e = 1.0 / (b.dot(z_) + kInfluenceEpsilon);
-      const double m_e = V_e * (b.dot(d_.col(l)) - z_.dot(x_));
+      const auto b = B.col(l);
+      z.noalias() = D(l) * b;
+      const double V_e = 1.0 / (b.dot(z) + kInfluenceEpsilon);
+      const double m_e = V_e * (b.dot(d(l)) - z.dot(x));
       const Message msg{m_e, V_e};
       const ScalarPrior& prior = g.input_prior[i];
       double u;
       if (pass == Pass::kIterate) {
-        Decision d;
+        Decision dec;
         if (prior.is_constraint() && prior.is_hard()) {
           // The adaptive-slope rule (§8.3) decides exactly the projection; the slope only
           // grows to the smallest value that makes it feasible, for the NUP update.
-          d = Decide(prior, kInfinity, msg);
-          if (d.region == Region::kAtLower || d.region == Region::kAtUpper) {
+          dec = Decide(prior, kInfinity, msg);
+          if (dec.region == Region::kAtLower || dec.region == Region::kAtUpper) {
             slope_[i] = std::max(slope_[i], RequiredSlope(prior, FoldGaussianPart(prior, msg)));
           }
         } else {
-          d = Decide(prior, slope_[i], msg);
+          dec = Decide(prior, slope_[i], msg);
         }
-        if (d.region != region_[i]) ++changed;
-        region_[i] = d.region;
-        nup_[i] = NupUpdate(prior, slope_[i], d.z);
-        u = d.z;
+        if (dec.region != region_[i]) ++changed;
+        region_[i] = dec.region;
+        nup_[i] = NupUpdate(prior, slope_[i], dec.z);
+        u = dec.z;
       } else {
         u = CombineWithMessage(factor_[i], m_e, V_e);
-        const Decision d = Decide(prior, prior.slope, msg);
-        residual = std::max(residual, std::abs(d.z - u));
-        polish_region_[i] = d.region;
+        const Decision dec = Decide(prior, prior.slope, msg);
+        residual = std::max(residual, std::abs(dec.z - u));
+        polish_region_[i] = dec.region;
       }
       out->u(l, j) = u;
-      x_.noalias() += u * b;
+      x.noalias() += u * b;
     }
   }
   return pass == Pass::kIterate ? changed : residual;

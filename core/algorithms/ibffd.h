@@ -38,9 +38,10 @@ class Ibffd final : public OuterIteration {
   enum class Pass { kIterate, kPolish };
   void BackwardFilter(const std::vector<ScalarFactor>& input_factor);
   double ForwardDeciding(Pass pass, PrimalIterate* out);
-  // Marginalises input (n, l) with factor f out of the message (W, ξ) at the state it enters.
-  void MarginalizeInput(const ScalarFactor& f, const Eigen::Ref<const Eigen::VectorXd>& b, Eigen::MatrixXd& W,
-                        Eigen::Ref<Eigen::VectorXd> xi);
+  template <int MS>
+  void BackwardFilterImpl(const std::vector<ScalarFactor>& input_factor);
+  template <int MS>
+  double ForwardDecidingImpl(Pass pass, PrimalIterate* out);
   double InitialSlope(const ScalarPrior& prior) const;
 
   SolverOptions options_;
