@@ -94,8 +94,17 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, bool keep_
     m.noalias() = s.t;
     m.noalias() += B * ws->mU.col(n);
     m += ConstView<MS, 1>(graph.cx.col(n).data(), M, 1);
-    s.AV.noalias() = A * V;
-    V.noalias() = s.AV * A.transpose();
+    if (graph.augmented) {
+      // A' = [[A, 0], [0, 0]] (§9.6): only the top-left block of A' V A'ᵀ is nonzero.
+      const int M0 = graph.base_M;
+      s.AV.topLeftCorner(M0, M0).noalias() = A.topLeftCorner(M0, M0) * V.topLeftCorner(M0, M0);
+      V.topLeftCorner(M0, M0).noalias() = s.AV.topLeftCorner(M0, M0) * A.topLeftCorner(M0, M0).transpose();
+      V.rightCols(M - M0).setZero();
+      V.bottomLeftCorner(M - M0, M0).setZero();
+    } else {
+      s.AV.noalias() = A * V;
+      V.noalias() = s.AV * A.transpose();
+    }
     if constexpr (MS == Eigen::Dynamic) {
       ws->BD.noalias() = B * ws->VU.col(n).asDiagonal();  // large M: one GEMM beats L rank-1 updates
       V.noalias() += ws->BD * B.transpose();
