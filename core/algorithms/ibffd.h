@@ -18,7 +18,7 @@ namespace nupmpc::core {
 //
 // Memory: the backward message (W, ξ) at each state x[n] (N·M² doubles); the per-input
 // messages inside a step are recomputed in the forward pass (§8.5 alternative).
-class Ibffd final : public OuterIteration {
+class Ibffd final : public ActiveSetIteration {
  public:
   static absl::Status CheckApplicable(const Problem& problem);
   Ibffd(const Problem& problem, const SolverOptions& options);
@@ -29,10 +29,7 @@ class Ibffd final : public OuterIteration {
   void ColdStart() override;
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
-  void AdoptRegionsForPolish() override { polish_region_ = region_; }
-  void AcceptPolishRegions() override { region_ = polish_region_; }
   double Polish(PrimalIterate* out) override;
-  bool has_regions() const override { return has_regions_; }
 
  private:
   enum class Pass { kIterate, kPolish };
@@ -49,7 +46,6 @@ class Ibffd final : public OuterIteration {
   std::vector<ScalarFactor> nup_;        ///< NUP part per input (the carried state)
   std::vector<ScalarFactor> factor_;     ///< what the backward filter sees
   std::vector<double> slope_;            ///< adapted slope per input
-  std::vector<Region> region_, polish_region_;
   Eigen::MatrixXd W_step_;   ///< M × M(N+1): backward message at x[n] (before step n-1's inputs)
   Eigen::MatrixXd xi_step_;  ///< M × (N+1)
   Eigen::MatrixXd W_, AtW_, S_;
@@ -57,7 +53,6 @@ class Ibffd final : public OuterIteration {
   Eigen::MatrixXd D_;        ///< M × M·L: per-input messages inside one step (forward pass)
   Eigen::MatrixXd d_;        ///< M × L
   Eigen::PartialPivLU<Eigen::MatrixXd> x0_lu_;
-  bool has_regions_ = false;
 };
 
 }  // namespace nupmpc::core

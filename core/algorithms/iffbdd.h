@@ -16,7 +16,7 @@ namespace nupmpc::core {
 // inputs recovered from the costate. Input constraints enter through state augmentation
 // (§9.6). Needs a Gaussian part on every input; rows may carry box, half-space (hard or
 // soft) and L1 priors.
-class Iffbdd final : public OuterIteration {
+class Iffbdd final : public ActiveSetIteration {
  public:
   // Why this problem cannot run IFFBDD (OkStatus if it can).
   static absl::Status CheckApplicable(const Problem& problem);
@@ -28,10 +28,7 @@ class Iffbdd final : public OuterIteration {
   void ColdStart() override;
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
-  void AdoptRegionsForPolish() override { polish_region_ = region_; }
-  void AcceptPolishRegions() override { region_ = polish_region_; }
   double Polish(PrimalIterate* out) override;
-  bool has_regions() const override { return has_regions_; }
 
  private:
   enum class Pass { kIterate, kPolish };
@@ -47,9 +44,7 @@ class Iffbdd final : public OuterIteration {
   std::vector<ScalarFactor> nup_;           ///< dual-NUP factor per row (the carried state)
   std::vector<ScalarFactor> row_factor_;    ///< nup_ × Gaussian part, what the filter sees
   std::vector<double> gamma_;               ///< γ per row (§9.5)
-  std::vector<Region> region_, polish_region_;
   Eigen::VectorXd costate_, scratch_;
-  bool has_regions_ = false;
 };
 
 }  // namespace nupmpc::core

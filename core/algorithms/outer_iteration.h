@@ -1,8 +1,11 @@
 #ifndef NUPMPC_CORE_ALGORITHMS_OUTER_ITERATION_H_
 #define NUPMPC_CORE_ALGORITHMS_OUTER_ITERATION_H_
 
+#include <vector>
+
 #include "Eigen/Core"
 #include "core/options.h"
+#include "core/priors/scalar_rules.h"
 #include "core/problem.h"
 
 namespace nupmpc::core {
@@ -57,6 +60,20 @@ class OuterIteration {
   virtual void AcceptPolishRegions() = 0;
   // Whether regions from a previous solve are available (a warm polish is worth trying).
   virtual bool has_regions() const = 0;
+};
+
+// The active-set bookkeeping shared by the algorithms that decide every scalar with an
+// exact proximal rule (IBFFD, IFFBDD): the region of each decided scalar in the last pass,
+// and the regions the polish works with.
+class ActiveSetIteration : public OuterIteration {
+ public:
+  void AdoptRegionsForPolish() override { polish_region_ = region_; }
+  void AcceptPolishRegions() override { region_ = polish_region_; }
+  bool has_regions() const override { return has_regions_; }
+
+ protected:
+  std::vector<Region> region_, polish_region_;  ///< one per decided scalar
+  bool has_regions_ = false;
 };
 
 }  // namespace nupmpc::core
