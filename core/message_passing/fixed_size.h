@@ -14,7 +14,7 @@
 namespace nupmpc::core {
 
 // State sizes with a compiled kernel (the rest use Eigen::Dynamic).
-#define NUPMPC_FIXED_STATE_SIZES(X) X(1) X(2) X(3) X(4) X(5) X(6) X(8) X(12) X(15) X(16)
+#define NUPMPC_FIXED_STATE_SIZES(X) X(2) X(3) X(4) X(5) X(6) X(8) X(12) X(15) X(16)
 
 template <int MS>
 using StateMatrix = Eigen::Matrix<double, MS, MS>;
