@@ -72,7 +72,6 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Create(Problem problem, Solver
 
 absl::Status Session::Rebuild() {
   NUPMPC_ASSIGN_OR_RETURN(algorithm_, MakeOuterIteration(problem_, options_));
-  inputs_constrained_ = AnyInputConstrained(problem_);
   evaluator_.Prepare(problem_);
   current_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   candidate_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
@@ -96,8 +95,10 @@ absl::Status Session::Update(const Problem& problem) {
   NUPMPC_RETURN_IF_ERROR(CheckSameShape(problem_, problem));
   NUPMPC_RETURN_IF_ERROR(Validate(problem));
   NUPMPC_ASSIGN_OR_RETURN(const Algorithm selected, SelectAlgorithm(problem, options_.algorithm));
-  const bool same_graph = selected == algorithm_->algorithm() &&
-                          (selected != Algorithm::kIffbdd || AnyInputConstrained(problem) == inputs_constrained_);
+  // IFFBDD's graph is augmented iff some input is constrained: that is part of its shape.
+  const bool same_graph =
+      selected == algorithm_->algorithm() &&
+      (selected != Algorithm::kIffbdd || AnyInputConstrained(problem) == AnyInputConstrained(problem_));
   if (!same_graph) {
     // The new priors need another algorithm (or augmentation): build it on a copy first so
     // that a failure leaves the session untouched.
@@ -106,7 +107,6 @@ absl::Status Session::Update(const Problem& problem) {
     NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<OuterIteration> rebuilt, MakeOuterIteration(problem, forced));
     problem_ = problem;
     algorithm_ = std::move(rebuilt);
-    inputs_constrained_ = AnyInputConstrained(problem_);
     has_warm_state_ = false;
   } else {
     problem_ = problem;

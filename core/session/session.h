@@ -53,7 +53,6 @@ class Session {
   Problem problem_;
   SolverOptions options_;
   std::unique_ptr<OuterIteration> algorithm_;
-  bool inputs_constrained_ = false;  ///< part of the graph's shape for IFFBDD (augmentation)
   ObjectiveEvaluator evaluator_;
   PrimalIterate current_, candidate_, best_;
   bool has_warm_state_ = false;

@@ -117,12 +117,7 @@ TEST(WarmStart, ShiftMovesEveryStepOneEarlier) {
 // ---- bad input ----------------------------------------------------------------------
 
 Problem SmallProblem() {
-  testing::RandomProblemSpec spec;
-  spec.M = 3;
-  spec.L = 2;
-  spec.K = 2;
-  spec.N = 8;
-  Problem p = testing::RandomGaussianProblem(spec);
+  Problem p = testing::RandomGaussianProblem({.M = 3, .L = 2, .K = 2, .N = 8});
   for (int n = 0; n < p.horizon; ++n) {
     p.mutable_input_prior(n, 0) = ScalarPrior::Box(-0.2, 0.2).WithGaussian(0.0, 1.0);
   }
@@ -251,13 +246,7 @@ TEST(Determinism, IdenticalInputsGiveBitIdenticalResults) {
 
 TEST(NumericalSafety, IllConditionedProblemsNeverReturnNaN) {
   for (Algorithm algorithm : {Algorithm::kIffbdd, Algorithm::kIbffd, Algorithm::kIake}) {
-    testing::RandomProblemSpec spec;
-    spec.M = 5;
-    spec.L = 2;
-    spec.K = 3;
-    spec.N = 200;
-    spec.seed = 11;
-    Problem p = testing::RandomGaussianProblem(spec);
+    Problem p = testing::RandomGaussianProblem({.M = 5, .L = 2, .K = 3, .N = 200, .seed = 11});
     for (auto& A : p.A) A *= 3.0;  // strongly unstable: state grows like 2.7^n
     p.terminal->weight *= 1e12;
     for (int n = 0; n < p.horizon; ++n) {
@@ -312,16 +301,9 @@ TEST(Limits, CancelAndIterationLimitAreReportedAsStatus) {
 }
 
 TEST(Iake, AgreesWithIbffdAndIffbddOnSoftPenalties) {
-  // A convex problem with L1, Huber and soft box priors on inputs (IBFFD, IAKE) and a soft box
-  // on outputs via IFFBDD: the three algorithms reach the same objective.
-  testing::RandomProblemSpec spec;
-  spec.M = 3;
-  spec.L = 2;
-  spec.K = 2;
-  spec.N = 25;
-  spec.seed = 5;
-  spec.terminal = false;
-  Problem p = testing::RandomGaussianProblem(spec);
+  // A convex problem with an L1 prior and a soft box on the inputs (each with a Gaussian part,
+  // so all three algorithms apply): they must reach the same objective.
+  Problem p = testing::RandomGaussianProblem({.M = 3, .L = 2, .K = 2, .N = 25, .terminal = false, .seed = 5});
   for (int n = 0; n < p.horizon; ++n) {
     p.mutable_input_prior(n, 0) = ScalarPrior::L1(0.1, 0.5).WithGaussian(0.0, 4.0);
     p.mutable_input_prior(n, 1) = ScalarPrior::Box(-0.3, 0.3, 2.0).WithGaussian(0.0, 1.0);
