@@ -94,8 +94,9 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, bool keep_
     m.noalias() = s.t;
     m.noalias() += B * ws->mU.col(n);
     m += ConstView<MS, 1>(graph.cx.col(n).data(), M, 1);
-    if (graph.augmented) {
-      // A' = [[A, 0], [0, 0]] (§9.6): only the top-left block of A' V A'ᵀ is nonzero.
+    if (MS == Eigen::Dynamic && graph.augmented) {
+      // A' = [[A, 0], [0, 0]] (§9.6): only the top-left block of A' V A'ᵀ is nonzero. (Fixed
+      // sizes multiply whole: a runtime-sized block would leave the unrolled kernel.)
       const int M0 = graph.base_M;
       s.AV.topLeftCorner(M0, M0).noalias() = A.topLeftCorner(M0, M0) * V.topLeftCorner(M0, M0);
       V.topLeftCorner(M0, M0).noalias() = s.AV.topLeftCorner(M0, M0) * A.topLeftCorner(M0, M0).transpose();

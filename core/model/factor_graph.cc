@@ -4,6 +4,7 @@
 #include <tuple>
 
 #include "Eigen/Eigenvalues"
+#include "core/message_passing/fixed_size.h"
 
 namespace nupmpc::core {
 namespace {
@@ -35,7 +36,7 @@ FactorGraph BuildFactorGraph(const Problem& p, bool augment_inputs) {
   const int M0 = p.num_states, L = p.num_inputs, K = p.num_outputs, N = p.horizon;
   g.base_M = M0;
   g.augmented = augment_inputs && L > 0;
-  g.M = g.augmented ? M0 + L : M0;
+  g.M = g.augmented ? PaddedStateSize(M0 + L) : M0;
   g.L = L;
   g.N = N;
   g.A_pool.assign(p.A.size(), Eigen::MatrixXd::Zero(g.M, g.M));
@@ -102,7 +103,7 @@ void RefreshFactorGraph(const Problem& p, FactorGraph* graph) {
   for (std::size_t i = 0; i < p.A.size(); ++i) g.A_pool[i].topLeftCorner(M0, M0) = p.A[i];
   for (std::size_t i = 0; i < p.B.size(); ++i) {
     g.B_pool[i].topRows(M0) = p.B[i];
-    if (g.augmented) g.B_pool[i].bottomRows(L).setIdentity();
+    if (g.augmented) g.B_pool[i].middleRows(M0, L).setIdentity();
   }
   for (int n = 0; n < N; ++n) {
     for (int i = 0; i < M0; ++i) g.cx(i, n) = p.state_offset_at(n, i);

@@ -28,7 +28,7 @@ struct RowOrigin {
 // Built once per session shape (allocates); Refresh() copies new values of the same
 // shape into it without allocating.
 struct FactorGraph {
-  int M = 0;        ///< state dimension (M + L when augmented)
+  int M = 0;        ///< state dimension (M + L when augmented, padded: PaddedStateSize)
   int L = 0;        ///< inputs per step
   int N = 0;        ///< horizon
   int base_M = 0;   ///< the problem's M
