@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/message_passing/fixed_size.h"
 #include "core/priors/scalar_rules.h"
 
 namespace nupmpc::core {
@@ -25,10 +26,28 @@ void ObjectiveEvaluator::Prepare(const Problem& p) {
   bound_scale_ = scale > 0.0 ? scale : 1.0;
 }
 
+// x[n+1] = A x[n] + B u[n] + c[n] and y[n] = C x[n] (offsets d are added by the caller).
+// Evaluate() runs once per iteration: with dynamic sizes these small products cost as
+// much as the message passing itself (corridor, M = 3), hence the fixed-size kernels.
+template <int MS>
+void ObjectiveEvaluator::Simulate(const Problem& p, const PrimalIterate& it) {
+  const int M = p.num_states, N = p.horizon, L = p.num_inputs, K = p.num_outputs;
+  const auto state = [&](int n) { return Eigen::Map<StateVector<MS>>(x_.col(n).data(), M); };
+  state(0) = it.x0.head(M);
+  for (int n = 0;; ++n) {
+    if (K > 0) y_.col(n).noalias() = ConstView<Eigen::Dynamic, MS>(p.C_at(n).data(), K, M) * state(n);
+    if (n == N) break;
+    auto next = state(n + 1);
+    next.noalias() = ConstView<MS, MS>(p.A_at(n).data(), M, M) * state(n);
+    next.noalias() += ConstView<MS, Eigen::Dynamic>(p.B_at(n).data(), M, L) * it.u.col(n);
+    if (!p.state_offset.empty()) next += p.state_offset.size() == 1 ? p.state_offset[0] : p.state_offset[n];
+  }
+}
+
 ObjectiveEvaluator::Result ObjectiveEvaluator::Evaluate(const Problem& p, const PrimalIterate& it) {
   Result r;
   const int N = p.horizon, L = p.num_inputs, K = p.num_outputs;
-  x_.col(0) = it.x0.head(p.num_states);
+  DispatchStateSize(p.num_states, [&]<int MS>() { Simulate<MS>(p, it); });
   if (x0_free_) {
     dx_ = x_.col(0) - p.initial_mean;
     tmp_ = dx_;
@@ -36,22 +55,12 @@ ObjectiveEvaluator::Result ObjectiveEvaluator::Evaluate(const Problem& p, const 
     r.objective += 0.5 * dx_.dot(tmp_);
   }
   for (int n = 0; n <= N; ++n) {
-    if (n > 0) {
-      x_.col(n).noalias() = p.A_at(n - 1) * x_.col(n - 1);
-      x_.col(n).noalias() += p.B_at(n - 1) * it.u.col(n - 1);
-      if (!p.state_offset.empty()) {
-        x_.col(n) += p.state_offset.size() == 1 ? p.state_offset[0] : p.state_offset[n - 1];
-      }
-    }
-    if (K > 0) {
-      y_.col(n).noalias() = p.C_at(n) * x_.col(n);
-      for (int k = 0; k < K; ++k) {
-        const double y = y_(k, n) + p.output_offset_at(n, k);
-        y_(k, n) = y;
-        const ScalarPrior& prior = p.output_prior(n, k);
-        r.objective += PriorCost(prior, y);
-        r.max_violation = std::max(r.max_violation, HardViolation(prior, y));
-      }
+    for (int k = 0; k < K; ++k) {
+      const double y = y_(k, n) + p.output_offset_at(n, k);
+      y_(k, n) = y;
+      const ScalarPrior& prior = p.output_prior(n, k);
+      r.objective += PriorCost(prior, y);
+      r.max_violation = std::max(r.max_violation, HardViolation(prior, y));
     }
     if (n < N) {
       for (int l = 0; l < L; ++l) {

@@ -31,6 +31,9 @@ class ObjectiveEvaluator {
   double bound_scale() const { return bound_scale_; }
 
  private:
+  template <int MS>
+  void Simulate(const Problem& problem, const PrimalIterate& iterate);
+
   Eigen::MatrixXd x_, y_;
   Eigen::VectorXd dx_, tmp_;
   Eigen::LLT<Eigen::MatrixXd> v0_llt_;
