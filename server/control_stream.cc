@@ -1,0 +1,212 @@
+#include "server/control_stream.h"
+
+#include "server/step_solver.h"
+#include "spdlog/spdlog.h"
+
+namespace nupmpc::server {
+namespace {
+
+std::optional<Clock::time_point> StreamDeadline(const grpc::CallbackServerContext* context) {
+  const auto deadline = context->deadline();
+  if (deadline == std::chrono::system_clock::time_point::max()) return std::nullopt;
+  return Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - std::chrono::system_clock::now());
+}
+
+v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& status) {
+  v1::ControlResponse r;
+  r.set_sequence(sequence);
+  r.set_error_code(status.error_code());
+  r.set_error_message(status.error_message());
+  return r;
+}
+
+}  // namespace
+
+ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* context)
+    : state_(state), context_(context) {
+  if (state_->draining.load()) {
+    Finish(state_->ToGrpc(absl::UnavailableError("the server is shutting down")));
+    return;
+  }
+  StartRead(&read_buffer_);
+}
+
+absl::Status ControlStream::Attach(const v1::ControlRequest& first) {
+  std::shared_ptr<SessionEntry> entry;
+  switch (first.attach_case()) {
+    case v1::ControlRequest::kSessionId: {
+      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->registry.Find(first.session_id());
+      if (!found.ok()) return found.status();
+      entry = *std::move(found);
+      if (entry->owned_by_stream || entry->attached.exchange(true)) {
+        return absl::FailedPreconditionError(
+            absl::StrCat("session_id \"", first.session_id(), "\": another Control stream is attached to it"));
+      }
+      break;
+    }
+    case v1::ControlRequest::kSpec: {
+      absl::StatusOr<BuiltSession> built = BuildSession(first.spec(), state_->options.size_limits);
+      if (!built.ok()) return built.status();
+      absl::StatusOr<std::shared_ptr<SessionEntry>> added =
+          state_->registry.Add(std::move(built->solver), std::move(built->problem), built->default_time_limit_ms,
+                               /*owned_by_stream=*/true);
+      if (!added.ok()) return added.status();
+      entry = *std::move(added);
+      entry->attached.store(true);
+      spdlog::info("session {} created by a Control stream", entry->id);
+      break;
+    }
+    case v1::ControlRequest::ATTACH_NOT_SET:
+      return absl::InvalidArgumentError("first ControlRequest: must carry session_id or spec (attach)");
+  }
+  entry_ = std::move(entry);
+  attached_ = true;
+  return absl::OkStatus();
+}
+
+void ControlStream::OnReadDone(bool ok) {
+  if (!ok) {  // the client half-closed (or went away)
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      reads_done_ = true;
+    }
+    Pump();
+    return;
+  }
+  v1::ControlRequest request = std::move(read_buffer_);
+  read_buffer_.Clear();
+  bool read_more = true;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!attached_) {
+      if (absl::Status s = Attach(request); !s.ok()) {
+        final_status_ = state_->ToGrpc(s);
+        finish_requested_ = true;
+        read_more = false;
+      } else {
+        v1::ControlResponse hello;
+        hello.set_sequence(request.sequence());
+        hello.set_session_id(entry_->id);
+        if (request.has_step()) {
+          EnqueueStepLocked(std::move(request));
+        } else {
+          QueueWriteLocked(std::move(hello));
+        }
+      }
+    } else if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
+      QueueWriteLocked(ErrorResponse(
+          request.sequence(),
+          state_->ToGrpc(absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
+    } else if (!request.has_step()) {
+      QueueWriteLocked(ErrorResponse(
+          request.sequence(), state_->ToGrpc(absl::InvalidArgumentError("step: required after the first message"))));
+    } else {
+      EnqueueStepLocked(std::move(request));
+    }
+  }
+  if (read_more) StartRead(&read_buffer_);
+  Pump();
+}
+
+void ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
+  if (state_->draining.load()) {
+    QueueWriteLocked(
+        ErrorResponse(request.sequence(), state_->ToGrpc(absl::UnavailableError("the server is shutting down"))));
+    return;
+  }
+  if (parked_.has_value()) {
+    v1::ControlResponse superseded;
+    superseded.set_sequence(parked_->sequence());
+    superseded.mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
+    QueueWriteLocked(std::move(superseded));
+  }
+  parked_ = std::move(request);
+  if (!solving_) StartSolveLocked();
+}
+
+void ControlStream::StartSolveLocked() {
+  v1::ControlRequest request = std::move(*parked_);
+  parked_.reset();
+  solving_ = true;
+  const std::uint64_t sequence = request.sequence();
+  const auto queued_at = Clock::now();
+  const bool queued = state_->pool.TrySubmit([this, request = std::move(request), queued_at]() mutable {
+    SolveOnPool(std::move(request));
+    state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+  });
+  if (!queued) {
+    solving_ = false;
+    QueueWriteLocked(ErrorResponse(
+        sequence, state_->ToGrpc(absl::ResourceExhaustedError("the solve queue is full; retry later"))));
+  }
+}
+
+void ControlStream::SolveOnPool(v1::ControlRequest request) {
+  CallContext call;
+  call.deadline = StreamDeadline(context_);
+  call.cancel = &cancelled_;
+  v1::ControlResponse response;
+  response.set_sequence(request.sequence());
+  const absl::Status status = SolveStep(*entry_, request.step(), call, response.mutable_result());
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (status.ok()) {
+      QueueWriteLocked(std::move(response));
+    } else {
+      QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(status)));
+    }
+    solving_ = false;
+    if (parked_.has_value()) StartSolveLocked();
+  }
+  Pump();
+}
+
+void ControlStream::QueueWriteLocked(v1::ControlResponse response) { writes_.push_back(std::move(response)); }
+
+void ControlStream::Pump() {
+  const v1::ControlResponse* to_write = nullptr;
+  bool finish = false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (finished_) return;
+    if (!writing_ && !writes_.empty()) {
+      writing_ = true;
+      to_write = &writes_.front();  // deque: stays valid while other elements are added at the back
+    } else if (!writing_ && !solving_ && (finish_requested_ || (reads_done_ && !parked_.has_value()))) {
+      finished_ = true;
+      finish = true;
+    }
+  }
+  if (to_write != nullptr) StartWrite(to_write);
+  if (finish) Finish(final_status_);
+}
+
+void ControlStream::OnWriteDone(bool ok) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    writes_.pop_front();
+    writing_ = false;
+    if (!ok) {  // the client is gone: drop what is left
+      writes_.clear();
+      parked_.reset();
+      reads_done_ = true;
+    }
+  }
+  Pump();
+}
+
+void ControlStream::OnCancel() { cancelled_.store(true); }
+
+void ControlStream::OnDone() {
+  if (entry_ != nullptr) {
+    if (entry_->owned_by_stream) {
+      (void)state_->registry.Close(entry_->id);
+      spdlog::info("session {} closed with its Control stream", entry_->id);
+    } else {
+      entry_->attached.store(false);
+    }
+  }
+  delete this;
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,66 @@
+#ifndef NUPMPC_SERVER_CONTROL_STREAM_H_
+#define NUPMPC_SERVER_CONTROL_STREAM_H_
+
+#include <atomic>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <optional>
+
+#include "grpcpp/grpcpp.h"
+#include "nupmpc/v1/nupmpc.grpc.pb.h"
+#include "server/server_context.h"
+
+namespace nupmpc::server {
+
+// One Control stream (the main path). The first message attaches to a session or creates
+// one owned by the stream; every message with a step is answered once, in order.
+//
+// Flow control, "newest state wins": at most one step of a stream is being solved and at
+// most one waits. A step that arrives while another one waits replaces it, and the replaced
+// one is answered at once with SOLVE_STATUS_SUPERSEDED (nothing of it is applied). A client
+// that sends faster than the server solves therefore always gets the plan for its latest
+// state next, and never builds up a backlog.
+//
+// A bad step is answered with error_code/error_message and the stream stays open (the
+// session is unchanged); a bad first message ends the stream with that status.
+class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
+ public:
+  ControlStream(ServerState* state, grpc::CallbackServerContext* context);
+
+  void OnReadDone(bool ok) override;
+  void OnWriteDone(bool ok) override;
+  void OnCancel() override;
+  void OnDone() override;
+
+ private:
+  absl::Status Attach(const v1::ControlRequest& first);
+  // Accepts a step: solve it now, or park it (superseding the parked one). Called with mu_.
+  void EnqueueStepLocked(v1::ControlRequest request);
+  void StartSolveLocked();
+  void SolveOnPool(v1::ControlRequest request);
+  void QueueWriteLocked(v1::ControlResponse response);
+  // Starts the next write / finishes the stream if nothing is left. Called without mu_.
+  void Pump();
+
+  ServerState* const state_;
+  grpc::CallbackServerContext* const context_;
+  v1::ControlRequest read_buffer_;
+  std::atomic<bool> cancelled_{false};
+
+  std::mutex mu_;
+  std::shared_ptr<SessionEntry> entry_;        // set by the first message
+  bool attached_ = false;
+  std::optional<v1::ControlRequest> parked_;   // the newest step not yet started
+  bool solving_ = false;
+  std::deque<v1::ControlResponse> writes_;     // front is being written when writing_
+  bool writing_ = false;
+  bool reads_done_ = false;
+  bool finish_requested_ = false;
+  bool finished_ = false;
+  grpc::Status final_status_;
+};
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_CONTROL_STREAM_H_

@@ -1,0 +1,58 @@
+#include "server/grpc_server.h"
+
+#include "absl/strings/str_cat.h"
+#include "grpcpp/ext/proto_server_reflection_plugin.h"
+#include "grpcpp/health_check_service_interface.h"
+#include "spdlog/spdlog.h"
+
+namespace nupmpc::server {
+
+absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOptions& options) {
+  std::unique_ptr<GrpcServer> s(new GrpcServer());
+  s->state_ = std::make_unique<ServerState>(options);
+  s->service_ = std::make_unique<MpcServiceImpl>(s->state_.get());
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.address, grpc::InsecureServerCredentials(), &s->port_);
+  builder.RegisterService(s->service_.get());
+  builder.SetMaxReceiveMessageSize(options.max_message_bytes);
+  builder.SetMaxSendMessageSize(options.max_message_bytes);
+  s->server_ = builder.BuildAndStart();
+  if (s->server_ == nullptr || s->port_ == 0) {
+    return absl::UnavailableError(absl::StrCat("could not listen on ", options.address));
+  }
+  s->server_->GetHealthCheckService()->SetServingStatus(true);
+  s->janitor_ = std::thread([raw = s.get()] { raw->Janitor(); });
+  return s;
+}
+
+GrpcServer::~GrpcServer() { Shutdown(); }
+
+void GrpcServer::Janitor() {
+  std::unique_lock<std::mutex> lock(janitor_mu_);
+  while (!stopping_) {
+    janitor_wake_.wait_for(lock, std::chrono::seconds(1));
+    if (stopping_) break;
+    const int expired = state_->registry.ExpireIdle(state_->options.session_idle_timeout_s);
+    if (expired > 0) spdlog::info("closed {} idle sessions", expired);
+  }
+}
+
+void GrpcServer::Shutdown() {
+  {
+    std::lock_guard<std::mutex> lock(janitor_mu_);
+    if (stopping_) return;
+    stopping_ = true;
+  }
+  janitor_wake_.notify_all();
+  if (janitor_.joinable()) janitor_.join();
+  state_->draining.store(true);
+  server_->GetHealthCheckService()->SetServingStatus(false);
+  const auto grace = std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::chrono::duration<double>(state_->options.grace_period_s));
+  server_->Shutdown(std::chrono::system_clock::now() + grace);
+  state_->pool.Shutdown();
+}
+
+}  // namespace nupmpc::server

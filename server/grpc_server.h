@@ -1,0 +1,46 @@
+#ifndef NUPMPC_SERVER_GRPC_SERVER_H_
+#define NUPMPC_SERVER_GRPC_SERVER_H_
+
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "absl/status/statusor.h"
+#include "grpcpp/grpcpp.h"
+#include "server/mpc_service.h"
+#include "server/server_context.h"
+
+namespace nupmpc::server {
+
+// The whole server: MpcService, grpc.health.v1, reflection, the idle-session janitor.
+// Used by nupmpc-server's main and, in-process, by the integration tests.
+class GrpcServer {
+ public:
+  static absl::StatusOr<std::unique_ptr<GrpcServer>> Start(const ServerOptions& options);
+  ~GrpcServer();
+
+  int port() const { return port_; }
+  ServerState& state() { return *state_; }
+  // Graceful stop: refuse new work (UNAVAILABLE, health NOT_SERVING), give in-flight calls
+  // `grace_period_s` to finish, cancel the rest, stop the workers. Idempotent.
+  void Shutdown();
+  void Wait() { server_->Wait(); }
+
+ private:
+  GrpcServer() = default;
+  void Janitor();
+
+  std::unique_ptr<ServerState> state_;
+  std::unique_ptr<MpcServiceImpl> service_;
+  std::unique_ptr<grpc::Server> server_;
+  int port_ = 0;
+  std::mutex janitor_mu_;
+  std::condition_variable janitor_wake_;
+  bool stopping_ = false;
+  std::thread janitor_;
+};
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_GRPC_SERVER_H_

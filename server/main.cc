@@ -1,0 +1,39 @@
+// nupmpc-server: the nupmpc.v1 gRPC service. Configuration: --help (flags; environment
+// variables NUPMPC_* as fallbacks). SIGTERM/SIGINT drain and exit 0.
+#include <csignal>
+#include <cstdio>
+
+#include "server/grpc_server.h"
+#include "server/server_flags.h"
+#include "server/version.h"
+#include "spdlog/spdlog.h"
+
+int main(int argc, char** argv) {
+  // Block the stop signals in every thread (gRPC's included); main waits for them.
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGTERM);
+  sigaddset(&stop_signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
+  absl::StatusOr<nupmpc::server::ParsedFlags> flags = nupmpc::server::ParseServerFlags(argc, argv);
+  if (!flags.ok()) {
+    std::fprintf(stderr, "nupmpc-server: %s\n", std::string(flags.status().message()).c_str());
+    return 2;
+  }
+  spdlog::set_level(spdlog::level::from_str(flags->log_level));
+  auto server = nupmpc::server::GrpcServer::Start(flags->options);
+  if (!server.ok()) {
+    spdlog::error("{}", std::string(server.status().message()));
+    return 1;
+  }
+  spdlog::info("nupmpc-server {} listening on port {} ({} workers, queue {}, max {} sessions)",
+               nupmpc::server::kVersion, (*server)->port(), flags->options.worker_threads,
+               flags->options.queue_capacity, flags->options.max_sessions);
+  int signal = 0;
+  sigwait(&stop_signals, &signal);
+  spdlog::info("signal {}: draining (grace {} s)", signal, flags->options.grace_period_s);
+  (*server)->Shutdown();
+  spdlog::info("stopped");
+  return 0;
+}

@@ -1,0 +1,158 @@
+#include "server/mpc_service.h"
+
+#include <functional>
+
+#include "server/control_stream.h"
+#include "server/step_solver.h"
+#include "server/version.h"
+#include "spdlog/spdlog.h"
+
+namespace nupmpc::server {
+namespace {
+
+std::optional<Clock::time_point> DeadlineOf(const grpc::CallbackServerContext* context) {
+  const auto deadline = context->deadline();
+  if (deadline == std::chrono::system_clock::time_point::max()) return std::nullopt;
+  // The deadline is on the system clock; solves measure the steady clock.
+  return Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - std::chrono::system_clock::now());
+}
+
+// A unary call whose work runs on the worker pool. It finishes itself, and a client that
+// cancels raises the flag the solver checks every iteration.
+class PooledUnary : public grpc::ServerUnaryReactor {
+ public:
+  // Runs `work` on the pool (or answers RESOURCE_EXHAUSTED when the queue is full).
+  static grpc::ServerUnaryReactor* Start(ServerState* state, grpc::CallbackServerContext* context,
+                                         std::function<absl::Status(const CallContext&)> work) {
+    auto* self = new PooledUnary(state);
+    if (state->draining.load()) {
+      self->Finish(state->ToGrpc(absl::UnavailableError("the server is shutting down")));
+      return self;
+    }
+    self->call_.deadline = DeadlineOf(context);
+    self->call_.cancel = &self->cancelled_;
+    const auto queued_at = Clock::now();
+    const bool queued = state->pool.TrySubmit([self, state, work = std::move(work), queued_at] {
+      const absl::Status status = work(self->call_);
+      if (status.ok()) {
+        state->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+      }
+      self->Finish(state->ToGrpc(status));
+    });
+    if (!queued) {
+      self->Finish(state->ToGrpc(absl::ResourceExhaustedError("the solve queue is full; retry later")));
+    }
+    return self;
+  }
+
+  void OnCancel() override { cancelled_.store(true); }
+  void OnDone() override { delete this; }
+
+ private:
+  explicit PooledUnary(ServerState* state) : state_(state) {}
+  ServerState* state_;
+  CallContext call_;
+  std::atomic<bool> cancelled_{false};
+};
+
+grpc::ServerUnaryReactor* FinishNow(grpc::CallbackServerContext* context, const grpc::Status& status) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  reactor->Finish(status);
+  return reactor;
+}
+
+}  // namespace
+
+grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerContext* context,
+                                                        const v1::CreateSessionRequest* request,
+                                                        v1::CreateSessionResponse* response) {
+  ServerState* state = state_;
+  return PooledUnary::Start(state, context, [state, request, response](const CallContext&) -> absl::Status {
+    absl::StatusOr<BuiltSession> built = BuildSession(request->spec(), state->options.size_limits);
+    if (!built.ok()) return built.status();
+    absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+        state->registry.Add(std::move(built->solver), std::move(built->problem), built->default_time_limit_ms,
+                            /*owned_by_stream=*/false);
+    if (!entry.ok()) return entry.status();
+    response->set_session_id((*entry)->id);
+    *response->mutable_dimensions() = (*entry)->dimensions();
+    response->set_algorithm(AlgorithmToProto((*entry)->algorithm.load()));
+    state->FillLimits(response->mutable_limits());
+    spdlog::info("session {} created (M={}, L={}, K={}, N={})", (*entry)->id, response->dimensions().num_states(),
+                 response->dimensions().num_inputs(), response->dimensions().num_outputs(),
+                 response->dimensions().horizon());
+    return absl::OkStatus();
+  });
+}
+
+grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* MpcServiceImpl::Control(
+    grpc::CallbackServerContext* context) {
+  return new ControlStream(state_, context);
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* context, const v1::SolveRequest* request,
+                                                v1::SolveResponse* response) {
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(request->session_id());
+  if (!entry.ok()) return FinishNow(context, state_->ToGrpc(entry.status()));
+  if ((*entry)->attached.load()) {
+    return FinishNow(context, state_->ToGrpc(absl::FailedPreconditionError(
+                                  "session_id: a Control stream is attached to this session; send steps there")));
+  }
+  return PooledUnary::Start(state_, context,
+                            [entry = *std::move(entry), request, response](const CallContext& call) {
+                              return SolveStep(*entry, request->step(), call, response->mutable_result());
+                            });
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::SolveOnce(grpc::CallbackServerContext* context,
+                                                    const v1::SolveOnceRequest* request,
+                                                    v1::SolveOnceResponse* response) {
+  ServerState* state = state_;
+  return PooledUnary::Start(state, context, [state, request, response](const CallContext& call) {
+    return server::SolveOnce(request->spec(), state->options.size_limits, call, response->mutable_result());
+  });
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::GetSession(grpc::CallbackServerContext* context,
+                                                     const v1::GetSessionRequest* request,
+                                                     v1::GetSessionResponse* response) {
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(request->session_id());
+  if (!entry.ok()) return FinishNow(context, state_->ToGrpc(entry.status()));
+  (*entry)->Describe(response->mutable_session());
+  return FinishNow(context, grpc::Status::OK);
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::ListSessions(grpc::CallbackServerContext* context,
+                                                       const v1::ListSessionsRequest*,
+                                                       v1::ListSessionsResponse* response) {
+  for (const auto& entry : state_->registry.List()) entry->Describe(response->add_sessions());
+  return FinishNow(context, grpc::Status::OK);
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerContext* context,
+                                                       const v1::CloseSessionRequest* request,
+                                                       v1::CloseSessionResponse*) {
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(request->session_id());
+  if (entry.ok() && (*entry)->owned_by_stream) {
+    return FinishNow(context, state_->ToGrpc(absl::FailedPreconditionError(
+                                  "session_id: the session belongs to a Control stream and closes with it")));
+  }
+  const absl::Status status = state_->registry.Close(request->session_id());
+  if (status.ok()) spdlog::info("session {} closed", request->session_id());
+  return FinishNow(context, state_->ToGrpc(status));
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerContext* context,
+                                                        const v1::GetServerInfoRequest*,
+                                                        v1::GetServerInfoResponse* response) {
+  response->set_version(kVersion);
+  response->set_api_version("nupmpc.v1");
+  state_->FillLimits(response->mutable_limits());
+  for (v1::Algorithm a : {v1::ALGORITHM_IAKE, v1::ALGORITHM_IBFFD, v1::ALGORITHM_IFFBDD}) response->add_algorithms(a);
+  state_->metrics.Fill(response);
+  response->set_active_sessions(state_->registry.size());
+  response->set_draining(state_->draining.load());
+  return FinishNow(context, grpc::Status::OK);
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,25 @@
+#include "server/server_context.h"
+
+namespace nupmpc::server {
+
+grpc::Status ServerState::ToGrpc(const absl::Status& status) {
+  if (status.ok()) return grpc::Status::OK;
+  metrics.RecordError(status.code());
+  // absl and gRPC share the canonical code numbering.
+  return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
+}
+
+void ServerState::FillLimits(v1::ServerLimits* out) const {
+  out->set_max_sessions(options.max_sessions);
+  out->set_max_horizon(options.size_limits.max_horizon);
+  out->set_max_states(options.size_limits.max_states);
+  out->set_max_inputs(options.size_limits.max_inputs);
+  out->set_max_outputs(options.size_limits.max_outputs);
+  out->set_max_iterations(options.size_limits.max_iterations);
+  out->set_max_message_bytes(options.max_message_bytes);
+  out->set_session_idle_timeout_s(options.session_idle_timeout_s);
+  out->set_worker_threads(options.worker_threads);
+  out->set_queue_capacity(options.queue_capacity);
+}
+
+}  // namespace nupmpc::server

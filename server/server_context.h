@@ -1,0 +1,45 @@
+#ifndef NUPMPC_SERVER_SERVER_CONTEXT_H_
+#define NUPMPC_SERVER_SERVER_CONTEXT_H_
+
+#include <atomic>
+#include <string>
+
+#include "absl/status/status.h"
+#include "grpcpp/support/status.h"
+#include "server/metrics.h"
+#include "server/session_registry.h"
+#include "server/spec_conversion.h"
+#include "server/worker_pool.h"
+
+namespace nupmpc::server {
+
+struct ServerOptions {
+  std::string address = "[::]:50051";
+  int worker_threads = 2;
+  int queue_capacity = 64;
+  int max_sessions = 10000;
+  double session_idle_timeout_s = 600.0;
+  int max_message_bytes = 64 << 20;
+  double grace_period_s = 5.0;
+  SizeLimits size_limits;
+};
+
+// What every RPC handler shares: options, sessions, the solver pool, counters, and the
+// draining flag (set on SIGTERM: new work is refused with UNAVAILABLE).
+struct ServerState {
+  explicit ServerState(const ServerOptions& o)
+      : options(o), registry(o.max_sessions), pool(o.worker_threads, o.queue_capacity) {}
+  ServerOptions options;
+  SessionRegistry registry;
+  WorkerPool pool;
+  Metrics metrics;
+  std::atomic<bool> draining{false};
+
+  // An absl::Status as a gRPC status, counted when it is an error.
+  grpc::Status ToGrpc(const absl::Status& status);
+  void FillLimits(v1::ServerLimits* out) const;
+};
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_SERVER_CONTEXT_H_

@@ -1,0 +1,81 @@
+#include "server/server_flags.h"
+
+#include <cstdlib>
+
+#include "absl/flags/flag.h"
+#include "absl/flags/parse.h"
+#include "absl/flags/reflection.h"
+#include "absl/flags/usage.h"
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
+
+ABSL_FLAG(std::string, address, "[::]:50051", "listen address host:port (env NUPMPC_ADDRESS)");
+ABSL_FLAG(int, threads, 2, "solver worker threads (env NUPMPC_THREADS)");
+ABSL_FLAG(int, queue_capacity, 64, "solves waiting for a worker before RESOURCE_EXHAUSTED (env NUPMPC_QUEUE_CAPACITY)");
+ABSL_FLAG(int, max_sessions, 10000, "maximum open sessions (env NUPMPC_MAX_SESSIONS)");
+ABSL_FLAG(double, session_idle_timeout_s, 600, "close sessions idle this long (env NUPMPC_SESSION_IDLE_TIMEOUT_S)");
+ABSL_FLAG(int, max_message_bytes, 64 << 20, "largest request/response (env NUPMPC_MAX_MESSAGE_BYTES)");
+ABSL_FLAG(int, max_horizon, 100000, "largest horizon N (env NUPMPC_MAX_HORIZON)");
+ABSL_FLAG(int, max_states, 1000, "largest state dimension (env NUPMPC_MAX_STATES)");
+ABSL_FLAG(int, max_iterations, 100000, "largest per-solve iteration cap (env NUPMPC_MAX_ITERATIONS)");
+ABSL_FLAG(double, grace_period_s, 5, "on SIGTERM/SIGINT: time for in-flight solves (env NUPMPC_GRACE_PERIOD_S)");
+ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error|off (env NUPMPC_LOG_LEVEL)");
+
+namespace nupmpc::server {
+namespace {
+
+// Sets a flag from its environment variable; the command line, parsed afterwards, wins.
+absl::Status ApplyEnvironment(const char* name) {
+  absl::CommandLineFlag* flag = absl::FindCommandLineFlag(name);
+  if (flag == nullptr) return absl::OkStatus();
+  const std::string variable = absl::StrCat("NUPMPC_", absl::AsciiStrToUpper(name));
+  const char* value = std::getenv(variable.c_str());
+  if (value == nullptr) return absl::OkStatus();
+  std::string error;
+  if (!flag->ParseFrom(value, &error)) {
+    return absl::InvalidArgumentError(absl::StrCat(variable, "=", value, ": ", error));
+  }
+  return absl::OkStatus();
+}
+
+template <typename T>
+absl::Status RequireAtLeast(const char* name, T value, T minimum) {
+  if (value < minimum) return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be >= ", minimum));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
+  absl::SetProgramUsageMessage("nupmpc-server: model-predictive control over gRPC (nupmpc.v1.MpcService)");
+  for (const char* name : {"address", "threads", "queue_capacity", "max_sessions", "session_idle_timeout_s",
+                           "max_message_bytes", "max_horizon", "max_states", "max_iterations", "grace_period_s",
+                           "log_level"}) {
+    if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
+  }
+  absl::ParseCommandLine(argc, argv);
+  ParsedFlags out;
+  ServerOptions& o = out.options;
+  o.address = absl::GetFlag(FLAGS_address);
+  o.worker_threads = absl::GetFlag(FLAGS_threads);
+  o.queue_capacity = absl::GetFlag(FLAGS_queue_capacity);
+  o.max_sessions = absl::GetFlag(FLAGS_max_sessions);
+  o.session_idle_timeout_s = absl::GetFlag(FLAGS_session_idle_timeout_s);
+  o.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
+  o.size_limits.max_horizon = absl::GetFlag(FLAGS_max_horizon);
+  o.size_limits.max_states = absl::GetFlag(FLAGS_max_states);
+  o.size_limits.max_iterations = absl::GetFlag(FLAGS_max_iterations);
+  o.grace_period_s = absl::GetFlag(FLAGS_grace_period_s);
+  out.log_level = absl::GetFlag(FLAGS_log_level);
+  for (const absl::Status& s :
+       {RequireAtLeast("threads", o.worker_threads, 1), RequireAtLeast("queue_capacity", o.queue_capacity, 1),
+        RequireAtLeast("max_sessions", o.max_sessions, 1), RequireAtLeast("session_idle_timeout_s", o.session_idle_timeout_s, 0.001),
+        RequireAtLeast("max_message_bytes", o.max_message_bytes, 1024), RequireAtLeast("max_horizon", o.size_limits.max_horizon, 1),
+        RequireAtLeast("max_states", o.size_limits.max_states, 1), RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
+        RequireAtLeast("grace_period_s", o.grace_period_s, 0.0)}) {
+    if (!s.ok()) return s;
+  }
+  return out;
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,22 @@
+#ifndef NUPMPC_SERVER_SERVER_FLAGS_H_
+#define NUPMPC_SERVER_SERVER_FLAGS_H_
+
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "server/server_context.h"
+
+namespace nupmpc::server {
+
+// Parses the command line (absl flags). A flag not given on the command line falls back to
+// the environment variable NUPMPC_<FLAG IN UPPER CASE> (e.g. NUPMPC_ADDRESS), then to its
+// default. Returns the options and the log level.
+struct ParsedFlags {
+  ServerOptions options;
+  std::string log_level;
+};
+absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv);
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_SERVER_FLAGS_H_

@@ -1,0 +1,114 @@
+#include "server/session_registry.h"
+
+#include <random>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "server/spec_conversion.h"
+
+namespace nupmpc::server {
+
+double SessionEntry::idle_seconds() const {
+  const Clock::duration since = Clock::now().time_since_epoch() - Clock::duration(last_used.load());
+  return std::chrono::duration<double>(since).count();
+}
+
+v1::Dimensions SessionEntry::dimensions() const {
+  v1::Dimensions d;
+  d.set_num_states(problem.num_states);
+  d.set_num_inputs(problem.num_inputs);
+  d.set_num_outputs(problem.num_outputs);
+  d.set_horizon(problem.horizon);
+  return d;
+}
+
+void SessionEntry::Describe(v1::SessionInfo* out) const {
+  out->set_session_id(id);
+  *out->mutable_dimensions() = dimensions();  // the shape never changes after creation
+  out->set_algorithm(AlgorithmToProto(algorithm.load()));
+  out->set_solves(solves.load(std::memory_order_relaxed));
+  out->set_idle_s(idle_seconds());
+  out->set_owned_by_stream(owned_by_stream);
+  out->set_attached(attached.load(std::memory_order_relaxed));
+}
+
+std::string SessionRegistry::NewId() {
+  // std::random_device reads the kernel's CSPRNG (getrandom) on Linux.
+  static thread_local std::random_device device;
+  std::string id;
+  for (int i = 0; i < 4; ++i) absl::StrAppend(&id, absl::StrFormat("%08x", device()));
+  return id;
+}
+
+absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::Session> solver,
+                                                                   core::Problem problem,
+                                                                   double default_time_limit_ms,
+                                                                   bool owned_by_stream) {
+  auto entry = std::make_shared<SessionEntry>();
+  entry->owned_by_stream = owned_by_stream;
+  entry->default_time_limit_ms = default_time_limit_ms;
+  entry->algorithm = solver->algorithm();
+  entry->solver = std::move(solver);
+  entry->problem = std::move(problem);
+  entry->Touch();
+  std::lock_guard<std::mutex> lock(mu_);
+  if (static_cast<int>(sessions_.size()) >= max_sessions_) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("the server holds its maximum of ", max_sessions_, " sessions; close one or retry later"));
+  }
+  do {
+    entry->id = NewId();
+  } while (sessions_.count(entry->id) > 0);
+  sessions_.emplace(entry->id, entry);
+  return entry;
+}
+
+absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Find(const std::string& id) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  const auto it = sessions_.find(id);
+  if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id \"", id, "\": no such session"));
+  return it->second;
+}
+
+absl::Status SessionRegistry::Close(const std::string& id) {
+  std::shared_ptr<SessionEntry> entry;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    const auto it = sessions_.find(id);
+    if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id \"", id, "\": no such session"));
+    entry = std::move(it->second);
+    sessions_.erase(it);
+  }
+  // Mark it closed after any solve in flight; the memory goes with the last reference.
+  std::lock_guard<std::mutex> lock(entry->mu);
+  entry->closed = true;
+  return absl::OkStatus();
+}
+
+std::vector<std::shared_ptr<SessionEntry>> SessionRegistry::List() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<std::shared_ptr<SessionEntry>> out;
+  out.reserve(sessions_.size());
+  for (const auto& [id, entry] : sessions_) out.push_back(entry);
+  return out;
+}
+
+int SessionRegistry::ExpireIdle(double idle_seconds) {
+  std::vector<std::string> expired;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (const auto& [id, entry] : sessions_) {
+      if (!entry->attached.load() && entry->idle_seconds() > idle_seconds) expired.push_back(id);
+    }
+  }
+  int closed = 0;
+  for (const std::string& id : expired) closed += Close(id).ok() ? 1 : 0;
+  return closed;
+}
+
+int SessionRegistry::size() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return static_cast<int>(sessions_.size());
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,71 @@
+#ifndef NUPMPC_SERVER_SESSION_REGISTRY_H_
+#define NUPMPC_SERVER_SESSION_REGISTRY_H_
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/session/session.h"
+#include "nupmpc/v1/nupmpc.pb.h"
+
+namespace nupmpc::server {
+
+using Clock = std::chrono::steady_clock;
+
+// One client session: the core session (workspace + warm start) and the problem it was
+// last updated to. `mu` serialises solves: one solve at a time per session.
+struct SessionEntry {
+  std::string id;
+  bool owned_by_stream = false;
+  double default_time_limit_ms = 0.0;  ///< from the spec's options
+
+  std::mutex mu;
+  core::Problem problem;                  ///< guarded by mu
+  std::unique_ptr<core::Session> solver;  ///< guarded by mu
+  core::Solution solution;                ///< guarded by mu; reused buffer
+  bool closed = false;                    ///< guarded by mu: removed from the registry
+
+  std::atomic<bool> attached{false};  ///< a Control stream uses it
+  std::atomic<std::uint64_t> solves{0};
+  std::atomic<Clock::rep> last_used{0};
+
+  void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }
+  double idle_seconds() const;
+  void Describe(v1::SessionInfo* out) const;  // fields readable without mu
+  v1::Dimensions dimensions() const;
+  std::atomic<core::Algorithm> algorithm{core::Algorithm::kAuto};
+};
+
+// Sessions by unguessable id (128 random bits from the OS), with a maximum count and idle
+// expiry. Thread-safe; lookups are short critical sections (never held during a solve).
+class SessionRegistry {
+ public:
+  explicit SessionRegistry(int max_sessions) : max_sessions_(max_sessions) {}
+
+  // RESOURCE_EXHAUSTED when full.
+  absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::Session> solver, core::Problem problem,
+                                                    double default_time_limit_ms, bool owned_by_stream);
+  // NOT_FOUND for unknown (or closed, or expired) ids.
+  absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id) const;
+  absl::Status Close(const std::string& id);
+  std::vector<std::shared_ptr<SessionEntry>> List() const;
+  // Closes sessions idle longer than `idle_seconds` that no stream is attached to.
+  int ExpireIdle(double idle_seconds);
+  int size() const;
+  int max_sessions() const { return max_sessions_; }
+
+ private:
+  static std::string NewId();
+  const int max_sessions_;
+  mutable std::mutex mu_;
+  std::unordered_map<std::string, std::shared_ptr<SessionEntry>> sessions_;
+};
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_SESSION_REGISTRY_H_

@@ -1,0 +1,48 @@
+#ifndef NUPMPC_SERVER_SPEC_CONVERSION_H_
+#define NUPMPC_SERVER_SPEC_CONVERSION_H_
+
+// proto ⇄ core conversion. Everything a client sends passes through here before it reaches
+// the core: every error names the proto field path (e.g. "spec.model.a[2]") and the rule.
+
+#include "absl/status/statusor.h"
+#include "core/options.h"
+#include "core/problem.h"
+#include "core/solution.h"
+#include "nupmpc/v1/nupmpc.pb.h"
+
+namespace nupmpc::server {
+
+// Size limits a spec must respect (RESOURCE_EXHAUSTED when exceeded).
+struct SizeLimits {
+  int max_states = 1000;
+  int max_inputs = 1000;
+  int max_outputs = 1000;
+  int max_horizon = 100000;
+  // Largest number of doubles a session may hold in its model and priors (memory bound).
+  long long max_scalars = 50'000'000;
+  int max_iterations = 100000;
+};
+
+// The problem of a spec, validated (INVALID_ARGUMENT naming the field, RESOURCE_EXHAUSTED
+// for sizes over `limits`).
+absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const SizeLimits& limits);
+
+// The solver options of a spec (defaults where fields are 0).
+absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& options, const SizeLimits& limits);
+
+// Applies a step's state and prior update to a copy of the session's problem. `field` is
+// the path prefix used in messages ("step").
+absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* problem);
+
+// Fills a SolveResult from the core's summary and solution.
+void ResultToProto(const core::SolveSummary& summary, const core::Solution& solution, v1::SolveResult* out);
+
+v1::Algorithm AlgorithmToProto(core::Algorithm algorithm);
+
+// The spec of a core problem (for tools that read problems from files). Fails when a
+// component mixes prior kinds that one ComponentPrior cannot express.
+absl::StatusOr<v1::ProblemSpec> SpecFromProblem(const core::Problem& problem);
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_SPEC_CONVERSION_H_

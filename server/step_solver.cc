@@ -1,0 +1,102 @@
+#include "server/step_solver.h"
+
+#include <algorithm>
+#include <limits>
+
+#include "core/util/status_macros.h"
+
+namespace nupmpc::server {
+namespace {
+
+// Combines the session's, the step's and the deadline's time limits (0 = none).
+absl::Status MakeLimits(double session_limit_ms, const v1::Step* step, const CallContext& call,
+                        core::SolveLimits* limits) {
+  double limit_ms = session_limit_ms;
+  if (step != nullptr && step->time_limit_ms() > 0.0) {
+    limit_ms = limit_ms > 0.0 ? std::min(limit_ms, step->time_limit_ms()) : step->time_limit_ms();
+  }
+  if (call.deadline.has_value()) {
+    const double left_ms = std::chrono::duration<double, std::milli>(*call.deadline - Clock::now()).count();
+    if (left_ms <= 0.0) return absl::DeadlineExceededError("the deadline passed before the solve started");
+    limit_ms = limit_ms > 0.0 ? std::min(limit_ms, left_ms) : left_ms;
+  }
+  limits->time_limit_seconds = limit_ms > 0.0 ? limit_ms * 1e-3 : 0.0;
+  limits->cancel = call.cancel;
+  if (step != nullptr) limits->max_iterations = static_cast<int>(step->max_iterations());
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits) {
+  BuiltSession built;
+  NUPMPC_ASSIGN_OR_RETURN(built.problem, ProblemFromSpec(spec, limits));
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolverOptions options, OptionsFromSpec(spec.options(), limits));
+  absl::StatusOr<std::unique_ptr<core::Session>> solver = core::Session::Create(built.problem, options);
+  if (!solver.ok()) {
+    // e.g. a forced algorithm that cannot handle the priors: the spec's fault.
+    return absl::Status(solver.status().code(), absl::StrCat("spec: ", solver.status().message()));
+  }
+  built.solver = *std::move(solver);
+  built.default_time_limit_ms = spec.options().time_limit_ms();
+  return built;
+}
+
+absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallContext& call, v1::SolveResult* out) {
+  std::lock_guard<std::mutex> lock(entry.mu);
+  if (entry.closed) return absl::NotFoundError(absl::StrCat("session_id \"", entry.id, "\": closed"));
+  entry.Touch();
+  core::SolveLimits limits;
+  NUPMPC_RETURN_IF_ERROR(MakeLimits(entry.default_time_limit_ms, &step, call, &limits));
+  if (step.max_iterations() > static_cast<unsigned>(std::numeric_limits<int>::max())) {
+    return absl::InvalidArgumentError("step.max_iterations: too large");
+  }
+
+  core::Session& solver = *entry.solver;
+  if (step.has_update()) {
+    // References or bounds change: validate on a copy; Update() keeps the session as it
+    // was if it rejects the problem.
+    core::Problem candidate = entry.problem;
+    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &candidate));
+    NUPMPC_RETURN_IF_ERROR(solver.Update(candidate));
+    entry.problem = std::move(candidate);
+    entry.algorithm.store(solver.algorithm());
+  } else if (step.state_size() > 0) {
+    // The common path: only the measured state changes (no copy of the problem).
+    core::Problem& p = entry.problem;
+    const Eigen::VectorXd previous = p.initial_mean;
+    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &p));
+    if (absl::Status s = solver.SetInitialState(p.initial_mean); !s.ok()) {
+      p.initial_mean = previous;
+      return s;
+    }
+  } else {
+    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &entry.problem));  // validates the other fields
+  }
+
+  switch (step.warm_start()) {
+    case v1::WARM_START_UNSPECIFIED:
+    case v1::WARM_START_SHIFT: solver.ShiftWarmStart(); break;
+    case v1::WARM_START_KEEP: break;
+    case v1::WARM_START_COLD: limits.warm_start = false; break;
+    default: break;
+  }
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
+  entry.solves.fetch_add(1, std::memory_order_relaxed);
+  ResultToProto(summary, entry.solution, out);
+  entry.Touch();
+  return absl::OkStatus();
+}
+
+absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limits, const CallContext& call,
+                       v1::SolveResult* out) {
+  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits));
+  core::SolveLimits limits;
+  NUPMPC_RETURN_IF_ERROR(MakeLimits(built.default_time_limit_ms, nullptr, call, &limits));
+  core::Solution solution;
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, built.solver->Solve(limits, &solution));
+  ResultToProto(summary, solution, out);
+  return absl::OkStatus();
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,40 @@
+#ifndef NUPMPC_SERVER_STEP_SOLVER_H_
+#define NUPMPC_SERVER_STEP_SOLVER_H_
+
+#include <atomic>
+#include <optional>
+
+#include "absl/status/status.h"
+#include "server/session_registry.h"
+#include "server/spec_conversion.h"
+
+namespace nupmpc::server {
+
+// What the RPC adds to a solve: the time left until its deadline (becomes a time limit)
+// and a cancel flag raised when the client goes away.
+struct CallContext {
+  std::optional<Clock::time_point> deadline;
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+// One control period on a session: validates and applies the step to a copy of the
+// session's problem (the session is untouched if anything is rejected), moves the warm
+// start, solves, and fills `out`. Holds the session's lock for the duration.
+absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallContext& call, v1::SolveResult* out);
+
+// Stateless: builds a session for the spec, solves cold once, fills `out`.
+absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& limits, const CallContext& call,
+                       v1::SolveResult* out);
+
+// Converts a spec and builds its core session (shared by CreateSession, SolveOnce and
+// streams that carry a spec).
+struct BuiltSession {
+  core::Problem problem;
+  std::unique_ptr<core::Session> solver;
+  double default_time_limit_ms = 0.0;
+};
+absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits);
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_STEP_SOLVER_H_
