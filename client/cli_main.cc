@@ -1,0 +1,205 @@
+// nupmpc: command-line client of nupmpc-server.
+//
+//   nupmpc solve FILE          one stateless solve (SolveOnce)
+//   nupmpc closed-loop FILE    a receding-horizon run through a Control stream: the
+//                              instance's recorded closed-loop states if it has them,
+//                              else the model simulated locally (optional --noise)
+//   nupmpc info                server version, limits, counters
+//   nupmpc sessions            open sessions
+//
+// FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.
+// --format table|json; with json, closed-loop prints one object per step and line with
+// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, u0.
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+
+#include "absl/flags/flag.h"
+#include "absl/flags/parse.h"
+#include "absl/flags/usage.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "client/client.h"
+#include "google/protobuf/util/json_util.h"
+#include "loadtest/benchmark_instance.h"
+#include "server/spec_conversion.h"
+
+ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, format, "table", "table or json");
+ABSL_FLAG(int, steps, 0, "closed-loop: number of steps (0: the instance's sequence, or 50)");
+ABSL_FLAG(double, noise, 0.0, "closed-loop simulation: std. dev. of additive state noise");
+ABSL_FLAG(int, seed, 1, "closed-loop simulation: noise seed");
+ABSL_FLAG(int, deadline_ms, 0, "deadline of unary calls (0: none)");
+
+namespace {
+
+namespace v1 = nupmpc::v1;
+
+struct LoadedProblem {
+  v1::ProblemSpec spec;
+  std::vector<std::vector<double>> closed_loop_states;  // empty: simulate
+};
+
+absl::StatusOr<LoadedProblem> LoadProblem(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
+  std::stringstream text;
+  text << in.rdbuf();
+  LoadedProblem out;
+  if (text.str().find("\"dims\"") != std::string::npos) {  // the benchmark format
+    absl::StatusOr<nupmpc::bench::BenchmarkInstance> inst = nupmpc::bench::LoadBenchmarkInstance(path);
+    if (!inst.ok()) return inst.status();
+    absl::StatusOr<v1::ProblemSpec> spec = nupmpc::server::SpecFromProblem(inst->problem);
+    if (!spec.ok()) return spec.status();
+    out.spec = *std::move(spec);
+    if (inst->closed_loop.has_value()) {
+      for (const Eigen::VectorXd& x : inst->closed_loop->x1) out.closed_loop_states.emplace_back(x.begin(), x.end());
+    }
+    return out;
+  }
+  const auto status = google::protobuf::util::JsonStringToMessage(text.str(), &out.spec);
+  if (!status.ok()) return absl::InvalidArgumentError(absl::StrCat(path, ": not a ProblemSpec: ", status.ToString()));
+  return out;
+}
+
+const char* StatusName(v1::SolveStatus s) {
+  static std::string names[8];
+  const std::string& full = v1::SolveStatus_Name(s);
+  std::string& name = names[std::min<int>(s, 7)];
+  name = full.rfind("SOLVE_STATUS_", 0) == 0 ? full.substr(13) : full;
+  for (char& c : name) c = static_cast<char>(std::tolower(c));
+  return name.c_str();
+}
+
+std::string U0(const v1::SolveResult& r, int L) {
+  std::vector<std::string> parts;
+  for (int l = 0; l < L && l < r.inputs_size(); ++l) parts.push_back(absl::StrCat(r.inputs(l)));
+  return absl::StrCat("[", absl::StrJoin(parts, ","), "]");
+}
+
+void PrintResult(const v1::SolveResult& r, int L, bool json) {
+  if (json) {
+    std::printf("{\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%.6g,"
+                "\"u0\":%s}\n",
+                StatusName(r.status()), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
+                U0(r, L).c_str());
+  } else {
+    std::printf("status %s, %u iterations, %.4f ms, J = %.12g, max violation %.3g\nu[0] = %s\n",
+                StatusName(r.status()), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
+                U0(r, L).c_str());
+  }
+}
+
+int Fail(const absl::Status& s) {
+  std::fprintf(stderr, "nupmpc: %s\n", s.ToString().c_str());
+  return 1;
+}
+
+// x ← A x + B u0 (+ c) (+ noise), from the spec's first (time-invariant) matrices.
+std::vector<double> Simulate(const v1::ProblemSpec& spec, const std::vector<double>& x, const v1::SolveResult& r,
+                             std::normal_distribution<double>& noise, std::mt19937_64& rng) {
+  const v1::Model& m = spec.model();
+  const int M = static_cast<int>(m.num_states()), L = static_cast<int>(m.num_inputs());
+  std::vector<double> next(M, 0.0);
+  for (int i = 0; i < M; ++i) {
+    for (int j = 0; j < M; ++j) next[i] += m.a(0).data(i * M + j) * x[j];
+    for (int l = 0; l < L; ++l) next[i] += m.b(0).data(i * L + l) * r.inputs(l);
+    if (m.state_offset_size() >= M) next[i] += m.state_offset(i);
+    if (noise.stddev() > 0) next[i] += noise(rng);
+  }
+  return next;
+}
+
+int ClosedLoop(nupmpc::Client& client, const LoadedProblem& problem, bool json) {
+  absl::StatusOr<std::unique_ptr<nupmpc::Session>> session = client.OpenSession(problem.spec);
+  if (!session.ok()) return Fail(session.status());
+  const int L = static_cast<int>(problem.spec.model().num_inputs());
+  const bool recorded = !problem.closed_loop_states.empty();
+  int steps = absl::GetFlag(FLAGS_steps);
+  if (steps <= 0) steps = recorded ? static_cast<int>(problem.closed_loop_states.size()) : 50;
+  if (recorded) steps = std::min<int>(steps, problem.closed_loop_states.size());
+  std::mt19937_64 rng(absl::GetFlag(FLAGS_seed));
+  std::normal_distribution<double> noise(0.0, absl::GetFlag(FLAGS_noise));
+  std::vector<double> x(problem.spec.initial_state().mean().begin(), problem.spec.initial_state().mean().end());
+  if (!json) std::printf("%5s %-16s %6s %10s %10s %18s %10s  %s\n", "step", "status", "iter", "solve_ms", "rtt_ms",
+                         "objective", "max_viol", "u0");
+  for (int t = 0; t < steps; ++t) {
+    if (recorded) x = problem.closed_loop_states[t];
+    v1::Step step;
+    step.mutable_state()->Add(x.begin(), x.end());
+    const auto start = std::chrono::steady_clock::now();
+    absl::StatusOr<v1::SolveResult> r = (*session)->Step(step);
+    const double rtt_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    if (!r.ok()) return Fail(r.status());
+    if (json) {
+      std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,"
+                  "\"round_trip_ms\":%.6f,\"max_violation\":%.6g,\"warm_started\":%s,\"u0\":%s}\n",
+                  t, StatusName(r->status()), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
+                  r->max_violation(), r->warm_started() ? "true" : "false", U0(*r, L).c_str());
+    } else {
+      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, StatusName(r->status()), r->iterations(),
+                  r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), U0(*r, L).c_str());
+    }
+    std::fflush(stdout);
+    if (!recorded) x = Simulate(problem.spec, x, *r, noise, rng);
+  }
+  if (absl::Status s = (*session)->Close(); !s.ok()) return Fail(s);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  absl::SetProgramUsageMessage(
+      "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | info | sessions");
+  if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
+  std::vector<char*> args = absl::ParseCommandLine(argc, argv);
+  if (args.size() < 2) {
+    std::fprintf(stderr, "%s\n", absl::ProgramUsageMessage().data());
+    return 2;
+  }
+  const std::string command = args[1];
+  const bool json = absl::GetFlag(FLAGS_format) == "json";
+  nupmpc::Client client(absl::GetFlag(FLAGS_server), std::chrono::milliseconds(absl::GetFlag(FLAGS_deadline_ms)));
+
+  if (command == "solve" || command == "closed-loop") {
+    if (args.size() < 3) return Fail(absl::InvalidArgumentError(absl::StrCat(command, ": FILE missing")));
+    absl::StatusOr<LoadedProblem> problem = LoadProblem(args[2]);
+    if (!problem.ok()) return Fail(problem.status());
+    if (command == "closed-loop") return ClosedLoop(client, *problem, json);
+    absl::StatusOr<v1::SolveResult> r = client.SolveOnce(problem->spec);
+    if (!r.ok()) return Fail(r.status());
+    PrintResult(*r, static_cast<int>(problem->spec.model().num_inputs()), json);
+    return 0;
+  }
+  if (command == "info") {
+    absl::StatusOr<v1::GetServerInfoResponse> info = client.GetServerInfo();
+    if (!info.ok()) return Fail(info.status());
+    std::string text;
+    google::protobuf::util::JsonPrintOptions options;
+    options.add_whitespace = !json;
+    (void)google::protobuf::util::MessageToJsonString(*info, &text, options);
+    std::printf("%s\n", text.c_str());
+    return 0;
+  }
+  if (command == "sessions") {
+    absl::StatusOr<std::vector<v1::SessionInfo>> sessions = client.ListSessions();
+    if (!sessions.ok()) return Fail(sessions.status());
+    for (const v1::SessionInfo& s : *sessions) {
+      if (json) {
+        std::string text;
+        (void)google::protobuf::util::MessageToJsonString(s, &text);
+        std::printf("%s\n", text.c_str());
+      } else {
+        std::printf("%s  M=%u L=%u K=%u N=%u  solves=%llu  idle=%.1fs%s\n", s.session_id().c_str(),
+                    s.dimensions().num_states(), s.dimensions().num_inputs(), s.dimensions().num_outputs(),
+                    s.dimensions().horizon(), static_cast<unsigned long long>(s.solves()), s.idle_s(),
+                    s.attached() ? "  (stream attached)" : "");
+      }
+    }
+    return 0;
+  }
+  return Fail(absl::InvalidArgumentError(absl::StrCat("unknown command \"", command, "\"")));
+}

@@ -1,0 +1,215 @@
+#include "client/client.h"
+
+#include "absl/strings/str_cat.h"
+
+namespace nupmpc {
+namespace {
+
+absl::Status FromGrpc(const grpc::Status& s) {
+  return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
+}
+
+// Shifts a per-step array one step (n+1 → n, last repeated); length-1 arrays are constant.
+void ShiftArray(google::protobuf::RepeatedField<double>* values) {
+  for (int n = 0; n + 1 < values->size(); ++n) values->Set(n, values->Get(n + 1));
+}
+
+void ShiftComponent(v1::ComponentPrior* c) {
+  for (auto* f : {c->mutable_weight(), c->mutable_target(), c->mutable_lower(), c->mutable_upper(),
+                  c->mutable_slope(), c->mutable_radius()}) {
+    ShiftArray(f);
+  }
+}
+
+}  // namespace
+
+void ApplyUpdateToSpec(const v1::Step& step, v1::ProblemSpec* spec) {
+  if (step.state_size() > 0) *spec->mutable_initial_state()->mutable_mean() = step.state();
+  if (!step.has_update()) return;
+  const v1::PriorUpdate& u = step.update();
+  if (u.shift()) {
+    for (auto& c : *spec->mutable_input_priors()) ShiftComponent(&c);
+    for (auto& c : *spec->mutable_output_priors()) ShiftComponent(&c);
+  }
+  for (const auto& e : u.inputs()) {
+    if (static_cast<int>(e.index()) < spec->input_priors_size()) *spec->mutable_input_priors(e.index()) = e.prior();
+  }
+  for (const auto& e : u.outputs()) {
+    if (static_cast<int>(e.index()) < spec->output_priors_size()) *spec->mutable_output_priors(e.index()) = e.prior();
+  }
+}
+
+Client::Client(const std::string& target, std::chrono::milliseconds default_deadline)
+    : Client(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()), default_deadline) {}
+
+Client::Client(std::shared_ptr<grpc::Channel> channel, std::chrono::milliseconds default_deadline)
+    : channel_(std::move(channel)), stub_(v1::MpcService::NewStub(channel_)), default_deadline_(default_deadline) {}
+
+void Client::SetDeadline(grpc::ClientContext* context) const {
+  if (default_deadline_.count() > 0) context->set_deadline(std::chrono::system_clock::now() + default_deadline_);
+}
+
+absl::StatusOr<v1::SolveResult> Client::SolveOnce(const v1::ProblemSpec& spec) {
+  grpc::ClientContext context;
+  SetDeadline(&context);
+  v1::SolveOnceRequest request;
+  *request.mutable_spec() = spec;
+  v1::SolveOnceResponse response;
+  const grpc::Status s = stub_->SolveOnce(&context, request, &response);
+  if (!s.ok()) return FromGrpc(s);
+  return std::move(*response.mutable_result());
+}
+
+absl::StatusOr<v1::CreateSessionResponse> Client::CreateSession(const v1::ProblemSpec& spec) {
+  grpc::ClientContext context;
+  SetDeadline(&context);
+  v1::CreateSessionRequest request;
+  *request.mutable_spec() = spec;
+  v1::CreateSessionResponse response;
+  const grpc::Status s = stub_->CreateSession(&context, request, &response);
+  if (!s.ok()) return FromGrpc(s);
+  return response;
+}
+
+absl::StatusOr<v1::SolveResult> Client::Solve(const std::string& session_id, const v1::Step& step) {
+  grpc::ClientContext context;
+  SetDeadline(&context);
+  v1::SolveRequest request;
+  request.set_session_id(session_id);
+  *request.mutable_step() = step;
+  v1::SolveResponse response;
+  const grpc::Status s = stub_->Solve(&context, request, &response);
+  if (!s.ok()) return FromGrpc(s);
+  return std::move(*response.mutable_result());
+}
+
+absl::StatusOr<v1::GetServerInfoResponse> Client::GetServerInfo() {
+  grpc::ClientContext context;
+  SetDeadline(&context);
+  v1::GetServerInfoResponse response;
+  const grpc::Status s = stub_->GetServerInfo(&context, v1::GetServerInfoRequest(), &response);
+  if (!s.ok()) return FromGrpc(s);
+  return response;
+}
+
+absl::StatusOr<v1::SessionInfo> Client::GetSession(const std::string& session_id) {
+  grpc::ClientContext context;
+  SetDeadline(&context);
+  v1::GetSessionRequest request;
+  request.set_session_id(session_id);
+  v1::GetSessionResponse response;
+  const grpc::Status s = stub_->GetSession(&context, request, &response);
+  if (!s.ok()) return FromGrpc(s);
+  return response.session();
+}
+
+absl::StatusOr<std::vector<v1::SessionInfo>> Client::ListSessions() {
+  grpc::ClientContext context;
+  SetDeadline(&context);
+  v1::ListSessionsResponse response;
+  const grpc::Status s = stub_->ListSessions(&context, v1::ListSessionsRequest(), &response);
+  if (!s.ok()) return FromGrpc(s);
+  return std::vector<v1::SessionInfo>(response.sessions().begin(), response.sessions().end());
+}
+
+absl::Status Client::CloseSession(const std::string& session_id) {
+  grpc::ClientContext context;
+  SetDeadline(&context);
+  v1::CloseSessionRequest request;
+  request.set_session_id(session_id);
+  v1::CloseSessionResponse response;
+  return FromGrpc(stub_->CloseSession(&context, request, &response));
+}
+
+absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession(const v1::ProblemSpec& spec) {
+  std::unique_ptr<Session> session(new Session(this, spec));
+  std::lock_guard<std::mutex> lock(session->mu_);
+  if (absl::Status s = session->ConnectLocked(); !s.ok()) return s;
+  return session;
+}
+
+Session::~Session() { (void)Close(); }
+
+std::string Session::id() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return id_;
+}
+
+absl::Status Session::ConnectLocked() {
+  context_ = std::make_unique<grpc::ClientContext>();
+  stream_ = client_->stub_->Control(context_.get());
+  v1::ControlRequest hello;
+  *hello.mutable_spec() = spec_;
+  hello.set_sequence(next_sequence_++);
+  v1::ControlResponse response;
+  if (!stream_->Write(hello) || !stream_->Read(&response)) {
+    const grpc::Status s = stream_->Finish();
+    TearDownLocked();
+    return s.ok() ? absl::UnavailableError("the Control stream closed while attaching") : FromGrpc(s);
+  }
+  if (response.error_code() != 0) {
+    TearDownLocked();
+    return absl::Status(static_cast<absl::StatusCode>(response.error_code()), response.error_message());
+  }
+  id_ = response.session_id();
+  return absl::OkStatus();
+}
+
+void Session::TearDownLocked() {
+  if (context_ != nullptr) context_->TryCancel();
+  stream_.reset();
+  context_.reset();
+}
+
+absl::StatusOr<v1::SolveResult> Session::StepOnceLocked(const v1::Step& step) {
+  if (stream_ == nullptr) return absl::UnavailableError("not connected");
+  v1::ControlRequest request;
+  const std::uint64_t sequence = next_sequence_++;
+  request.set_sequence(sequence);
+  *request.mutable_step() = step;
+  if (!stream_->Write(request)) return absl::UnavailableError("the Control stream broke (write)");
+  v1::ControlResponse response;
+  while (stream_->Read(&response)) {
+    if (response.sequence() != sequence) continue;  // an older step superseded by this one
+    if (response.error_code() != 0) {
+      return absl::Status(static_cast<absl::StatusCode>(response.error_code()), response.error_message());
+    }
+    return std::move(*response.mutable_result());
+  }
+  return absl::UnavailableError("the Control stream broke (read)");
+}
+
+absl::StatusOr<v1::SolveResult> Session::Step(const v1::Step& step) {
+  std::lock_guard<std::mutex> lock(mu_);
+  absl::StatusOr<v1::SolveResult> result = StepOnceLocked(step);
+  if (!result.ok() && absl::IsUnavailable(result.status())) {
+    // The stream (or the server) went away: re-create the session from the spec and retry.
+    TearDownLocked();
+    if (absl::Status s = ConnectLocked(); !s.ok()) {
+      return absl::UnavailableError(absl::StrCat("reconnect failed: ", s.message()));
+    }
+    ++reconnects_;
+    result = StepOnceLocked(step);
+  }
+  if (result.ok()) ApplyUpdateToSpec(step, &spec_);
+  return result;
+}
+
+std::future<absl::StatusOr<v1::SolveResult>> Session::StepAsync(v1::Step step) {
+  return std::async(std::launch::async, [this, step = std::move(step)] { return Step(step); });
+}
+
+absl::Status Session::Close() {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (stream_ == nullptr) return absl::OkStatus();
+  stream_->WritesDone();
+  v1::ControlResponse ignored;
+  while (stream_->Read(&ignored)) {
+  }
+  const grpc::Status s = stream_->Finish();
+  stream_.reset();
+  context_.reset();
+  return FromGrpc(s);
+}
+
+}  // namespace nupmpc
