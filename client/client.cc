@@ -39,8 +39,18 @@ void ApplyUpdateToSpec(const v1::Step& step, v1::ProblemSpec* spec) {
   }
 }
 
+namespace {
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target) {
+  grpc::ChannelArguments args;
+  // Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
+  args.SetMaxReceiveMessageSize(-1);
+  args.SetMaxSendMessageSize(-1);
+  return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+}
+}  // namespace
+
 Client::Client(const std::string& target, std::chrono::milliseconds default_deadline)
-    : Client(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()), default_deadline) {}
+    : Client(MakeChannel(target), default_deadline) {}
 
 Client::Client(std::shared_ptr<grpc::Channel> channel, std::chrono::milliseconds default_deadline)
     : channel_(std::move(channel)), stub_(v1::MpcService::NewStub(channel_)), default_deadline_(default_deadline) {}

@@ -1,0 +1,68 @@
+#ifndef NUPMPC_TESTS_SERVER_SERVICE_FIXTURE_H_
+#define NUPMPC_TESTS_SERVER_SERVICE_FIXTURE_H_
+
+// An in-process nupmpc server on a loopback port plus a client, and the benchmark
+// instances as ProblemSpecs.
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "client/client.h"
+#include "gtest/gtest.h"
+#include "loadtest/benchmark_instance.h"
+#include "server/grpc_server.h"
+#include "server/spec_conversion.h"
+#include "spdlog/spdlog.h"
+
+namespace nupmpc::testing {
+
+inline std::string BenchmarkPath(const std::string& name) {
+  return std::string(NUPMPC_BENCHMARK_DIR) + "/" + name + ".json";
+}
+
+inline bench::BenchmarkInstance LoadInstanceOrDie(const std::string& name) {
+  absl::StatusOr<bench::BenchmarkInstance> inst = bench::LoadBenchmarkInstance(BenchmarkPath(name));
+  EXPECT_TRUE(inst.ok()) << inst.status();
+  return *std::move(inst);
+}
+
+inline v1::ProblemSpec SpecOrDie(const core::Problem& problem) {
+  absl::StatusOr<v1::ProblemSpec> spec = server::SpecFromProblem(problem);
+  EXPECT_TRUE(spec.ok()) << spec.status();
+  return *std::move(spec);
+}
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  static server::ServerOptions DefaultOptions() {
+    server::ServerOptions o;
+    o.address = "127.0.0.1:0";
+    o.max_message_bytes = 64 << 20;
+    o.grace_period_s = 1.0;
+    return o;
+  }
+  void StartServer(const server::ServerOptions& options) {
+    absl::StatusOr<std::unique_ptr<server::GrpcServer>> s = server::GrpcServer::Start(options);
+    ASSERT_TRUE(s.ok()) << s.status();
+    server_ = *std::move(s);
+    target_ = "127.0.0.1:" + std::to_string(server_->port());
+    client_ = std::make_unique<Client>(target_);
+  }
+  void SetUp() override {
+    spdlog::set_level(spdlog::level::warn);  // session lifecycle logs would drown the test output
+    StartServer(DefaultOptions());
+  }
+  void TearDown() override {
+    client_.reset();
+    if (server_ != nullptr) server_->Shutdown();
+  }
+
+  std::unique_ptr<server::GrpcServer> server_;
+  std::string target_;
+  std::unique_ptr<Client> client_;
+};
+
+}  // namespace nupmpc::testing
+
+#endif  // NUPMPC_TESTS_SERVER_SERVICE_FIXTURE_H_
