@@ -6,12 +6,6 @@
 namespace nupmpc::server {
 namespace {
 
-std::optional<Clock::time_point> StreamDeadline(const grpc::CallbackServerContext* context) {
-  const auto deadline = context->deadline();
-  if (deadline == std::chrono::system_clock::time_point::max()) return std::nullopt;
-  return Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - std::chrono::system_clock::now());
-}
-
 v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& status) {
   v1::ControlResponse r;
   r.set_sequence(sequence);
@@ -143,7 +137,7 @@ void ControlStream::StartSolveLocked() {
 
 void ControlStream::SolveOnPool(v1::ControlRequest request) {
   CallContext call;
-  call.deadline = StreamDeadline(context_);
+  call.deadline = SteadyDeadline(*context_);
   call.cancel = &cancelled_;
   v1::ControlResponse response;
   response.set_sequence(request.sequence());

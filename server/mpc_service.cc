@@ -10,31 +10,25 @@
 namespace nupmpc::server {
 namespace {
 
-std::optional<Clock::time_point> DeadlineOf(const grpc::CallbackServerContext* context) {
-  const auto deadline = context->deadline();
-  if (deadline == std::chrono::system_clock::time_point::max()) return std::nullopt;
-  // The deadline is on the system clock; solves measure the steady clock.
-  return Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - std::chrono::system_clock::now());
-}
-
 // A unary call whose work runs on the worker pool. It finishes itself, and a client that
 // cancels raises the flag the solver checks every iteration.
 class PooledUnary : public grpc::ServerUnaryReactor {
  public:
   // Runs `work` on the pool (or answers RESOURCE_EXHAUSTED when the queue is full).
-  static grpc::ServerUnaryReactor* Start(ServerState* state, grpc::CallbackServerContext* context,
+  // `is_solve`: count it in the solve counters and latency histogram.
+  static grpc::ServerUnaryReactor* Start(ServerState* state, grpc::CallbackServerContext* context, bool is_solve,
                                          std::function<absl::Status(const CallContext&)> work) {
-    auto* self = new PooledUnary(state);
+    auto* self = new PooledUnary();
     if (state->draining.load()) {
       self->Finish(state->ToGrpc(absl::UnavailableError("the server is shutting down")));
       return self;
     }
-    self->call_.deadline = DeadlineOf(context);
+    self->call_.deadline = SteadyDeadline(*context);
     self->call_.cancel = &self->cancelled_;
     const auto queued_at = Clock::now();
-    const bool queued = state->pool.TrySubmit([self, state, work = std::move(work), queued_at] {
+    const bool queued = state->pool.TrySubmit([self, state, is_solve, work = std::move(work), queued_at] {
       const absl::Status status = work(self->call_);
-      if (status.ok()) {
+      if (status.ok() && is_solve) {
         state->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
       }
       self->Finish(state->ToGrpc(status));
@@ -49,8 +43,7 @@ class PooledUnary : public grpc::ServerUnaryReactor {
   void OnDone() override { delete this; }
 
  private:
-  explicit PooledUnary(ServerState* state) : state_(state) {}
-  ServerState* state_;
+  PooledUnary() = default;
   CallContext call_;
   std::atomic<bool> cancelled_{false};
 };
@@ -67,7 +60,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
                                                         const v1::CreateSessionRequest* request,
                                                         v1::CreateSessionResponse* response) {
   ServerState* state = state_;
-  return PooledUnary::Start(state, context, [state, request, response](const CallContext&) -> absl::Status {
+  return PooledUnary::Start(state, context, /*is_solve=*/false,
+                            [state, request, response](const CallContext&) -> absl::Status {
     absl::StatusOr<BuiltSession> built = BuildSession(request->spec(), state->options.size_limits);
     if (!built.ok()) return built.status();
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
@@ -98,7 +92,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
     return FinishNow(context, state_->ToGrpc(absl::FailedPreconditionError(
                                   "session_id: a Control stream is attached to this session; send steps there")));
   }
-  return PooledUnary::Start(state_, context,
+  return PooledUnary::Start(state_, context, /*is_solve=*/true,
                             [entry = *std::move(entry), request, response](const CallContext& call) {
                               return SolveStep(*entry, request->step(), call, response->mutable_result());
                             });
@@ -108,7 +102,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::SolveOnce(grpc::CallbackServerContext*
                                                     const v1::SolveOnceRequest* request,
                                                     v1::SolveOnceResponse* response) {
   ServerState* state = state_;
-  return PooledUnary::Start(state, context, [state, request, response](const CallContext& call) {
+  return PooledUnary::Start(state, context, /*is_solve=*/true, [state, request, response](const CallContext& call) {
     return server::SolveOnce(request->spec(), state->options.size_limits, call, response->mutable_result());
   });
 }

@@ -22,4 +22,10 @@ void ServerState::FillLimits(v1::ServerLimits* out) const {
   out->set_queue_capacity(options.queue_capacity);
 }
 
+std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context) {
+  const auto deadline = context.deadline();
+  if (deadline == std::chrono::system_clock::time_point::max()) return std::nullopt;
+  return Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - std::chrono::system_clock::now());
+}
+
 }  // namespace nupmpc::server

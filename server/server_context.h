@@ -2,9 +2,11 @@
 #define NUPMPC_SERVER_SERVER_CONTEXT_H_
 
 #include <atomic>
+#include <optional>
 #include <string>
 
 #include "absl/status/status.h"
+#include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
 #include "server/metrics.h"
 #include "server/session_registry.h"
@@ -39,6 +41,9 @@ struct ServerState {
   grpc::Status ToGrpc(const absl::Status& status);
   void FillLimits(v1::ServerLimits* out) const;
 };
+
+// The call's deadline on the steady clock the solver measures (none if the client set none).
+std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context);
 
 }  // namespace nupmpc::server
 
