@@ -19,7 +19,9 @@
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/strip.h"
 #include "absl/strings/str_join.h"
 #include "client/client.h"
 #include "google/protobuf/util/json_util.h"
@@ -64,13 +66,9 @@ absl::StatusOr<LoadedProblem> LoadProblem(const std::string& path) {
   return out;
 }
 
-const char* StatusName(v1::SolveStatus s) {
-  static std::string names[8];
-  const std::string& full = v1::SolveStatus_Name(s);
-  std::string& name = names[std::min<int>(s, 7)];
-  name = full.rfind("SOLVE_STATUS_", 0) == 0 ? full.substr(13) : full;
-  for (char& c : name) c = static_cast<char>(std::tolower(c));
-  return name.c_str();
+// "SOLVE_STATUS_TIME_LIMIT" → "time_limit" (the names the core and nupmpc-bench print).
+std::string StatusName(v1::SolveStatus s) {
+  return absl::AsciiStrToLower(absl::StripPrefix(v1::SolveStatus_Name(s), "SOLVE_STATUS_"));
 }
 
 std::string U0(const v1::SolveResult& r, int L) {
@@ -83,11 +81,11 @@ void PrintResult(const v1::SolveResult& r, int L, bool json) {
   if (json) {
     std::printf("{\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%.6g,"
                 "\"u0\":%s}\n",
-                StatusName(r.status()), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
+                StatusName(r.status()).c_str(), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
                 U0(r, L).c_str());
   } else {
     std::printf("status %s, %u iterations, %.4f ms, J = %.12g, max violation %.3g\nu[0] = %s\n",
-                StatusName(r.status()), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
+                StatusName(r.status()).c_str(), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
                 U0(r, L).c_str());
   }
 }
@@ -136,11 +134,11 @@ int ClosedLoop(nupmpc::Client& client, const LoadedProblem& problem, bool json) 
     if (json) {
       std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,"
                   "\"round_trip_ms\":%.6f,\"max_violation\":%.6g,\"warm_started\":%s,\"u0\":%s}\n",
-                  t, StatusName(r->status()), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
+                  t, StatusName(r->status()).c_str(), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
                   r->max_violation(), r->warm_started() ? "true" : "false", U0(*r, L).c_str());
     } else {
-      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, StatusName(r->status()), r->iterations(),
-                  r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), U0(*r, L).c_str());
+      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, StatusName(r->status()).c_str(),
+                  r->iterations(), r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), U0(*r, L).c_str());
     }
     std::fflush(stdout);
     if (!recorded) x = Simulate(problem.spec, x, *r, noise, rng);

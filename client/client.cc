@@ -59,76 +59,63 @@ void Client::SetDeadline(grpc::ClientContext* context) const {
   if (default_deadline_.count() > 0) context->set_deadline(std::chrono::system_clock::now() + default_deadline_);
 }
 
-absl::StatusOr<v1::SolveResult> Client::SolveOnce(const v1::ProblemSpec& spec) {
+template <typename Request, typename Response>
+absl::StatusOr<Response> Client::Unary(
+    grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
+    const Request& request) {
   grpc::ClientContext context;
   SetDeadline(&context);
+  Response response;
+  const grpc::Status s = (stub_.get()->*method)(&context, request, &response);
+  if (!s.ok()) return FromGrpc(s);
+  return response;
+}
+
+absl::StatusOr<v1::SolveResult> Client::SolveOnce(const v1::ProblemSpec& spec) {
   v1::SolveOnceRequest request;
   *request.mutable_spec() = spec;
-  v1::SolveOnceResponse response;
-  const grpc::Status s = stub_->SolveOnce(&context, request, &response);
-  if (!s.ok()) return FromGrpc(s);
-  return std::move(*response.mutable_result());
+  auto response = Unary(&v1::MpcService::Stub::SolveOnce, request);
+  if (!response.ok()) return response.status();
+  return std::move(*response->mutable_result());
 }
 
 absl::StatusOr<v1::CreateSessionResponse> Client::CreateSession(const v1::ProblemSpec& spec) {
-  grpc::ClientContext context;
-  SetDeadline(&context);
   v1::CreateSessionRequest request;
   *request.mutable_spec() = spec;
-  v1::CreateSessionResponse response;
-  const grpc::Status s = stub_->CreateSession(&context, request, &response);
-  if (!s.ok()) return FromGrpc(s);
-  return response;
+  return Unary(&v1::MpcService::Stub::CreateSession, request);
 }
 
 absl::StatusOr<v1::SolveResult> Client::Solve(const std::string& session_id, const v1::Step& step) {
-  grpc::ClientContext context;
-  SetDeadline(&context);
   v1::SolveRequest request;
   request.set_session_id(session_id);
   *request.mutable_step() = step;
-  v1::SolveResponse response;
-  const grpc::Status s = stub_->Solve(&context, request, &response);
-  if (!s.ok()) return FromGrpc(s);
-  return std::move(*response.mutable_result());
+  auto response = Unary(&v1::MpcService::Stub::Solve, request);
+  if (!response.ok()) return response.status();
+  return std::move(*response->mutable_result());
 }
 
 absl::StatusOr<v1::GetServerInfoResponse> Client::GetServerInfo() {
-  grpc::ClientContext context;
-  SetDeadline(&context);
-  v1::GetServerInfoResponse response;
-  const grpc::Status s = stub_->GetServerInfo(&context, v1::GetServerInfoRequest(), &response);
-  if (!s.ok()) return FromGrpc(s);
-  return response;
+  return Unary(&v1::MpcService::Stub::GetServerInfo, v1::GetServerInfoRequest());
 }
 
 absl::StatusOr<v1::SessionInfo> Client::GetSession(const std::string& session_id) {
-  grpc::ClientContext context;
-  SetDeadline(&context);
   v1::GetSessionRequest request;
   request.set_session_id(session_id);
-  v1::GetSessionResponse response;
-  const grpc::Status s = stub_->GetSession(&context, request, &response);
-  if (!s.ok()) return FromGrpc(s);
-  return response.session();
+  auto response = Unary(&v1::MpcService::Stub::GetSession, request);
+  if (!response.ok()) return response.status();
+  return response->session();
 }
 
 absl::StatusOr<std::vector<v1::SessionInfo>> Client::ListSessions() {
-  grpc::ClientContext context;
-  SetDeadline(&context);
-  v1::ListSessionsResponse response;
-  const grpc::Status s = stub_->ListSessions(&context, v1::ListSessionsRequest(), &response);
-  if (!s.ok()) return FromGrpc(s);
-  return std::vector<v1::SessionInfo>(response.sessions().begin(), response.sessions().end());
+  auto response = Unary(&v1::MpcService::Stub::ListSessions, v1::ListSessionsRequest());
+  if (!response.ok()) return response.status();
+  return std::vector<v1::SessionInfo>(response->sessions().begin(), response->sessions().end());
 }
 
 absl::Status Client::CloseSession(const std::string& session_id) {
-  grpc::ClientContext context;
-  SetDeadline(&context);
   v1::CloseSessionRequest request;
   request.set_session_id(session_id);
-  v1::CloseSessionResponse response;
-  return FromGrpc(stub_->CloseSession(&context, request, &response));
+  return Unary(&v1::MpcService::Stub::CloseSession, request).status();
 }
 
 absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession(const v1::ProblemSpec& spec) {

@@ -53,6 +53,11 @@ class Client {
 
  private:
   void SetDeadline(grpc::ClientContext* context) const;
+  // One blocking unary call with the default deadline.
+  template <typename Request, typename Response>
+  absl::StatusOr<Response> Unary(
+      grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
+      const Request& request);
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::MpcService::Stub> stub_;
   std::chrono::milliseconds default_deadline_;

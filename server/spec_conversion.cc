@@ -286,6 +286,14 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, 
 
 absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* p) {
   const int M = p->num_states, L = p->num_inputs, K = p->num_outputs, N = p->horizon;
+  // Every check that cannot depend on the update comes before the first write, so a step
+  // without an update that is rejected leaves the problem untouched.
+  if (!v1::WarmStart_IsValid(step.warm_start())) {
+    return Invalid(field, ".warm_start = ", static_cast<int>(step.warm_start()), ": unknown");
+  }
+  if (!(step.time_limit_ms() >= 0.0) || !std::isfinite(step.time_limit_ms())) {
+    return Invalid(field, ".time_limit_ms = ", step.time_limit_ms(), ": must be finite and >= 0");
+  }
   if (step.state_size() != 0) {
     if (step.state_size() != M) {
       return absl::FailedPreconditionError(
@@ -295,12 +303,6 @@ absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* p
       if (!std::isfinite(step.state(i))) return Invalid(field, ".state[", i, "] = ", step.state(i), ": must be finite");
     }
     p->initial_mean = Eigen::Map<const Eigen::VectorXd>(step.state().data(), M);
-  }
-  if (!v1::WarmStart_IsValid(step.warm_start())) {
-    return Invalid(field, ".warm_start = ", static_cast<int>(step.warm_start()), ": unknown");
-  }
-  if (!(step.time_limit_ms() >= 0.0) || !std::isfinite(step.time_limit_ms())) {
-    return Invalid(field, ".time_limit_ms = ", step.time_limit_ms(), ": must be finite and >= 0");
   }
   if (!step.has_update()) return absl::OkStatus();
   const v1::PriorUpdate& u = step.update();
@@ -386,30 +388,28 @@ void SetMatrix(const Eigen::MatrixXd& m, v1::Matrix* out) {
 // Per-step arrays of one component; compressed to one value when constant.
 absl::Status ComponentToProto(const std::vector<core::ScalarPrior>& priors, int steps, int stride, int offset,
                               const std::string& path, v1::ComponentPrior* out) {
+  // One ComponentPrior has one kind. A constraint that changes side over the horizon, or
+  // is absent at some steps, is a BOX with infinite sides where needed.
   core::PriorKind kind = core::PriorKind::kNone;
-  bool mixed_constraint = false;
+  bool absent_somewhere = false, sides_mixed = false;
   for (int n = 0; n < steps; ++n) {
     const core::ScalarPrior& p = priors[static_cast<std::size_t>(n) * stride + offset];
-    if (p.kind == core::PriorKind::kNone || p.kind == kind) continue;
-    if (kind == core::PriorKind::kNone) {
+    if (p.kind == core::PriorKind::kNone) {
+      absent_somewhere = true;
+    } else if (kind == core::PriorKind::kNone) {
       kind = p.kind;
-    } else if (p.is_constraint() && core::ScalarPrior{.kind = kind}.is_constraint()) {
-      mixed_constraint = true;
-    } else {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": mixes prior kinds over the horizon"));
+    } else if (p.kind != kind) {
+      const core::ScalarPrior first_kind{.kind = kind};
+      if (!p.is_constraint() || !first_kind.is_constraint()) {
+        return absl::InvalidArgumentError(absl::StrCat(path, ": mixes prior kinds over the horizon"));
+      }
+      sides_mixed = true;
     }
   }
-  const bool as_box = mixed_constraint || kind == core::PriorKind::kBox ||
-                      (kind != core::PriorKind::kNone && core::ScalarPrior{.kind = kind}.is_constraint() &&
-                       [&] {  // a constraint absent at some steps is a box with infinite sides there
-                         for (int n = 0; n < steps; ++n) {
-                           if (priors[static_cast<std::size_t>(n) * stride + offset].kind == core::PriorKind::kNone) {
-                             return true;
-                           }
-                         }
-                         return false;
-                       }());
-  switch (as_box ? core::PriorKind::kBox : kind) {
+  if (core::ScalarPrior{.kind = kind}.is_constraint() && (absent_somewhere || sides_mixed)) {
+    kind = core::PriorKind::kBox;
+  }
+  switch (kind) {
     case core::PriorKind::kNone: out->set_kind(v1::PRIOR_KIND_UNSPECIFIED); break;
     case core::PriorKind::kL1: out->set_kind(v1::PRIOR_KIND_L1); break;
     case core::PriorKind::kHuber: out->set_kind(v1::PRIOR_KIND_HUBER); break;

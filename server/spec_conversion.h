@@ -30,8 +30,9 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
 // The solver options of a spec (defaults where fields are 0).
 absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& options, const SizeLimits& limits);
 
-// Applies a step's state and prior update to a copy of the session's problem. `field` is
-// the path prefix used in messages ("step").
+// Applies a step's state and prior update to the session's problem. `field` is the path
+// prefix used in messages ("step"). A step without an update is checked completely before
+// anything is written; with an update, pass a copy (a bad entry may fail half-way).
 absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* problem);
 
 // Fills a SolveResult from the core's summary and solution.

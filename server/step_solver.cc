@@ -62,14 +62,10 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     entry.problem = std::move(candidate);
     entry.algorithm.store(solver.algorithm());
   } else if (step.state_size() > 0) {
-    // The common path: only the measured state changes (no copy of the problem).
-    core::Problem& p = entry.problem;
-    const Eigen::VectorXd previous = p.initial_mean;
-    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &p));
-    if (absl::Status s = solver.SetInitialState(p.initial_mean); !s.ok()) {
-      p.initial_mean = previous;
-      return s;
-    }
+    // The common path: only the measured state changes (no copy of the problem). ApplyStep
+    // checks size and finiteness before it writes, which is all SetInitialState checks.
+    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &entry.problem));
+    NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(entry.problem.initial_mean));
   } else {
     NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &entry.problem));  // validates the other fields
   }
