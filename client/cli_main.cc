@@ -11,9 +11,7 @@
 // --format table|json; with json, closed-loop prints one object per step and line with
 // step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, u0.
 #include <cstdio>
-#include <fstream>
 #include <random>
-#include <sstream>
 #include <string>
 
 #include "absl/flags/flag.h"
@@ -24,9 +22,8 @@
 #include "absl/strings/strip.h"
 #include "absl/strings/str_join.h"
 #include "client/client.h"
+#include "client/problem_file.h"
 #include "google/protobuf/util/json_util.h"
-#include "loadtest/benchmark_instance.h"
-#include "server/spec_conversion.h"
 
 ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
 ABSL_FLAG(std::string, format, "table", "table or json");
@@ -38,33 +35,6 @@ ABSL_FLAG(int, deadline_ms, 0, "deadline of unary calls (0: none)");
 namespace {
 
 namespace v1 = nupmpc::v1;
-
-struct LoadedProblem {
-  v1::ProblemSpec spec;
-  std::vector<std::vector<double>> closed_loop_states;  // empty: simulate
-};
-
-absl::StatusOr<LoadedProblem> LoadProblem(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
-  std::stringstream text;
-  text << in.rdbuf();
-  LoadedProblem out;
-  if (text.str().find("\"dims\"") != std::string::npos) {  // the benchmark format
-    absl::StatusOr<nupmpc::bench::BenchmarkInstance> inst = nupmpc::bench::LoadBenchmarkInstance(path);
-    if (!inst.ok()) return inst.status();
-    absl::StatusOr<v1::ProblemSpec> spec = nupmpc::server::SpecFromProblem(inst->problem);
-    if (!spec.ok()) return spec.status();
-    out.spec = *std::move(spec);
-    if (inst->closed_loop.has_value()) {
-      for (const Eigen::VectorXd& x : inst->closed_loop->x1) out.closed_loop_states.emplace_back(x.begin(), x.end());
-    }
-    return out;
-  }
-  const auto status = google::protobuf::util::JsonStringToMessage(text.str(), &out.spec);
-  if (!status.ok()) return absl::InvalidArgumentError(absl::StrCat(path, ": not a ProblemSpec: ", status.ToString()));
-  return out;
-}
 
 // "SOLVE_STATUS_TIME_LIMIT" → "time_limit" (the names the core and nupmpc-bench print).
 std::string StatusName(v1::SolveStatus s) {
@@ -110,7 +80,7 @@ std::vector<double> Simulate(const v1::ProblemSpec& spec, const std::vector<doub
   return next;
 }
 
-int ClosedLoop(nupmpc::Client& client, const LoadedProblem& problem, bool json) {
+int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool json) {
   absl::StatusOr<std::unique_ptr<nupmpc::Session>> session = client.OpenSession(problem.spec);
   if (!session.ok()) return Fail(session.status());
   const int L = static_cast<int>(problem.spec.model().num_inputs());
@@ -164,7 +134,7 @@ int main(int argc, char** argv) {
 
   if (command == "solve" || command == "closed-loop") {
     if (args.size() < 3) return Fail(absl::InvalidArgumentError(absl::StrCat(command, ": FILE missing")));
-    absl::StatusOr<LoadedProblem> problem = LoadProblem(args[2]);
+    absl::StatusOr<nupmpc::ProblemFile> problem = nupmpc::LoadProblemFile(args[2]);
     if (!problem.ok()) return Fail(problem.status());
     if (command == "closed-loop") return ClosedLoop(client, *problem, json);
     absl::StatusOr<v1::SolveResult> r = client.SolveOnce(problem->spec);

@@ -3,6 +3,7 @@
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "server/process_memory.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
@@ -31,11 +32,17 @@ GrpcServer::~GrpcServer() { Shutdown(); }
 
 void GrpcServer::Janitor() {
   std::unique_lock<std::mutex> lock(janitor_mu_);
+  std::uint64_t closed_at_last_trim = 0;
   while (!stopping_) {
     janitor_wake_.wait_for(lock, std::chrono::seconds(1));
     if (stopping_) break;
     const int expired = state_->registry.ExpireIdle(state_->options.session_idle_timeout_s);
     if (expired > 0) spdlog::info("closed {} idle sessions", expired);
+    // Once a second at most, and only when sessions went away since the last time.
+    if (const std::uint64_t closed = state_->registry.closed_total(); closed != closed_at_last_trim) {
+      closed_at_last_trim = closed;
+      ReleaseFreedMemory();
+    }
   }
 }
 

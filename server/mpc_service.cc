@@ -3,6 +3,7 @@
 #include <functional>
 
 #include "server/control_stream.h"
+#include "server/process_memory.h"
 #include "server/step_solver.h"
 #include "server/version.h"
 #include "spdlog/spdlog.h"
@@ -146,6 +147,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerCont
   state_->metrics.Fill(response);
   response->set_active_sessions(state_->registry.size());
   response->set_draining(state_->draining.load());
+  response->set_resident_memory_bytes(ResidentMemoryBytes());
   return FinishNow(context, grpc::Status::OK);
 }
 

@@ -82,6 +82,7 @@ absl::Status SessionRegistry::Close(const std::string& id) {
   // Mark it closed after any solve in flight; the memory goes with the last reference.
   std::lock_guard<std::mutex> lock(entry->mu);
   entry->closed = true;
+  closed_total_.fetch_add(1, std::memory_order_relaxed);
   return absl::OkStatus();
 }
 

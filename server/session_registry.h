@@ -58,12 +58,15 @@ class SessionRegistry {
   int ExpireIdle(double idle_seconds);
   int size() const;
   int max_sessions() const { return max_sessions_; }
+  // Sessions closed since start (explicitly, with their stream, or by expiry).
+  std::uint64_t closed_total() const { return closed_total_.load(std::memory_order_relaxed); }
 
  private:
   static std::string NewId();
   const int max_sessions_;
   mutable std::mutex mu_;
   std::unordered_map<std::string, std::shared_ptr<SessionEntry>> sessions_;
+  std::atomic<std::uint64_t> closed_total_{0};
 };
 
 }  // namespace nupmpc::server

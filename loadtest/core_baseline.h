@@ -1,0 +1,30 @@
+#ifndef NUPMPC_LOADTEST_CORE_BASELINE_H_
+#define NUPMPC_LOADTEST_CORE_BASELINE_H_
+
+// The peer every load-test figure is measured against, in the same run: the core alone
+// (no gRPC, no threads) solving the same closed-loop steps the streams send, with the
+// same warm starts (cold at the first state, shifted after).
+
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "nupmpc/v1/nupmpc.pb.h"
+
+namespace nupmpc::loadtest {
+
+struct CoreBaseline {
+  double median_ms = 0.0;  ///< per step, including setting x[0] and shifting the warm start
+  double p99_ms = 0.0;
+  double mean_iterations = 0.0;
+  int solves = 0;
+};
+
+absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
+                                                 const std::vector<std::vector<double>>& states, int rounds);
+
+// The q-quantile (0..1) of `values` by nearest rank; sorts them. 0 when empty.
+double Quantile(std::vector<double>& values, double q);
+
+}  // namespace nupmpc::loadtest
+
+#endif  // NUPMPC_LOADTEST_CORE_BASELINE_H_

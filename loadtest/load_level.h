@@ -1,0 +1,41 @@
+#ifndef NUPMPC_LOADTEST_LOAD_LEVEL_H_
+#define NUPMPC_LOADTEST_LOAD_LEVEL_H_
+
+// One load level of nupmpc-loadtest: C concurrent Control streams against a server for a
+// fixed time (or request count), closed or open loop.
+
+#include <cstdint>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "loadtest/load_stream.h"
+
+namespace nupmpc::loadtest {
+
+struct LevelConfig {
+  int concurrency = 1;
+  bool closed_loop = true;
+  double rate_per_s = 0.0;     ///< open loop: total Poisson arrival rate over all streams
+  double duration_s = 5.0;     ///< measured window
+  double warmup_s = 0.5;       ///< before the window; not counted
+  std::uint64_t requests = 0;  ///< > 0: stop once this many solves were answered
+  bool progress = false;       ///< a status line on stderr every second
+  std::uint64_t seed = 1;
+};
+
+struct LevelReport {
+  LevelConfig config;
+  double measured_s = 0.0;
+  StreamTally tally;
+  double solves_per_s = 0.0;
+  double p50_ms = 0.0, p90_ms = 0.0, p99_ms = 0.0, p999_ms = 0.0, max_ms = 0.0;
+  double solve_p50_ms = 0.0;  ///< the server's own solver time, median
+  double mean_iterations = 0.0;
+};
+
+// Opens the streams (each creates its session), runs the level, closes them.
+absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan& plan, const LevelConfig& config);
+
+}  // namespace nupmpc::loadtest
+
+#endif  // NUPMPC_LOADTEST_LOAD_LEVEL_H_

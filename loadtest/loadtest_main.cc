@@ -1,0 +1,143 @@
+// nupmpc-loadtest: drives a running nupmpc-server with concurrent Control streams and
+// reports throughput and latency next to the core's own solve time for the same steps.
+//
+//   nupmpc-loadtest [--server HOST:PORT] [--instance FILE] [--concurrency C | --sweep 1,2,8,64]
+//                   [--mode closed|open [--rate R | --rate_x X]] [--duration_s T] [--requests R]
+//                   [--json]
+//   nupmpc-loadtest --idle_sessions 10000 [--idle_release close|expire]
+//
+// Every stream creates its own session from the instance and cycles through the
+// instance's recorded closed-loop states (or, for a file without them, its initial state).
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "absl/flags/flag.h"
+#include "absl/flags/parse.h"
+#include "absl/flags/usage.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_split.h"
+#include "client/client.h"
+#include "client/problem_file.h"
+#include "loadtest/core_baseline.h"
+#include "loadtest/idle_sessions.h"
+#include "loadtest/load_level.h"
+#include "loadtest/loadtest_report.h"
+
+ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, instance, "../shared/benchmarks/masses_N30.json",
+          "benchmark instance or ProblemSpec JSON every stream solves");
+ABSL_FLAG(int, concurrency, 1, "concurrent streams (sessions)");
+ABSL_FLAG(std::string, sweep, "", "comma-separated concurrency levels, run one after another (overrides --concurrency)");
+ABSL_FLAG(std::string, mode, "closed", "closed: next state when the answer arrives; open: Poisson arrivals");
+ABSL_FLAG(double, rate, 0.0, "open loop: total arrivals per second");
+ABSL_FLAG(double, rate_x, 0.0, "open loop: arrivals as a multiple of the capacity workers / core median solve time");
+ABSL_FLAG(double, duration_s, 5.0, "measured seconds per level");
+ABSL_FLAG(double, warmup_s, 0.5, "unmeasured seconds before each level");
+ABSL_FLAG(uint64_t, requests, 0, "stop a level once this many solves were answered (0: by time)");
+ABSL_FLAG(int, baseline_rounds, 20, "passes of the core-alone baseline over the closed-loop states");
+ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
+ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
+ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
+ABSL_FLAG(std::string, idle_release, "close", "memory mode: close (CloseSession) or expire (wait for idle expiry)");
+ABSL_FLAG(uint64_t, seed, 1, "open-loop arrival seed");
+
+namespace {
+
+namespace lt = nupmpc::loadtest;
+
+int Fail(const std::string& what, const absl::Status& s) {
+  std::fprintf(stderr, "nupmpc-loadtest: %s: %s\n", what.c_str(), s.ToString().c_str());
+  return 1;
+}
+
+absl::StatusOr<std::vector<int>> ConcurrencyLevels() {
+  const std::string sweep = absl::GetFlag(FLAGS_sweep);
+  if (sweep.empty()) return std::vector<int>{absl::GetFlag(FLAGS_concurrency)};
+  std::vector<int> levels;
+  for (absl::string_view part : absl::StrSplit(sweep, ',', absl::SkipWhitespace())) {
+    int c = 0;
+    if (!absl::SimpleAtoi(part, &c) || c < 1) {
+      return absl::InvalidArgumentError(absl::StrCat("--sweep: \"", part, "\" is not a positive integer"));
+    }
+    levels.push_back(c);
+  }
+  if (levels.empty()) return absl::InvalidArgumentError("--sweep: no levels");
+  return levels;
+}
+
+bool ShowProgress() {
+  const std::string p = absl::GetFlag(FLAGS_progress);
+  return p == "on" || (p == "auto" && isatty(STDERR_FILENO));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  absl::SetProgramUsageMessage(
+      "nupmpc-loadtest [--server HOST:PORT] [--instance FILE] [--concurrency C | --sweep 1,2,8,64] "
+      "[--mode closed|open [--rate R | --rate_x X]] [--duration_s T] [--json] | --idle_sessions N");
+  if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
+  absl::ParseCommandLine(argc, argv);
+  const std::string target = absl::GetFlag(FLAGS_server);
+  const std::string instance_path = absl::GetFlag(FLAGS_instance);
+  absl::StatusOr<nupmpc::ProblemFile> file = nupmpc::LoadProblemFile(instance_path);
+  if (!file.ok()) return Fail("--instance", file.status());
+  if (file->closed_loop_states.empty()) {
+    const auto& mean = file->spec.initial_state().mean();
+    file->closed_loop_states.emplace_back(mean.begin(), mean.end());
+  }
+  const std::string name = std::filesystem::path(instance_path).stem().string();
+  const bool json = absl::GetFlag(FLAGS_json);
+
+  if (const int idle = absl::GetFlag(FLAGS_idle_sessions); idle > 0) {
+    const std::string release = absl::GetFlag(FLAGS_idle_release);
+    if (release != "close" && release != "expire") {
+      return Fail("--idle_release", absl::InvalidArgumentError("must be close or expire"));
+    }
+    absl::StatusOr<lt::IdleSessionsReport> r = lt::RunIdleSessions(target, file->spec, idle, release == "expire");
+    if (!r.ok()) return Fail("idle sessions", r.status());
+    lt::PrintIdleSessions(name, *r, json);
+    return 0;
+  }
+
+  absl::StatusOr<std::vector<int>> levels = ConcurrencyLevels();
+  if (!levels.ok()) return Fail("--sweep", levels.status());
+  const std::string mode = absl::GetFlag(FLAGS_mode);
+  if (mode != "closed" && mode != "open") return Fail("--mode", absl::InvalidArgumentError("must be closed or open"));
+
+  nupmpc::Client client(target, std::chrono::seconds(10));
+  absl::StatusOr<nupmpc::v1::GetServerInfoResponse> info = client.GetServerInfo();
+  if (!info.ok()) return Fail(absl::StrCat("server ", target), info.status());
+
+  absl::StatusOr<lt::CoreBaseline> baseline =
+      lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, absl::GetFlag(FLAGS_baseline_rounds));
+  if (!baseline.ok()) return Fail("core baseline", baseline.status());
+  const double capacity_per_s = info->limits().worker_threads() / (baseline->median_ms * 1e-3);
+
+  lt::RunHeader header{name, target, *info, *baseline, capacity_per_s};
+  if (!json) lt::PrintHeader(header);
+  const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed"};
+  std::vector<lt::LevelReport> reports;
+  for (const int c : *levels) {
+    lt::LevelConfig config;
+    config.concurrency = c;
+    config.closed_loop = plan.closed_loop;
+    config.rate_per_s = absl::GetFlag(FLAGS_rate);
+    if (absl::GetFlag(FLAGS_rate_x) > 0.0) config.rate_per_s = absl::GetFlag(FLAGS_rate_x) * capacity_per_s;
+    config.duration_s = absl::GetFlag(FLAGS_duration_s);
+    config.warmup_s = absl::GetFlag(FLAGS_warmup_s);
+    config.requests = absl::GetFlag(FLAGS_requests);
+    config.progress = ShowProgress();
+    config.seed = absl::GetFlag(FLAGS_seed);
+    absl::StatusOr<lt::LevelReport> report = lt::RunLevel(target, plan, config);
+    if (!report.ok()) return Fail(absl::StrCat("concurrency ", c), report.status());
+    if (!json) lt::PrintLevel(header, *report);
+    reports.push_back(*std::move(report));
+  }
+  if (json) lt::PrintJson(header, reports);
+  return 0;
+}

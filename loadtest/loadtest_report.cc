@@ -1,0 +1,112 @@
+#include "loadtest/loadtest_report.h"
+
+#include <cstdio>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "nlohmann/json.hpp"
+
+namespace nupmpc::loadtest {
+namespace {
+
+std::string Errors(const StreamTally& t) {
+  if (t.errors.empty()) return "none";
+  return absl::StrJoin(t.errors, " ", [](std::string* out, const auto& e) { absl::StrAppend(out, e.first, ":", e.second); });
+}
+
+// Round trip above the core's own median: what the network, gRPC and the server add.
+double OverheadUs(const RunHeader& h, const LevelReport& l) { return (l.p50_ms - h.baseline.median_ms) * 1e3; }
+
+double MiB(std::uint64_t bytes) { return static_cast<double>(bytes) / (1024.0 * 1024.0); }
+
+}  // namespace
+
+void PrintHeader(const RunHeader& h) {
+  std::printf("nupmpc-loadtest: %s against %s (nupmpc-server %s, %u workers, queue %u)\n", h.instance.c_str(),
+              h.target.c_str(), h.server.version().c_str(), h.server.limits().worker_threads(),
+              h.server.limits().queue_capacity());
+  std::printf("core alone, same steps: median %.4f ms, p99 %.4f ms, %.2f iterations/step over %d solves; "
+              "capacity %u workers / median = %.0f solves/s\n",
+              h.baseline.median_ms, h.baseline.p99_ms, h.baseline.mean_iterations, h.baseline.solves,
+              h.server.limits().worker_threads(), h.capacity_per_s);
+  std::printf("(load generator and server share this machine's cores; latency is request sent, or open-loop "
+              "arrival scheduled, to answer received)\n");
+  std::printf("%5s %-6s %10s %10s %8s %8s %8s %8s %8s %6s %10s %10s %9s  %s\n", "C", "mode", "offered/s", "solves/s",
+              "p50 ms", "p90 ms", "p99 ms", "p99.9 ms", "max ms", "iter", "superseded", "overhead", "capacity",
+              "errors");
+}
+
+void PrintLevel(const RunHeader& h, const LevelReport& l) {
+  const std::string offered = l.config.closed_loop ? "-" : absl::StrCat(static_cast<long long>(l.config.rate_per_s));
+  std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %6.2f %10llu %8.0f\xc2\xb5s %8.0f%%  %s\n",
+              l.config.concurrency, l.config.closed_loop ? "closed" : "open", offered.c_str(), l.solves_per_s,
+              l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms, l.max_ms, l.mean_iterations,
+              static_cast<unsigned long long>(l.tally.superseded), OverheadUs(h, l),
+              100.0 * l.solves_per_s / h.capacity_per_s, Errors(l.tally).c_str());
+  std::fflush(stdout);
+}
+
+void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
+  nlohmann::json out;
+  out["instance"] = h.instance;
+  out["server"] = {{"target", h.target},
+                   {"version", h.server.version()},
+                   {"worker_threads", h.server.limits().worker_threads()},
+                   {"queue_capacity", h.server.limits().queue_capacity()}};
+  out["core_baseline"] = {{"median_ms", h.baseline.median_ms},
+                          {"p99_ms", h.baseline.p99_ms},
+                          {"mean_iterations", h.baseline.mean_iterations},
+                          {"solves", h.baseline.solves},
+                          {"capacity_per_s", h.capacity_per_s}};
+  out["levels"] = nlohmann::json::array();
+  for (const LevelReport& l : levels) {
+    nlohmann::json level = {{"concurrency", l.config.concurrency},
+                            {"mode", l.config.closed_loop ? "closed" : "open"},
+                            {"measured_s", l.measured_s},
+                            {"sent", l.tally.sent},
+                            {"solves", l.tally.latency_ms.size()},
+                            {"solves_per_s", l.solves_per_s},
+                            {"p50_ms", l.p50_ms},
+                            {"p90_ms", l.p90_ms},
+                            {"p99_ms", l.p99_ms},
+                            {"p999_ms", l.p999_ms},
+                            {"max_ms", l.max_ms},
+                            {"server_solve_p50_ms", l.solve_p50_ms},
+                            {"mean_iterations", l.mean_iterations},
+                            {"superseded", l.tally.superseded},
+                            {"errors", l.tally.errors},
+                            {"overhead_p50_us", OverheadUs(h, l)},
+                            {"fraction_of_capacity", l.solves_per_s / h.capacity_per_s}};
+    if (!l.config.closed_loop) level["offered_per_s"] = l.config.rate_per_s;
+    out["levels"].push_back(std::move(level));
+  }
+  std::printf("%s\n", out.dump(2).c_str());
+}
+
+void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& r, bool json) {
+  const double per_session_kib =
+      r.sessions > 0 ? (static_cast<double>(r.rss_with_sessions) - static_cast<double>(r.rss_before)) / 1024.0 / r.sessions
+                     : 0.0;
+  if (json) {
+    const nlohmann::json out = {{"instance", instance},
+                                {"sessions", r.sessions},
+                                {"rss_before_bytes", r.rss_before},
+                                {"rss_with_sessions_bytes", r.rss_with_sessions},
+                                {"rss_after_bytes", r.rss_after},
+                                {"per_session_kib", per_session_kib},
+                                {"create_s", r.create_s},
+                                {"release", r.expired ? "expire" : "close"},
+                                {"release_s", r.release_s}};
+    std::printf("%s\n", out.dump(2).c_str());
+    return;
+  }
+  std::printf("nupmpc-loadtest: %d idle %s sessions\n", r.sessions, instance.c_str());
+  std::printf("  server RSS before      %9.1f MiB\n", MiB(r.rss_before));
+  std::printf("  with the sessions      %9.1f MiB  (%.1f KiB per session; created in %.2f s)\n",
+              MiB(r.rss_with_sessions), per_session_kib, r.create_s);
+  std::printf("  after they %s  %9.1f MiB  (%+.1f%% of before; released in %.2f s)\n",
+              r.expired ? "expired" : "closed ", MiB(r.rss_after),
+              r.rss_before > 0 ? 100.0 * (static_cast<double>(r.rss_after) / r.rss_before - 1.0) : 0.0, r.release_s);
+}
+
+}  // namespace nupmpc::loadtest

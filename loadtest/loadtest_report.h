@@ -1,0 +1,32 @@
+#ifndef NUPMPC_LOADTEST_LOADTEST_REPORT_H_
+#define NUPMPC_LOADTEST_LOADTEST_REPORT_H_
+
+// nupmpc-loadtest's output: a table for people, one JSON document for scripts. Every
+// level is set against the core-alone baseline measured in the same run.
+
+#include <string>
+#include <vector>
+
+#include "loadtest/core_baseline.h"
+#include "loadtest/idle_sessions.h"
+#include "loadtest/load_level.h"
+#include "nupmpc/v1/nupmpc.pb.h"
+
+namespace nupmpc::loadtest {
+
+struct RunHeader {
+  std::string instance;
+  std::string target;
+  v1::GetServerInfoResponse server;
+  CoreBaseline baseline;
+  double capacity_per_s = 0.0;  ///< worker threads / core median solve time
+};
+
+void PrintHeader(const RunHeader& header);
+void PrintLevel(const RunHeader& header, const LevelReport& level);
+void PrintJson(const RunHeader& header, const std::vector<LevelReport>& levels);
+void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& report, bool json);
+
+}  // namespace nupmpc::loadtest
+
+#endif  // NUPMPC_LOADTEST_LOADTEST_REPORT_H_
