@@ -23,11 +23,21 @@ absl::StatusOr<IdleSessionsReport> RunIdleSessions(const std::string& target, co
   IdleSessionsReport report;
   report.sessions = count;
   report.expired = wait_for_expiry;
+  // Warm-up: one session through its whole life, then let the janitor settle.
+  {
+    absl::StatusOr<v1::CreateSessionResponse> first = client.CreateSession(spec);
+    if (!first.ok()) return first.status();
+    if (absl::Status s = client.CloseSession(first->session_id()); !s.ok()) return s;
+    std::this_thread::sleep_for(kJanitorSettle);
+  }
   absl::StatusOr<v1::GetServerInfoResponse> info = client.GetServerInfo();
   if (!info.ok()) return info.status();
   const std::uint32_t sessions_before = info->active_sessions();
   const double idle_timeout_s = info->limits().session_idle_timeout_s();
+  report.compact_idle_s = info->limits().session_compact_idle_s();
   report.rss_before = info->resident_memory_bytes();
+  v1::Step step;  // one solve from the spec's own initial state
+  *step.mutable_state() = spec.initial_state().mean();
 
   std::vector<std::string> ids;
   ids.reserve(count);
@@ -40,10 +50,20 @@ absl::StatusOr<IdleSessionsReport> RunIdleSessions(const std::string& target, co
                           absl::StrCat("creating session ", i + 1, " of ", count, ": ", created.status().message()));
     }
     ids.push_back(created->session_id());
+    if (absl::StatusOr<v1::SolveResult> solved = client.Solve(ids.back(), step); !solved.ok()) {
+      for (const std::string& id : ids) (void)client.CloseSession(id);
+      return absl::Status(solved.status().code(), absl::StrCat("solving on session ", i + 1, ": ",
+                                                               solved.status().message()));
+    }
   }
   report.create_s = std::chrono::duration<double>(Clock::now() - create_start).count();
   if (info = client.GetServerInfo(); !info.ok()) return info.status();
   report.rss_with_sessions = info->resident_memory_bytes();
+  if (report.compact_idle_s > 0.0) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(report.compact_idle_s) + kJanitorSettle);
+    if (info = client.GetServerInfo(); !info.ok()) return info.status();
+  }
+  report.rss_idle = info->resident_memory_bytes();
 
   const Clock::time_point release_start = Clock::now();
   if (wait_for_expiry) {

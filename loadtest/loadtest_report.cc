@@ -84,16 +84,19 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
 }
 
 void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& r, bool json) {
-  const double per_session_kib =
-      r.sessions > 0 ? (static_cast<double>(r.rss_with_sessions) - static_cast<double>(r.rss_before)) / 1024.0 / r.sessions
-                     : 0.0;
+  const auto per_session_kib = [&](std::uint64_t rss) {
+    return r.sessions > 0 ? (static_cast<double>(rss) - static_cast<double>(r.rss_before)) / 1024.0 / r.sessions : 0.0;
+  };
   if (json) {
     const nlohmann::json out = {{"instance", instance},
                                 {"sessions", r.sessions},
                                 {"rss_before_bytes", r.rss_before},
                                 {"rss_with_sessions_bytes", r.rss_with_sessions},
+                                {"rss_idle_bytes", r.rss_idle},
                                 {"rss_after_bytes", r.rss_after},
-                                {"per_session_kib", per_session_kib},
+                                {"per_session_kib", per_session_kib(r.rss_with_sessions)},
+                                {"per_idle_session_kib", per_session_kib(r.rss_idle)},
+                                {"compact_idle_s", r.compact_idle_s},
                                 {"create_s", r.create_s},
                                 {"release", r.expired ? "expire" : "close"},
                                 {"release_s", r.release_s}};
@@ -102,8 +105,10 @@ void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& r,
   }
   std::printf("nupmpc-loadtest: %d idle %s sessions\n", r.sessions, instance.c_str());
   std::printf("  server RSS before      %9.1f MiB\n", MiB(r.rss_before));
-  std::printf("  with the sessions      %9.1f MiB  (%.1f KiB per session; created in %.2f s)\n",
-              MiB(r.rss_with_sessions), per_session_kib, r.create_s);
+  std::printf("  with the sessions      %9.1f MiB  (%.1f KiB per session; created and solved once in %.2f s)\n",
+              MiB(r.rss_with_sessions), per_session_kib(r.rss_with_sessions), r.create_s);
+  std::printf("  idle (compacted after %.0f s) %5.1f MiB  (%.1f KiB per session)\n", r.compact_idle_s, MiB(r.rss_idle),
+              per_session_kib(r.rss_idle));
   std::printf("  after they %s  %9.1f MiB  (%+.1f%% of before; released in %.2f s)\n",
               r.expired ? "expired" : "closed ", MiB(r.rss_after),
               r.rss_before > 0 ? 100.0 * (static_cast<double>(r.rss_after) / r.rss_before - 1.0) : 0.0, r.release_s);

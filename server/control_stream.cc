@@ -42,7 +42,7 @@ absl::Status ControlStream::Attach(const v1::ControlRequest& first) {
       absl::StatusOr<BuiltSession> built = BuildSession(first.spec(), state_->options.size_limits);
       if (!built.ok()) return built.status();
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
-          state_->registry.Add(std::move(built->solver), std::move(built->problem), built->default_time_limit_ms,
+          state_->registry.Add(std::move(built->solver), built->default_time_limit_ms,
                                /*owned_by_stream=*/true);
       if (!added.ok()) return added.status();
       entry = *std::move(added);

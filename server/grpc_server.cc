@@ -38,8 +38,11 @@ void GrpcServer::Janitor() {
     if (stopping_) break;
     const int expired = state_->registry.ExpireIdle(state_->options.session_idle_timeout_s);
     if (expired > 0) spdlog::info("closed {} idle sessions", expired);
-    // Once a second at most, and only when sessions went away since the last time.
-    if (const std::uint64_t closed = state_->registry.closed_total(); closed != closed_at_last_trim) {
+    const double compact_after_s = state_->options.session_compact_idle_s;
+    const int compacted = compact_after_s > 0.0 ? state_->registry.CompactIdle(compact_after_s) : 0;
+    if (compacted > 0) spdlog::debug("released the scratch memory of {} idle sessions", compacted);
+    // Once a second at most, and only when memory was freed since the last time.
+    if (const std::uint64_t closed = state_->registry.closed_total(); closed != closed_at_last_trim || compacted > 0) {
       closed_at_last_trim = closed;
       ReleaseFreedMemory();
     }

@@ -66,11 +66,11 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
     absl::StatusOr<BuiltSession> built = BuildSession(request->spec(), state->options.size_limits);
     if (!built.ok()) return built.status();
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
-        state->registry.Add(std::move(built->solver), std::move(built->problem), built->default_time_limit_ms,
+        state->registry.Add(std::move(built->solver), built->default_time_limit_ms,
                             /*owned_by_stream=*/false);
     if (!entry.ok()) return entry.status();
     response->set_session_id((*entry)->id);
-    *response->mutable_dimensions() = (*entry)->dimensions();
+    *response->mutable_dimensions() = (*entry)->dims;
     response->set_algorithm(AlgorithmToProto((*entry)->algorithm.load()));
     state->FillLimits(response->mutable_limits());
     spdlog::info("session {} created (M={}, L={}, K={}, N={})", (*entry)->id, response->dimensions().num_states(),

@@ -18,6 +18,7 @@ void ServerState::FillLimits(v1::ServerLimits* out) const {
   out->set_max_iterations(options.size_limits.max_iterations);
   out->set_max_message_bytes(options.max_message_bytes);
   out->set_session_idle_timeout_s(options.session_idle_timeout_s);
+  out->set_session_compact_idle_s(options.session_compact_idle_s);
   out->set_worker_threads(options.worker_threads);
   out->set_queue_capacity(options.queue_capacity);
 }

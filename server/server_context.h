@@ -21,6 +21,7 @@ struct ServerOptions {
   int queue_capacity = 64;
   int max_sessions = 10000;
   double session_idle_timeout_s = 600.0;
+  double session_compact_idle_s = 10.0;  ///< 0: idle sessions keep their scratch
   int max_message_bytes = 64 << 20;
   double grace_period_s = 5.0;
   SizeLimits size_limits;

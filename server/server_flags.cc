@@ -14,6 +14,8 @@ ABSL_FLAG(int, threads, 2, "solver worker threads (env NUPMPC_THREADS)");
 ABSL_FLAG(int, queue_capacity, 64, "solves waiting for a worker before RESOURCE_EXHAUSTED (env NUPMPC_QUEUE_CAPACITY)");
 ABSL_FLAG(int, max_sessions, 10000, "maximum open sessions (env NUPMPC_MAX_SESSIONS)");
 ABSL_FLAG(double, session_idle_timeout_s, 600, "close sessions idle this long (env NUPMPC_SESSION_IDLE_TIMEOUT_S)");
+ABSL_FLAG(double, session_compact_idle_s, 10,
+          "sessions idle this long free their solver scratch memory; 0: never (env NUPMPC_SESSION_COMPACT_IDLE_S)");
 ABSL_FLAG(int, max_message_bytes, 64 << 20, "largest request/response (env NUPMPC_MAX_MESSAGE_BYTES)");
 ABSL_FLAG(int, max_horizon, 100000, "largest horizon N (env NUPMPC_MAX_HORIZON)");
 ABSL_FLAG(int, max_states, 1000, "largest state dimension (env NUPMPC_MAX_STATES)");
@@ -49,7 +51,7 @@ absl::Status RequireAtLeast(const char* name, T value, T minimum) {
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   absl::SetProgramUsageMessage("nupmpc-server: model-predictive control over gRPC (nupmpc.v1.MpcService)");
   for (const char* name : {"address", "threads", "queue_capacity", "max_sessions", "session_idle_timeout_s",
-                           "max_message_bytes", "max_horizon", "max_states", "max_iterations", "grace_period_s",
+                           "session_compact_idle_s", "max_message_bytes", "max_horizon", "max_states", "max_iterations", "grace_period_s",
                            "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
@@ -61,6 +63,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.queue_capacity = absl::GetFlag(FLAGS_queue_capacity);
   o.max_sessions = absl::GetFlag(FLAGS_max_sessions);
   o.session_idle_timeout_s = absl::GetFlag(FLAGS_session_idle_timeout_s);
+  o.session_compact_idle_s = absl::GetFlag(FLAGS_session_compact_idle_s);
   o.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   o.size_limits.max_horizon = absl::GetFlag(FLAGS_max_horizon);
   o.size_limits.max_states = absl::GetFlag(FLAGS_max_states);
@@ -72,7 +75,8 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
         RequireAtLeast("max_sessions", o.max_sessions, 1), RequireAtLeast("session_idle_timeout_s", o.session_idle_timeout_s, 0.001),
         RequireAtLeast("max_message_bytes", o.max_message_bytes, 1024), RequireAtLeast("max_horizon", o.size_limits.max_horizon, 1),
         RequireAtLeast("max_states", o.size_limits.max_states, 1), RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
-        RequireAtLeast("grace_period_s", o.grace_period_s, 0.0)}) {
+        RequireAtLeast("grace_period_s", o.grace_period_s, 0.0),
+        RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0)}) {
     if (!s.ok()) return s;
   }
   return out;

@@ -13,18 +13,9 @@ double SessionEntry::idle_seconds() const {
   return std::chrono::duration<double>(since).count();
 }
 
-v1::Dimensions SessionEntry::dimensions() const {
-  v1::Dimensions d;
-  d.set_num_states(problem.num_states);
-  d.set_num_inputs(problem.num_inputs);
-  d.set_num_outputs(problem.num_outputs);
-  d.set_horizon(problem.horizon);
-  return d;
-}
-
 void SessionEntry::Describe(v1::SessionInfo* out) const {
   out->set_session_id(id);
-  *out->mutable_dimensions() = dimensions();  // the shape never changes after creation
+  *out->mutable_dimensions() = dims;
   out->set_algorithm(AlgorithmToProto(algorithm.load()));
   out->set_solves(solves.load(std::memory_order_relaxed));
   out->set_idle_s(idle_seconds());
@@ -41,15 +32,19 @@ std::string SessionRegistry::NewId() {
 }
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::Session> solver,
-                                                                   core::Problem problem,
                                                                    double default_time_limit_ms,
                                                                    bool owned_by_stream) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owned_by_stream = owned_by_stream;
   entry->default_time_limit_ms = default_time_limit_ms;
   entry->algorithm = solver->algorithm();
+  const core::Problem& p = solver->problem();
+  entry->dims.set_num_states(p.num_states);
+  entry->dims.set_num_inputs(p.num_inputs);
+  entry->dims.set_num_outputs(p.num_outputs);
+  entry->dims.set_horizon(p.horizon);
+  entry->x0.setZero(p.num_states);
   entry->solver = std::move(solver);
-  entry->problem = std::move(problem);
   entry->Touch();
   std::lock_guard<std::mutex> lock(mu_);
   if (static_cast<int>(sessions_.size()) >= max_sessions_) {
@@ -84,6 +79,19 @@ absl::Status SessionRegistry::Close(const std::string& id) {
   entry->closed = true;
   closed_total_.fetch_add(1, std::memory_order_relaxed);
   return absl::OkStatus();
+}
+
+int SessionRegistry::CompactIdle(double idle_seconds) {
+  int compacted = 0;
+  for (const std::shared_ptr<SessionEntry>& entry : List()) {
+    if (entry->idle_seconds() <= idle_seconds) continue;
+    std::unique_lock<std::mutex> lock(entry->mu, std::try_to_lock);
+    if (!lock.owns_lock() || entry->closed || entry->compacted) continue;
+    entry->solver->ReleaseWorkspace();
+    entry->compacted = true;
+    ++compacted;
+  }
+  return compacted;
 }
 
 std::vector<std::shared_ptr<SessionEntry>> SessionRegistry::List() const {

@@ -17,16 +17,18 @@ namespace nupmpc::server {
 
 using Clock = std::chrono::steady_clock;
 
-// One client session: the core session (workspace + warm start) and the problem it was
-// last updated to. `mu` serialises solves: one solve at a time per session.
+// One client session: the core session (problem, workspace, warm start). `mu` serialises
+// solves: one solve at a time per session.
 struct SessionEntry {
   std::string id;
   bool owned_by_stream = false;
   double default_time_limit_ms = 0.0;  ///< from the spec's options
+  v1::Dimensions dims;                 ///< fixed at creation
 
   std::mutex mu;
-  core::Problem problem;                  ///< guarded by mu
-  std::unique_ptr<core::Session> solver;  ///< guarded by mu
+  std::unique_ptr<core::Session> solver;  ///< guarded by mu; holds the session's problem
+  Eigen::VectorXd x0;                     ///< guarded by mu; the measured state being applied
+  bool compacted = false;                 ///< guarded by mu: solver scratch released while idle
   core::Solution solution;                ///< guarded by mu; reused buffer
   bool closed = false;                    ///< guarded by mu: removed from the registry
 
@@ -37,7 +39,6 @@ struct SessionEntry {
   void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }
   double idle_seconds() const;
   void Describe(v1::SessionInfo* out) const;  // fields readable without mu
-  v1::Dimensions dimensions() const;
   std::atomic<core::Algorithm> algorithm{core::Algorithm::kAuto};
 };
 
@@ -48,7 +49,7 @@ class SessionRegistry {
   explicit SessionRegistry(int max_sessions) : max_sessions_(max_sessions) {}
 
   // RESOURCE_EXHAUSTED when full.
-  absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::Session> solver, core::Problem problem,
+  absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::Session> solver,
                                                     double default_time_limit_ms, bool owned_by_stream);
   // NOT_FOUND for unknown (or closed, or expired) ids.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id) const;
@@ -56,6 +57,9 @@ class SessionRegistry {
   std::vector<std::shared_ptr<SessionEntry>> List() const;
   // Closes sessions idle longer than `idle_seconds` that no stream is attached to.
   int ExpireIdle(double idle_seconds);
+  // Releases the solver scratch of sessions idle longer than `idle_seconds` (skipping any
+  // that is solving right now); returns how many it compacted.
+  int CompactIdle(double idle_seconds);
   int size() const;
   int max_sessions() const { return max_sessions_; }
   // Sessions closed since start (explicitly, with their stream, or by expiry).

@@ -284,26 +284,30 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, 
   return out;
 }
 
-absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* p) {
-  const int M = p->num_states, L = p->num_inputs, K = p->num_outputs, N = p->horizon;
-  // Every check that cannot depend on the update comes before the first write, so a step
-  // without an update that is rejected leaves the problem untouched.
+absl::Status ReadStepState(const v1::Step& step, const char* field, int num_states, Eigen::VectorXd* x0) {
   if (!v1::WarmStart_IsValid(step.warm_start())) {
     return Invalid(field, ".warm_start = ", static_cast<int>(step.warm_start()), ": unknown");
   }
   if (!(step.time_limit_ms() >= 0.0) || !std::isfinite(step.time_limit_ms())) {
     return Invalid(field, ".time_limit_ms = ", step.time_limit_ms(), ": must be finite and >= 0");
   }
-  if (step.state_size() != 0) {
-    if (step.state_size() != M) {
-      return absl::FailedPreconditionError(
-          absl::StrCat(field, ".state: expected ", M, " values (the session's num_states), got ", step.state_size()));
-    }
-    for (int i = 0; i < M; ++i) {
-      if (!std::isfinite(step.state(i))) return Invalid(field, ".state[", i, "] = ", step.state(i), ": must be finite");
-    }
-    p->initial_mean = Eigen::Map<const Eigen::VectorXd>(step.state().data(), M);
+  if (step.state_size() == 0) return absl::OkStatus();
+  if (step.state_size() != num_states) {
+    return absl::FailedPreconditionError(absl::StrCat(field, ".state: expected ", num_states,
+                                                      " values (the session's num_states), got ", step.state_size()));
   }
+  for (int i = 0; i < num_states; ++i) {
+    if (!std::isfinite(step.state(i))) return Invalid(field, ".state[", i, "] = ", step.state(i), ": must be finite");
+  }
+  *x0 = Eigen::Map<const Eigen::VectorXd>(step.state().data(), num_states);
+  return absl::OkStatus();
+}
+
+absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* p) {
+  const int L = p->num_inputs, K = p->num_outputs, N = p->horizon;
+  // Every check that cannot depend on the update comes before the first write, so a step
+  // without an update that is rejected leaves the problem untouched.
+  NUPMPC_RETURN_IF_ERROR(ReadStepState(step, field, p->num_states, &p->initial_mean));
   if (!step.has_update()) return absl::OkStatus();
   const v1::PriorUpdate& u = step.update();
   if (u.shift()) {

@@ -30,6 +30,11 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
 // The solver options of a spec (defaults where fields are 0).
 absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& options, const SizeLimits& limits);
 
+// Checks the fields of a step that do not depend on its update (warm_start, time limit,
+// state size and finiteness) and copies its state, if it has one, to *x0 (same size as
+// the state). Writes nothing when it fails.
+absl::Status ReadStepState(const v1::Step& step, const char* field, int num_states, Eigen::VectorXd* x0);
+
 // Applies a step's state and prior update to the session's problem. `field` is the path
 // prefix used in messages ("step"). A step without an update is checked completely before
 // anything is written; with an update, pass a copy (a bad entry may fail half-way).

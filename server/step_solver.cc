@@ -30,9 +30,9 @@ absl::Status MakeLimits(double session_limit_ms, const v1::Step* step, const Cal
 
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits) {
   BuiltSession built;
-  NUPMPC_ASSIGN_OR_RETURN(built.problem, ProblemFromSpec(spec, limits));
+  NUPMPC_ASSIGN_OR_RETURN(core::Problem problem, ProblemFromSpec(spec, limits));
   NUPMPC_ASSIGN_OR_RETURN(const core::SolverOptions options, OptionsFromSpec(spec.options(), limits));
-  absl::StatusOr<std::unique_ptr<core::Session>> solver = core::Session::Create(built.problem, options);
+  absl::StatusOr<std::unique_ptr<core::Session>> solver = core::Session::Create(std::move(problem), options);
   if (!solver.ok()) {
     // e.g. a forced algorithm that cannot handle the priors: the spec's fault.
     return absl::Status(solver.status().code(), absl::StrCat("spec: ", solver.status().message()));
@@ -56,18 +56,15 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   if (step.has_update()) {
     // References or bounds change: validate on a copy; Update() keeps the session as it
     // was if it rejects the problem.
-    core::Problem candidate = entry.problem;
+    core::Problem candidate = solver.problem();
     NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &candidate));
     NUPMPC_RETURN_IF_ERROR(solver.Update(candidate));
-    entry.problem = std::move(candidate);
     entry.algorithm.store(solver.algorithm());
-  } else if (step.state_size() > 0) {
-    // The common path: only the measured state changes (no copy of the problem). ApplyStep
-    // checks size and finiteness before it writes, which is all SetInitialState checks.
-    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &entry.problem));
-    NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(entry.problem.initial_mean));
   } else {
-    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &entry.problem));  // validates the other fields
+    // The common path: at most the measured state changes (no copy of the problem).
+    // ReadStepState checks size and finiteness, which is all SetInitialState checks.
+    NUPMPC_RETURN_IF_ERROR(ReadStepState(step, "step", entry.dims.num_states(), &entry.x0));
+    if (step.state_size() > 0) NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(entry.x0));
   }
 
   switch (step.warm_start()) {
@@ -78,6 +75,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     default: break;
   }
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
+  entry.compacted = false;  // Solve() took its scratch back
   entry.solves.fetch_add(1, std::memory_order_relaxed);
   ResultToProto(summary, entry.solution, out);
   entry.Touch();

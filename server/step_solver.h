@@ -29,7 +29,6 @@ absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& limits, co
 // Converts a spec and builds its core session (shared by CreateSession, SolveOnce and
 // streams that carry a spec).
 struct BuiltSession {
-  core::Problem problem;
   std::unique_ptr<core::Session> solver;
   double default_time_limit_ms = 0.0;
 };

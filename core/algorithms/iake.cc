@@ -20,14 +20,26 @@ absl::Status Iake::CheckApplicable(const Problem& p) {
 
 Iake::Iake(const Problem& problem, const SolverOptions& options) : options_(options) {
   graph_ = BuildFactorGraph(problem, /*augment_inputs=*/false);
-  fw_.Resize(graph_, /*keep_edges=*/true);
-  sm_.Resize(graph_);
+  AcquireWorkspace();
   input_nup_.resize(graph_.input_prior.size());
   input_factor_.resize(graph_.input_prior.size());
   row_nup_.resize(graph_.num_rows());
   row_factor_.resize(graph_.num_rows());
   Refresh(problem);
   ColdStart();
+}
+
+void Iake::ReleaseWorkspace() {
+  fw_ = ForwardFilterWorkspace();
+  sm_ = SmootherWorkspace();
+  workspace_held_ = false;
+}
+
+void Iake::AcquireWorkspace() {
+  if (workspace_held_) return;
+  fw_.Resize(graph_, /*keep_edges=*/true);
+  sm_.Resize(graph_);
+  workspace_held_ = true;
 }
 
 void Iake::Refresh(const Problem& problem) {

@@ -33,6 +33,8 @@ class Iake final : public OuterIteration {
   void AcceptPolishRegions() override {}
   double Polish(PrimalIterate*) override { return kInfinity; }
   bool has_regions() const override { return false; }
+  void ReleaseWorkspace() override;
+  void AcquireWorkspace() override;
 
  private:
   double EffectiveSlope(const ScalarPrior& prior) const {
@@ -42,8 +44,9 @@ class Iake final : public OuterIteration {
 
   SolverOptions options_;
   FactorGraph graph_;
-  ForwardFilterWorkspace fw_;
-  SmootherWorkspace sm_;
+  ForwardFilterWorkspace fw_;  ///< scratch of every pass (released while idle)
+  SmootherWorkspace sm_;       ///< scratch of every pass
+  bool workspace_held_ = false;
   std::vector<ScalarFactor> input_nup_, row_nup_;        ///< carried NUP parts
   std::vector<ScalarFactor> input_factor_, row_factor_;  ///< with Gaussian parts
   double variance_floor_ = 0.0;

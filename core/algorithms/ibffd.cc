@@ -32,8 +32,7 @@ Ibffd::Ibffd(const Problem& problem, const SolverOptions& options) : options_(op
   slope_.resize(NL);
   region_.resize(NL);
   polish_region_.resize(NL);
-  W_step_.setZero(M, M * (N + 1));
-  xi_step_.setZero(M, N + 1);
+  AcquireWorkspace();
   W_.setZero(M, M);
   AtW_.setZero(M, M);
   S_.setZero(M, M);
@@ -46,6 +45,17 @@ Ibffd::Ibffd(const Problem& problem, const SolverOptions& options) : options_(op
   x0_lu_ = Eigen::PartialPivLU<Eigen::MatrixXd>(M);
   Refresh(problem);
   ColdStart();
+}
+
+void Ibffd::ReleaseWorkspace() {
+  W_step_.resize(0, 0);
+  xi_step_.resize(0, 0);
+}
+
+void Ibffd::AcquireWorkspace() {
+  if (xi_step_.size() > 0) return;
+  W_step_.setZero(graph_.M, graph_.M * (graph_.N + 1));
+  xi_step_.setZero(graph_.M, graph_.N + 1);
 }
 
 void Ibffd::Refresh(const Problem& problem) { RefreshFactorGraph(problem, &graph_); }

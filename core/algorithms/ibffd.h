@@ -30,6 +30,8 @@ class Ibffd final : public ActiveSetIteration {
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
   double Polish(PrimalIterate* out) override;
+  void ReleaseWorkspace() override;
+  void AcquireWorkspace() override;
 
  private:
   enum class Pass { kIterate, kPolish };
@@ -46,6 +48,7 @@ class Ibffd final : public ActiveSetIteration {
   std::vector<ScalarFactor> nup_;        ///< NUP part per input (the carried state)
   std::vector<ScalarFactor> factor_;     ///< what the backward filter sees
   std::vector<double> slope_;            ///< adapted slope per input
+  // Scratch of every pass (released while idle).
   Eigen::MatrixXd W_step_;   ///< M × M(N+1): backward message at x[n] (before step n-1's inputs)
   Eigen::MatrixXd xi_step_;  ///< M × (N+1)
   Eigen::MatrixXd W_, AtW_, S_;

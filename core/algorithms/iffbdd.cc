@@ -42,7 +42,6 @@ Iffbdd::Iffbdd(const Problem& problem) {
   bool inputs_constrained = false;
   for (const ScalarPrior& prior : problem.input_priors) inputs_constrained |= prior.kind != PriorKind::kNone;
   graph_ = BuildFactorGraph(problem, inputs_constrained);
-  fw_.Resize(graph_, /*keep_edges=*/false);
   const int R = graph_.num_rows();
   input_factor_.resize(graph_.input_prior.size());
   nup_.resize(R);
@@ -53,7 +52,20 @@ Iffbdd::Iffbdd(const Problem& problem) {
   costate_.setZero(graph_.M);
   scratch_.setZero(graph_.M);
   Refresh(problem);
+  AcquireWorkspace();
   ColdStart();
+}
+
+void Iffbdd::ReleaseWorkspace() {
+  fw_ = ForwardFilterWorkspace();
+  workspace_held_ = false;
+}
+
+void Iffbdd::AcquireWorkspace() {
+  if (workspace_held_) return;
+  fw_.Resize(graph_, /*keep_edges=*/false);
+  LoadInputMoments(graph_, input_factor_.data(), &fw_);
+  workspace_held_ = true;
 }
 
 void Iffbdd::Refresh(const Problem& problem) {
@@ -61,7 +73,7 @@ void Iffbdd::Refresh(const Problem& problem) {
   for (std::size_t i = 0; i < input_factor_.size(); ++i) {
     input_factor_[i] = ScalarFactor::GaussianPart(graph_.input_prior[i]);
   }
-  LoadInputMoments(graph_, input_factor_.data(), &fw_);
+  if (workspace_held_) LoadInputMoments(graph_, input_factor_.data(), &fw_);  // else on acquiring
   // Hard boxes keep γ = (b-a)/2 exactly ([LL-dual] eq. 59); others keep their adapted γ.
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];

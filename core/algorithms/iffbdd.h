@@ -29,6 +29,8 @@ class Iffbdd final : public ActiveSetIteration {
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
   double Polish(PrimalIterate* out) override;
+  void ReleaseWorkspace() override;
+  void AcquireWorkspace() override;
 
  private:
   enum class Pass { kIterate, kPolish };
@@ -39,7 +41,8 @@ class Iffbdd final : public ActiveSetIteration {
   double BackwardImpl(Pass pass, PrimalIterate* out);
 
   FactorGraph graph_;
-  ForwardFilterWorkspace fw_;
+  ForwardFilterWorkspace fw_;  ///< scratch, except the input moments loaded by Refresh
+  bool workspace_held_ = false;
   std::vector<ScalarFactor> input_factor_;  ///< Gaussian parts of the inputs (fixed)
   std::vector<ScalarFactor> nup_;           ///< dual-NUP factor per row (the carried state)
   std::vector<ScalarFactor> row_factor_;    ///< nup_ × Gaussian part, what the filter sees

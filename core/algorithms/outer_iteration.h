@@ -60,6 +60,13 @@ class OuterIteration {
   virtual void AcceptPolishRegions() = 0;
   // Whether regions from a previous solve are available (a warm polish is worth trying).
   virtual bool has_regions() const = 0;
+
+  // Idle sessions: frees the message-passing scratch (everything every pass recomputes;
+  // the carried state and the graph stay), which is most of a session's memory.
+  virtual void ReleaseWorkspace() = 0;
+  // Gets it back (allocates; a no-op when held). The driver calls it before the iteration
+  // loop; Iterate() and Polish() need it.
+  virtual void AcquireWorkspace() = 0;
 };
 
 // The active-set bookkeeping shared by the algorithms that decide every scalar with an

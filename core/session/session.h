@@ -40,6 +40,9 @@ class Session {
 
   void ShiftWarmStart();
   void ResetWarmStart();
+  // For idle sessions: frees the algorithm's scratch memory (most of the session's), keeps
+  // the problem and the warm start. The next Solve() allocates it again before iterating.
+  void ReleaseWorkspace() { algorithm_->ReleaseWorkspace(); }
   bool has_warm_start() const { return has_warm_state_; }
 
   absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution);

@@ -300,6 +300,41 @@ TEST(Limits, CancelAndIterationLimitAreReportedAsStatus) {
   EXPECT_TRUE(timed->status == SolveStatus::kTimeLimit || timed->status == SolveStatus::kConverged);
 }
 
+TEST(IdleSessions, ReleasingTheWorkspaceChangesNoResult) {
+  // A session whose scratch was released while idle must continue exactly as one that
+  // kept it: same warm start, same iterations, bit-identical plan; for every algorithm.
+  Problem p = testing::RandomGaussianProblem({.M = 3, .L = 2, .K = 2, .N = 25, .terminal = false, .seed = 7});
+  for (int n = 0; n < p.horizon; ++n) {
+    p.mutable_input_prior(n, 0) = ScalarPrior::L1(0.1, 0.5).WithGaussian(0.0, 4.0);
+    p.mutable_input_prior(n, 1) = ScalarPrior::Box(-0.3, 0.3, 2.0).WithGaussian(0.0, 1.0);
+  }
+  for (const Algorithm a : {Algorithm::kIake, Algorithm::kIbffd, Algorithm::kIffbdd}) {
+    SCOPED_TRACE(AlgorithmName(a));
+    SolverOptions options;
+    options.algorithm = a;
+    auto kept = Session::Create(p, options);
+    auto released = Session::Create(p, options);
+    ASSERT_TRUE(kept.ok() && released.ok());
+    (*released)->ReleaseWorkspace();  // also before the very first solve
+    Solution a_plan, b_plan;
+    Eigen::VectorXd x0 = p.initial_mean;
+    for (int step = 0; step < 3; ++step) {
+      x0 *= 0.9;
+      for (auto* s : {&*kept, &*released}) {
+        (*s)->ShiftWarmStart();
+        ASSERT_THAT((*s)->SetInitialState(x0), testing::IsOk());
+      }
+      auto r1 = (*kept)->Solve(&a_plan);
+      auto r2 = (*released)->Solve(&b_plan);
+      ASSERT_TRUE(r1.ok() && r2.ok());
+      EXPECT_EQ(r1->iterations, r2->iterations) << "step " << step;
+      EXPECT_EQ(r1->warm_started, r2->warm_started) << "step " << step;
+      EXPECT_TRUE(a_plan.inputs == b_plan.inputs) << "step " << step;
+      (*released)->ReleaseWorkspace();
+    }
+  }
+}
+
 TEST(Iake, AgreesWithIbffdAndIffbddOnSoftPenalties) {
   // A convex problem with an L1 prior and a soft box on the inputs (each with a Gaussian part,
   // so all three algorithms apply): they must reach the same objective.

@@ -1,0 +1,163 @@
+// nupmpc-loadtest's machinery against an in-process server: closed-loop levels count
+// every answer and match the requests sent; open-loop arrivals are answered or superseded,
+// never lost; a queue that is too small for the streams answers RESOURCE_EXHAUSTED; the
+// memory mode sees sessions grow and shrink the server's RSS. And the server side of the
+// memory mode: an idle session compacted by the janitor continues bit-identically.
+#include <cmath>
+#include <thread>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "loadtest/core_baseline.h"
+#include "loadtest/idle_sessions.h"
+#include "loadtest/load_level.h"
+#include "server/session_registry.h"
+#include "server/step_solver.h"
+#include "service_fixture.h"
+
+namespace nupmpc::testing {
+namespace {
+
+struct Workload {
+  v1::ProblemSpec spec;
+  std::vector<std::vector<double>> states;
+};
+
+Workload MassesWorkload() {
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
+  Workload w;
+  w.spec = SpecOrDie(inst.problem);
+  for (const Eigen::VectorXd& x : inst.closed_loop->x1) w.states.emplace_back(x.begin(), x.end());
+  return w;
+}
+
+class LoadTest : public ServiceTest {};
+
+TEST_F(LoadTest, ClosedLoopLevelAnswersEveryRequestWithoutErrors) {
+  const Workload w = MassesWorkload();
+  loadtest::LevelConfig config;
+  config.concurrency = 3;
+  config.duration_s = 0.6;
+  config.warmup_s = 0.1;
+  absl::StatusOr<loadtest::LevelReport> r =
+      loadtest::RunLevel(target_, {&w.spec, &w.states, /*closed_loop=*/true}, config);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_TRUE(r->tally.errors.empty());
+  EXPECT_EQ(r->tally.superseded, 0u);  // closed loop never has two requests in flight
+  EXPECT_GT(r->tally.latency_ms.size(), 30u);
+  // Every counted request was answered (the streams drain before they stop).
+  EXPECT_EQ(r->tally.sent, r->tally.latency_ms.size());
+  // A round trip contains the server's solve.
+  EXPECT_GE(r->p50_ms, r->solve_p50_ms);
+  EXPECT_LE(r->p50_ms, r->p99_ms);
+  EXPECT_LE(r->p99_ms, r->max_ms);
+  EXPECT_NEAR(r->solves_per_s, r->tally.latency_ms.size() / r->measured_s, 1e-9);
+  // The sequence warm-starts: on average far fewer iterations than cold solves (10).
+  EXPECT_LT(r->mean_iterations, 8.0);
+}
+
+TEST_F(LoadTest, OpenLoopArrivalsAreAnsweredOrSupersededNeverLost) {
+  const Workload w = MassesWorkload();
+  loadtest::LevelConfig config;
+  config.concurrency = 2;
+  config.closed_loop = false;
+  config.rate_per_s = 400.0;
+  config.duration_s = 0.8;
+  config.warmup_s = 0.1;
+  absl::StatusOr<loadtest::LevelReport> r =
+      loadtest::RunLevel(target_, {&w.spec, &w.states, /*closed_loop=*/false}, config);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_TRUE(r->tally.errors.empty());
+  EXPECT_EQ(r->tally.sent, r->tally.latency_ms.size() + r->tally.superseded);
+  // Poisson arrivals at 400/s for 0.8 s: 320 expected; 5 standard deviations either way.
+  EXPECT_NEAR(static_cast<double>(r->tally.sent), 320.0, 5.0 * std::sqrt(320.0));
+}
+
+TEST_F(LoadTest, MoreStreamsThanTheQueueHoldsGetResourceExhausted) {
+  server_->Shutdown();
+  server::ServerOptions options = DefaultOptions();
+  options.worker_threads = 1;
+  options.queue_capacity = 1;
+  StartServer(options);
+  const Workload w = MassesWorkload();
+  loadtest::LevelConfig config;
+  config.concurrency = 12;
+  config.closed_loop = false;
+  config.rate_per_s = 20000.0;  // far beyond one worker
+  config.duration_s = 0.5;
+  config.warmup_s = 0.0;
+  absl::StatusOr<loadtest::LevelReport> r =
+      loadtest::RunLevel(target_, {&w.spec, &w.states, /*closed_loop=*/false}, config);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_GT(r->tally.errors["RESOURCE_EXHAUSTED"], 0u);
+  EXPECT_GT(r->tally.latency_ms.size(), 0u);  // and the admitted ones were solved
+  EXPECT_EQ(r->tally.errors.size(), 1u);       // nothing else went wrong
+}
+
+TEST_F(LoadTest, IdleSessionsGrowTheServersMemoryAndGiveItBack) {
+  server_->Shutdown();
+  server::ServerOptions options = DefaultOptions();
+  options.session_compact_idle_s = 0.5;
+  StartServer(options);
+  const Workload w = MassesWorkload();
+  absl::StatusOr<loadtest::IdleSessionsReport> r = loadtest::RunIdleSessions(target_, w.spec, 200, false);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_GT(r->rss_before, 0u);
+  // 200 sessions of ~200 KiB each: tens of MiB, far above allocator noise.
+  EXPECT_GT(r->rss_with_sessions, r->rss_before + 200u * 100u * 1024u);
+  // Compacted idle sessions give their solver scratch (a quarter of a session) back.
+  EXPECT_LT(r->rss_idle, r->rss_with_sessions - 200u * 25u * 1024u);
+  EXPECT_LT(r->rss_after, r->rss_idle - 200u * 50u * 1024u);
+  EXPECT_EQ(client_->ListSessions()->size(), 0u);
+}
+
+TEST(CoreBaseline, MeasuresEveryStepOfEveryRound) {
+  const Workload w = MassesWorkload();
+  absl::StatusOr<loadtest::CoreBaseline> b = loadtest::MeasureCoreBaseline(w.spec, w.states, 2);
+  ASSERT_TRUE(b.ok()) << b.status();
+  EXPECT_EQ(b->solves, static_cast<int>(2 * w.states.size()));
+  EXPECT_GT(b->median_ms, 0.0);
+  EXPECT_LE(b->median_ms, b->p99_ms);
+  EXPECT_GT(b->mean_iterations, 1.0);
+}
+
+TEST(Quantile, NearestRank) {
+  std::vector<double> v = {5, 1, 4, 2, 3};
+  EXPECT_EQ(loadtest::Quantile(v, 0.5), 3);
+  EXPECT_EQ(loadtest::Quantile(v, 0.99), 5);
+  EXPECT_EQ(loadtest::Quantile(v, 0.0), 1);
+  std::vector<double> empty;
+  EXPECT_EQ(loadtest::Quantile(empty, 0.5), 0.0);
+}
+
+TEST(SessionCompaction, ACompactedSessionContinuesBitIdentically) {
+  const Workload w = MassesWorkload();
+  server::SessionRegistry kept_registry(4), compacted_registry(4);
+  std::shared_ptr<server::SessionEntry> kept, compacted;
+  for (auto [registry, entry] : {std::pair{&kept_registry, &kept}, std::pair{&compacted_registry, &compacted}}) {
+    absl::StatusOr<server::BuiltSession> built = server::BuildSession(w.spec, {});
+    ASSERT_TRUE(built.ok()) << built.status();
+    absl::StatusOr<std::shared_ptr<server::SessionEntry>> added =
+        registry->Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
+    ASSERT_TRUE(added.ok());
+    *entry = *added;
+  }
+  for (std::size_t t = 0; t < 6; ++t) {
+    v1::Step step;
+    step.mutable_state()->Add(w.states[t].begin(), w.states[t].end());
+    v1::SolveResult a, b;
+    ASSERT_TRUE(server::SolveStep(*kept, step, {}, &a).ok());
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    EXPECT_EQ(compacted_registry.CompactIdle(0.001), 1) << "step " << t;
+    EXPECT_TRUE(compacted->compacted);
+    ASSERT_TRUE(server::SolveStep(*compacted, step, {}, &b).ok());
+    EXPECT_FALSE(compacted->compacted);
+    EXPECT_EQ(a.iterations(), b.iterations()) << "step " << t;
+    EXPECT_EQ(a.warm_started(), b.warm_started()) << "step " << t;
+    ASSERT_EQ(a.inputs_size(), b.inputs_size());
+    for (int i = 0; i < a.inputs_size(); ++i) ASSERT_EQ(a.inputs(i), b.inputs(i)) << "step " << t << " input " << i;
+  }
+}
+
+}  // namespace
+}  // namespace nupmpc::testing
