@@ -25,7 +25,7 @@ ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* co
   StartRead(&read_buffer_);
 }
 
-absl::Status ControlStream::Attach(const v1::ControlRequest& first) {
+absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::ControlRequest& first) {
   std::shared_ptr<SessionEntry> entry;
   switch (first.attach_case()) {
     case v1::ControlRequest::kSessionId: {
@@ -53,9 +53,7 @@ absl::Status ControlStream::Attach(const v1::ControlRequest& first) {
     case v1::ControlRequest::ATTACH_NOT_SET:
       return absl::InvalidArgumentError("first ControlRequest: must carry session_id or spec (attach)");
   }
-  entry_ = std::move(entry);
-  attached_ = true;
-  return absl::OkStatus();
+  return entry;
 }
 
 void ControlStream::OnReadDone(bool ok) {
@@ -69,25 +67,22 @@ void ControlStream::OnReadDone(bool ok) {
   }
   v1::ControlRequest request = std::move(read_buffer_);
   read_buffer_.Clear();
-  bool read_more = true;
+  // The next read starts only once the first message is handled, so attached_ cannot
+  // change under this check.
+  bool first_message;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (!attached_) {
-      if (absl::Status s = Attach(request); !s.ok()) {
-        final_status_ = state_->ToGrpc(s);
-        finish_requested_ = true;
-        read_more = false;
-      } else {
-        v1::ControlResponse hello;
-        hello.set_sequence(request.sequence());
-        hello.set_session_id(entry_->id);
-        if (request.has_step()) {
-          EnqueueStepLocked(std::move(request));
-        } else {
-          QueueWriteLocked(std::move(hello));
-        }
-      }
-    } else if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
+    first_message = !attached_;
+  }
+  if (first_message) {
+    StartAttach(std::move(request));
+    return;
+  }
+  bool read_more;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    read_more = !finish_requested_;
+    if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
       QueueWriteLocked(ErrorResponse(
           request.sequence(),
           state_->ToGrpc(absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
@@ -96,6 +91,54 @@ void ControlStream::OnReadDone(bool ok) {
           request.sequence(), state_->ToGrpc(absl::InvalidArgumentError("step: required after the first message"))));
     } else {
       EnqueueStepLocked(std::move(request));
+    }
+  }
+  if (read_more) StartRead(&read_buffer_);
+  Pump();
+}
+
+void ControlStream::StartAttach(v1::ControlRequest first) {
+  if (first.attach_case() != v1::ControlRequest::kSpec) {  // a registry lookup: fine in the reaction
+    AttachAndContinue(std::move(first));
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    solving_ = true;  // keeps the stream from finishing while the pool builds the session
+  }
+  const bool queued =
+      state_->pool.TrySubmit([this, first = std::move(first)]() mutable { AttachAndContinue(std::move(first)); });
+  if (queued) return;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    solving_ = false;
+    final_status_ = state_->ToGrpc(absl::ResourceExhaustedError("the solve queue is full; retry later"));
+    finish_requested_ = true;
+  }
+  Pump();
+}
+
+void ControlStream::AttachAndContinue(v1::ControlRequest first) {
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = Attach(first);
+  bool read_more = false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    solving_ = false;
+    if (!entry.ok()) {
+      final_status_ = state_->ToGrpc(entry.status());
+      finish_requested_ = true;
+    } else {
+      entry_ = *std::move(entry);
+      attached_ = true;
+      read_more = true;
+      if (first.has_step()) {
+        EnqueueStepLocked(std::move(first));
+      } else {
+        v1::ControlResponse hello;
+        hello.set_sequence(first.sequence());
+        hello.set_session_id(entry_->id);
+        QueueWriteLocked(std::move(hello));
+      }
     }
   }
   if (read_more) StartRead(&read_buffer_);

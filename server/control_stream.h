@@ -34,7 +34,14 @@ class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Con
   void OnDone() override;
 
  private:
-  absl::Status Attach(const v1::ControlRequest& first);
+  // The session the first message names or creates (marked attached).
+  absl::StatusOr<std::shared_ptr<SessionEntry>> Attach(const v1::ControlRequest& first);
+  // Handles the first message: on the pool when it carries a spec (building a session
+  // converts and allocates, which can take long for big problems), else in the reaction.
+  void StartAttach(v1::ControlRequest first);
+  // Attaches (or ends the stream with the reason it could not), answers or solves the
+  // first message, and resumes reading.
+  void AttachAndContinue(v1::ControlRequest first);
   // Accepts a step: solve it now, or park it (superseding the parked one). Called with mu_.
   void EnqueueStepLocked(v1::ControlRequest request);
   void StartSolveLocked();
@@ -52,7 +59,7 @@ class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Con
   std::shared_ptr<SessionEntry> entry_;        // set by the first message
   bool attached_ = false;
   std::optional<v1::ControlRequest> parked_;   // the newest step not yet started
-  bool solving_ = false;
+  bool solving_ = false;                       // a solve (or the attach) is on the pool
   std::deque<v1::ControlResponse> writes_;     // front is being written when writing_
   bool writing_ = false;
   bool reads_done_ = false;

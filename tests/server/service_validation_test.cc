@@ -180,8 +180,41 @@ TEST_F(ServiceValidationTest, BadStepsLeaveTheSessionAsItWas) {
          e->mutable_prior()->add_upper(kNaN);
        },
        absl::StatusCode::kInvalidArgument, "step.update.outputs[0].prior.upper"},
+      {"NaN slope in an update",
+       [](v1::Step* s) {
+         auto* e = s->mutable_update()->add_inputs();
+         e->set_index(0);
+         e->mutable_prior()->set_kind(v1::PRIOR_KIND_L1);
+         e->mutable_prior()->add_weight(1.0);
+         e->mutable_prior()->add_target(0.0);
+         e->mutable_prior()->add_slope(kNaN);
+       },
+       absl::StatusCode::kInvalidArgument, "step.update.inputs[0].prior.slope"},
+      {"NaN radius in an update",
+       [](v1::Step* s) {
+         auto* e = s->mutable_update()->add_inputs();
+         e->set_index(1);
+         e->mutable_prior()->set_kind(v1::PRIOR_KIND_HUBER);
+         e->mutable_prior()->add_weight(1.0);
+         e->mutable_prior()->add_target(0.0);
+         e->mutable_prior()->add_slope(1.0);
+         e->mutable_prior()->add_radius(kNaN);
+       },
+       absl::StatusCode::kInvalidArgument, "step.update.inputs[0].prior.radius"},
+      {"NaN weight in an update",
+       [](v1::Step* s) {
+         auto* e = s->mutable_update()->add_outputs();
+         e->set_index(0);
+         e->mutable_prior()->add_weight(kNaN);
+         e->mutable_prior()->add_target(0.0);
+       },
+       absl::StatusCode::kInvalidArgument, "step.update.outputs[0].prior.weight"},
       {"negative time limit", [](v1::Step* s) { s->set_time_limit_ms(-1.0); }, absl::StatusCode::kInvalidArgument,
        "step.time_limit_ms"},
+      {"NaN time limit", [](v1::Step* s) { s->set_time_limit_ms(kNaN); }, absl::StatusCode::kInvalidArgument,
+       "step.time_limit_ms"},
+      {"unknown warm-start mode", [](v1::Step* s) { s->set_warm_start(static_cast<v1::WarmStart>(42)); },
+       absl::StatusCode::kInvalidArgument, "step.warm_start"},
   };
   for (const StepCase& c : cases) {
     SCOPED_TRACE(c.name);
