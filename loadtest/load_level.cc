@@ -112,6 +112,8 @@ absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan
   report.p99_ms = Quantile(t.latency_ms, 0.99);
   report.p999_ms = Quantile(t.latency_ms, 0.999);
   report.max_ms = t.latency_ms.empty() ? 0.0 : t.latency_ms.back();
+  report.service_p50_ms = Quantile(t.service_ms, 0.50);
+  report.service_p99_ms = Quantile(t.service_ms, 0.99);
   report.solve_p50_ms = Quantile(t.solve_ms, 0.50);
   report.mean_iterations =
       t.latency_ms.empty() ? 0.0 : static_cast<double>(t.iterations) / static_cast<double>(t.latency_ms.size());

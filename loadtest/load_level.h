@@ -29,6 +29,7 @@ struct LevelReport {
   StreamTally tally;
   double solves_per_s = 0.0;
   double p50_ms = 0.0, p90_ms = 0.0, p99_ms = 0.0, p999_ms = 0.0, max_ms = 0.0;
+  double service_p50_ms = 0.0, service_p99_ms = 0.0;  ///< from the hand-over to gRPC
   double solve_p50_ms = 0.0;  ///< the server's own solver time, median
   double mean_iterations = 0.0;
 };

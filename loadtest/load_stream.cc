@@ -13,6 +13,7 @@ std::string CodeName(int code) { return absl::StatusCodeToString(static_cast<abs
 
 void StreamTally::MergeFrom(const StreamTally& other) {
   latency_ms.insert(latency_ms.end(), other.latency_ms.begin(), other.latency_ms.end());
+  service_ms.insert(service_ms.end(), other.service_ms.begin(), other.service_ms.end());
   solve_ms.insert(solve_ms.end(), other.solve_ms.begin(), other.solve_ms.end());
   iterations += other.iterations;
   sent += other.sent;
@@ -84,7 +85,7 @@ void LoadStream::SendLocked(Clock::time_point scheduled) {
   // as the core baseline does.
   if (next_state_ == 0 && next_sequence_ > 1) step->set_warm_start(v1::WARM_START_COLD);
   next_state_ = (next_state_ + 1) % states.size();
-  outstanding_.emplace(next_sequence_, scheduled);
+  outstanding_.emplace(next_sequence_, Outstanding{scheduled, Clock::now()});
   ++next_sequence_;
   if (Counted(scheduled)) ++tally_.sent;
   write_queue_.push_back(std::move(request));
@@ -141,7 +142,7 @@ void LoadStream::OnReadDone(bool ok) {
 void LoadStream::RecordLocked(const v1::ControlResponse& response, Clock::time_point now) {
   const auto it = outstanding_.find(response.sequence());
   if (it == outstanding_.end()) return;
-  const Clock::time_point scheduled = it->second;
+  const auto [scheduled, sent] = it->second;
   outstanding_.erase(it);
   if (response.error_code() == 0 && response.result().status() != v1::SOLVE_STATUS_SUPERSEDED) ++answered_;
   if (!Counted(scheduled)) return;  // warm-up or after the window
@@ -151,6 +152,7 @@ void LoadStream::RecordLocked(const v1::ControlResponse& response, Clock::time_p
     ++tally_.superseded;
   } else {
     tally_.latency_ms.push_back(std::chrono::duration<double, std::milli>(now - scheduled).count());
+    tally_.service_ms.push_back(std::chrono::duration<double, std::milli>(now - sent).count());
     tally_.solve_ms.push_back(response.result().solve_ms());
     tally_.iterations += response.result().iterations();
   }

@@ -31,6 +31,10 @@ using Clock = std::chrono::steady_clock;
 // What one stream observed during the measured window.
 struct StreamTally {
   std::vector<double> latency_ms;  ///< answered solves, send (or scheduled arrival) → answer
+  // The same from the moment the request was handed to gRPC: differs from latency_ms when
+  // an open-loop generator falls behind its schedule (then the generator, not the server,
+  // is the bottleneck).
+  std::vector<double> service_ms;
   std::vector<double> solve_ms;    ///< the server's solver time of the same solves
   std::uint64_t iterations = 0;    ///< summed over answered solves
   std::uint64_t sent = 0;
@@ -90,7 +94,10 @@ class LoadStream : public grpc::ClientBidiReactor<v1::ControlRequest, v1::Contro
   Clock::time_point measure_from_ = Clock::time_point::max();
   Clock::time_point measure_until_ = Clock::time_point::max();
   bool Counted(Clock::time_point scheduled) const { return scheduled >= measure_from_ && scheduled < measure_until_; }
-  std::unordered_map<std::uint64_t, Clock::time_point> outstanding_;  ///< sequence → scheduled send
+  struct Outstanding {
+    Clock::time_point scheduled, sent;
+  };
+  std::unordered_map<std::uint64_t, Outstanding> outstanding_;  ///< by sequence
   std::uint64_t answered_ = 0;
   StreamTally tally_;
 };

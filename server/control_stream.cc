@@ -106,13 +106,13 @@ void ControlStream::StartAttach(v1::ControlRequest first) {
     std::lock_guard<std::mutex> lock(mu_);
     solving_ = true;  // keeps the stream from finishing while the pool builds the session
   }
-  const bool queued =
+  const absl::Status queued =
       state_->pool.TrySubmit([this, first = std::move(first)]() mutable { AttachAndContinue(std::move(first)); });
-  if (queued) return;
+  if (queued.ok()) return;
   {
     std::lock_guard<std::mutex> lock(mu_);
     solving_ = false;
-    final_status_ = state_->ToGrpc(absl::ResourceExhaustedError("the solve queue is full; retry later"));
+    final_status_ = state_->ToGrpc(queued);
     finish_requested_ = true;
   }
   Pump();
@@ -167,14 +167,15 @@ void ControlStream::StartSolveLocked() {
   solving_ = true;
   const std::uint64_t sequence = request.sequence();
   const auto queued_at = Clock::now();
-  const bool queued = state_->pool.TrySubmit([this, request = std::move(request), queued_at]() mutable {
-    SolveOnPool(std::move(request));
-    state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
-  });
-  if (!queued) {
+  const absl::Status queued = state_->pool.TrySubmit(
+      [this, request = std::move(request), queued_at]() mutable {
+        SolveOnPool(std::move(request));
+        state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+      },
+      entry_->last_solve_ms.load(std::memory_order_relaxed));
+  if (!queued.ok()) {
     solving_ = false;
-    QueueWriteLocked(ErrorResponse(
-        sequence, state_->ToGrpc(absl::ResourceExhaustedError("the solve queue is full; retry later"))));
+    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(queued)));
   }
 }
 

@@ -27,16 +27,14 @@ class PooledUnary : public grpc::ServerUnaryReactor {
     self->call_.deadline = SteadyDeadline(*context);
     self->call_.cancel = &self->cancelled_;
     const auto queued_at = Clock::now();
-    const bool queued = state->pool.TrySubmit([self, state, is_solve, work = std::move(work), queued_at] {
+    const absl::Status queued = state->pool.TrySubmit([self, state, is_solve, work = std::move(work), queued_at] {
       const absl::Status status = work(self->call_);
       if (status.ok() && is_solve) {
         state->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
       }
       self->Finish(state->ToGrpc(status));
     });
-    if (!queued) {
-      self->Finish(state->ToGrpc(absl::ResourceExhaustedError("the solve queue is full; retry later")));
-    }
+    if (!queued.ok()) self->Finish(state->ToGrpc(queued));
     return self;
   }
 

@@ -21,6 +21,7 @@ void ServerState::FillLimits(v1::ServerLimits* out) const {
   out->set_session_compact_idle_s(options.session_compact_idle_s);
   out->set_worker_threads(options.worker_threads);
   out->set_queue_capacity(options.queue_capacity);
+  out->set_max_queue_wait_ms(options.max_queue_wait_ms);
 }
 
 std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context) {

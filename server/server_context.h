@@ -19,6 +19,7 @@ struct ServerOptions {
   std::string address = "[::]:50051";
   int worker_threads = 2;
   int queue_capacity = 64;
+  double max_queue_wait_ms = 0.0;  ///< 0: only queue_capacity bounds the queue
   int max_sessions = 10000;
   double session_idle_timeout_s = 600.0;
   double session_compact_idle_s = 10.0;  ///< 0: idle sessions keep their scratch
@@ -31,7 +32,7 @@ struct ServerOptions {
 // draining flag (set on SIGTERM: new work is refused with UNAVAILABLE).
 struct ServerState {
   explicit ServerState(const ServerOptions& o)
-      : options(o), registry(o.max_sessions), pool(o.worker_threads, o.queue_capacity) {}
+      : options(o), registry(o.max_sessions), pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms) {}
   ServerOptions options;
   SessionRegistry registry;
   WorkerPool pool;

@@ -14,6 +14,9 @@ ABSL_FLAG(int, threads, 2, "solver worker threads (env NUPMPC_THREADS)");
 ABSL_FLAG(int, queue_capacity, 64, "solves waiting for a worker before RESOURCE_EXHAUSTED (env NUPMPC_QUEUE_CAPACITY)");
 ABSL_FLAG(int, max_sessions, 10000, "maximum open sessions (env NUPMPC_MAX_SESSIONS)");
 ABSL_FLAG(double, session_idle_timeout_s, 600, "close sessions idle this long (env NUPMPC_SESSION_IDLE_TIMEOUT_S)");
+ABSL_FLAG(double, max_queue_wait_ms, 0,
+          "refuse work the queued solves would delay longer than this; 0: only --queue_capacity "
+          "(env NUPMPC_MAX_QUEUE_WAIT_MS)");
 ABSL_FLAG(double, session_compact_idle_s, 10,
           "sessions idle this long free their solver scratch memory; 0: never (env NUPMPC_SESSION_COMPACT_IDLE_S)");
 ABSL_FLAG(int, max_message_bytes, 64 << 20, "largest request/response (env NUPMPC_MAX_MESSAGE_BYTES)");
@@ -51,7 +54,7 @@ absl::Status RequireAtLeast(const char* name, T value, T minimum) {
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   absl::SetProgramUsageMessage("nupmpc-server: model-predictive control over gRPC (nupmpc.v1.MpcService)");
   for (const char* name : {"address", "threads", "queue_capacity", "max_sessions", "session_idle_timeout_s",
-                           "session_compact_idle_s", "max_message_bytes", "max_horizon", "max_states", "max_iterations", "grace_period_s",
+                           "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states", "max_iterations", "grace_period_s",
                            "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
@@ -64,6 +67,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.max_sessions = absl::GetFlag(FLAGS_max_sessions);
   o.session_idle_timeout_s = absl::GetFlag(FLAGS_session_idle_timeout_s);
   o.session_compact_idle_s = absl::GetFlag(FLAGS_session_compact_idle_s);
+  o.max_queue_wait_ms = absl::GetFlag(FLAGS_max_queue_wait_ms);
   o.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   o.size_limits.max_horizon = absl::GetFlag(FLAGS_max_horizon);
   o.size_limits.max_states = absl::GetFlag(FLAGS_max_states);
@@ -76,7 +80,8 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
         RequireAtLeast("max_message_bytes", o.max_message_bytes, 1024), RequireAtLeast("max_horizon", o.size_limits.max_horizon, 1),
         RequireAtLeast("max_states", o.size_limits.max_states, 1), RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
         RequireAtLeast("grace_period_s", o.grace_period_s, 0.0),
-        RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0)}) {
+        RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
+        RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0)}) {
     if (!s.ok()) return s;
   }
   return out;

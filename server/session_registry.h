@@ -34,6 +34,7 @@ struct SessionEntry {
 
   std::atomic<bool> attached{false};  ///< a Control stream uses it
   std::atomic<std::uint64_t> solves{0};
+  std::atomic<double> last_solve_ms{-1.0};  ///< the pool's wait estimate; -1: not solved yet
   std::atomic<Clock::rep> last_used{0};
 
   void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }

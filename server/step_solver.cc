@@ -76,6 +76,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   }
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
   entry.compacted = false;  // Solve() took its scratch back
+  entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
   ResultToProto(summary, entry.solution, out);
   entry.Touch();

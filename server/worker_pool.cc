@@ -1,22 +1,40 @@
 #include "server/worker_pool.h"
 
+#include <chrono>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
 namespace nupmpc::server {
 
-WorkerPool::WorkerPool(int threads, int queue_capacity) : capacity_(queue_capacity) {
+WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms)
+    : capacity_(queue_capacity), max_queue_wait_ms_(max_queue_wait_ms) {
   threads_.reserve(threads);
   for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { Run(); });
 }
 
 WorkerPool::~WorkerPool() { Shutdown(); }
 
-bool WorkerPool::TrySubmit(std::function<void()> task) {
+absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_ms) {
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (stopping_ || static_cast<int>(queue_.size()) >= capacity_) return false;
-    queue_.push_back(std::move(task));
+    if (stopping_) return absl::UnavailableError("the server is shutting down");
+    if (static_cast<int>(queue_.size()) >= capacity_) {
+      return absl::ResourceExhaustedError(
+          absl::StrCat("the solve queue is full (", capacity_, " waiting); retry later"));
+    }
+    const double wait_ms = queued_ms_ / static_cast<double>(threads_.size());
+    if (max_queue_wait_ms_ > 0.0 && wait_ms > max_queue_wait_ms_) {
+      return absl::ResourceExhaustedError(absl::StrFormat(
+          "the solves queued ahead would take about %.3g ms, over the server's max_queue_wait_ms = %g; retry later",
+          wait_ms, max_queue_wait_ms_));
+    }
+    if (expected_ms < 0.0) expected_ms = average_task_ms_;
+    queue_.push_back(Task{std::move(task), expected_ms});
+    queued_ms_ += expected_ms;
   }
   ready_.notify_one();
-  return true;
+  return absl::OkStatus();
 }
 
 int WorkerPool::queued() const {
@@ -39,15 +57,20 @@ void WorkerPool::Shutdown() {
 
 void WorkerPool::Run() {
   for (;;) {
-    std::function<void()> task;
+    Task task;
     {
       std::unique_lock<std::mutex> lock(mu_);
       ready_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
       if (queue_.empty()) return;  // stopping and drained
       task = std::move(queue_.front());
       queue_.pop_front();
+      queued_ms_ = queue_.empty() ? 0.0 : queued_ms_ - task.expected_ms;  // no drift when empty
     }
-    task();
+    const auto start = std::chrono::steady_clock::now();
+    task.run();
+    const double took_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    std::lock_guard<std::mutex> lock(mu_);
+    average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
   }
 }
 

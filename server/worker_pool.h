@@ -1,6 +1,7 @@
 #ifndef NUPMPC_SERVER_WORKER_POOL_H_
 #define NUPMPC_SERVER_WORKER_POOL_H_
 
+#include "absl/status/status.h"
 #include <condition_variable>
 #include <deque>
 #include <functional>
@@ -11,17 +12,23 @@
 namespace nupmpc::server {
 
 // A fixed set of solver threads with a bounded queue. Solves are CPU-bound: the pool is
-// sized to the cores the server may use (two by design), and a full queue is reported to
-// the caller (RESOURCE_EXHAUSTED) instead of growing latency without bound.
+// sized to the cores the server may use (two by design), and work it cannot start soon is
+// refused (RESOURCE_EXHAUSTED) instead of growing latency without bound: when the queue
+// holds `queue_capacity` tasks, or (if `max_queue_wait_ms` > 0) when the work already
+// queued would keep a new task waiting longer than that. The wait is estimated from each
+// queued task's expected duration (a session's last solve time), so sessions of very
+// different sizes are weighed correctly.
 class WorkerPool {
  public:
-  WorkerPool(int threads, int queue_capacity);
+  WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms = 0.0);
   ~WorkerPool();  // Shutdown()
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;
 
-  // Queues a task; false when the queue is full or the pool is shut down.
-  bool TrySubmit(std::function<void()> task);
+  // Queues a task expected to run `expected_ms` (negative: unknown, the recent average of
+  // the pool's tasks is used). RESOURCE_EXHAUSTED when refused as above, UNAVAILABLE when
+  // the pool is shut down.
+  absl::Status TrySubmit(std::function<void()> task, double expected_ms = -1.0);
   // Stops accepting, runs what is queued, joins the threads. Idempotent.
   void Shutdown();
 
@@ -32,10 +39,17 @@ class WorkerPool {
  private:
   void Run();
 
+  struct Task {
+    std::function<void()> run;
+    double expected_ms;
+  };
   const int capacity_;
+  const double max_queue_wait_ms_;
   mutable std::mutex mu_;
   std::condition_variable ready_;
-  std::deque<std::function<void()>> queue_;
+  std::deque<Task> queue_;
+  double queued_ms_ = 0.0;         ///< sum of the queued tasks' expected_ms
+  double average_task_ms_ = 0.0;   ///< exponentially weighted, of finished tasks
   bool stopping_ = false;
   std::vector<std::thread> threads_;
 };

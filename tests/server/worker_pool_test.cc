@@ -1,0 +1,65 @@
+// The worker pool's admission: a bounded queue, and a bound on the estimated wait built
+// from each queued task's expected duration; refused work is RESOURCE_EXHAUSTED.
+#include "server/worker_pool.h"
+
+#include <atomic>
+#include <future>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace nupmpc::server {
+namespace {
+
+// Occupies the pool's only thread until released.
+class Blocker {
+ public:
+  explicit Blocker(WorkerPool& pool) {
+    EXPECT_TRUE(pool.TrySubmit([this] {
+                      started_.set_value();
+                      release_.get_future().wait();
+                    }).ok());
+    started_.get_future().wait();
+  }
+  void Release() { release_.set_value(); }
+
+ private:
+  std::promise<void> started_, release_;
+};
+
+TEST(WorkerPool, RefusesWorkBeyondTheQueueCapacity) {
+  WorkerPool pool(1, 2);
+  Blocker blocker(pool);
+  std::atomic<int> ran{0};
+  EXPECT_TRUE(pool.TrySubmit([&] { ++ran; }).ok());
+  EXPECT_TRUE(pool.TrySubmit([&] { ++ran; }).ok());
+  const absl::Status third = pool.TrySubmit([&] { ++ran; });
+  EXPECT_EQ(third.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(third.message()), ::testing::HasSubstr("queue is full"));
+  blocker.Release();
+  pool.Shutdown();  // runs what was queued
+  EXPECT_EQ(ran.load(), 2);
+}
+
+TEST(WorkerPool, RefusesWorkTheQueuedSolvesWouldDelayTooLong) {
+  WorkerPool pool(1, 100, /*max_queue_wait_ms=*/25.0);
+  Blocker blocker(pool);
+  // Queued ahead: 0, 10, 20 ms (all within 25 ms), then 30 ms: refused.
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(pool.TrySubmit([] {}, 10.0).ok()) << i;
+  const absl::Status refused = pool.TrySubmit([] {}, 10.0);
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(refused.message()), ::testing::HasSubstr("max_queue_wait_ms"));
+  blocker.Release();
+  pool.Shutdown();
+  EXPECT_EQ(pool.TrySubmit([] {}).code(), absl::StatusCode::kUnavailable);
+}
+
+TEST(WorkerPool, WithoutAWaitBoundOnlyTheCapacityCounts) {
+  WorkerPool pool(1, 100);
+  Blocker blocker(pool);
+  for (int i = 0; i < 50; ++i) EXPECT_TRUE(pool.TrySubmit([] {}, 1000.0).ok()) << i;
+  blocker.Release();
+}
+
+}  // namespace
+}  // namespace nupmpc::server
