@@ -154,8 +154,8 @@ void Ibffd::BackwardFilterImpl(const std::vector<ScalarFactor>& input_factor) {
     xi -= z;
     z.noalias() = A.transpose() * xi;
     xi = z;
-    AtW.noalias() = A.transpose() * W;
-    W.noalias() = AtW * A;
+    StateProduct<MS>(AtW, A.transpose(), W);
+    StateProduct<MS>(W, AtW, A);
     SymmetrizeInPlace(W);
   }
 }

@@ -50,6 +50,19 @@ Eigen::Map<const Eigen::Matrix<double, Rows, Cols>> ConstView(const double* data
   return Eigen::Map<const Eigen::Matrix<double, Rows, Cols>>(data, rows, cols);
 }
 
+// dst = lhs · rhs for state-sized matrices. Even for fixed sizes Eigen takes its blocked
+// GEMM path (packing, made for large matrices) once rows + cols + depth ≥ 20; for 8..16
+// the coefficient-based product is 1.2–7× faster (microbenchmark, AVX-512). Dynamic sizes
+// (large M) keep GEMM.
+template <int MS, typename Dst, typename Lhs, typename Rhs>
+void StateProduct(Dst&& dst, const Lhs& lhs, const Rhs& rhs) {
+  if constexpr (MS == Eigen::Dynamic) {
+    dst.noalias() = lhs * rhs;
+  } else {
+    dst.noalias() = lhs.lazyProduct(rhs);
+  }
+}
+
 }  // namespace nupmpc::core
 
 #endif  // NUPMPC_CORE_MESSAGE_PASSING_FIXED_SIZE_H_

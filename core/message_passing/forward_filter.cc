@@ -103,8 +103,8 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, bool keep_
       V.rightCols(M - M0).setZero();
       V.bottomLeftCorner(M - M0, M0).setZero();
     } else {
-      s.AV.noalias() = A * V;
-      V.noalias() = s.AV * A.transpose();
+      StateProduct<MS>(s.AV, A, V);
+      StateProduct<MS>(V, s.AV, A.transpose());
     }
     if constexpr (MS == Eigen::Dynamic) {
       ws->BD.noalias() = B * ws->VU.col(n).asDiagonal();  // large M: one GEMM beats L rank-1 updates
