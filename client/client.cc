@@ -16,7 +16,7 @@ void ShiftArray(google::protobuf::RepeatedField<double>* values) {
 
 void ShiftComponent(v1::ComponentPrior* c) {
   for (auto* f : {c->mutable_weight(), c->mutable_target(), c->mutable_lower(), c->mutable_upper(),
-                  c->mutable_slope(), c->mutable_radius()}) {
+                  c->mutable_slope(), c->mutable_radius(), c->mutable_exponent()}) {
     ShiftArray(f);
   }
 }

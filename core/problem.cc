@@ -70,6 +70,10 @@ const char* PriorKindName(PriorKind kind) {
     case PriorKind::kAtLeast: return "at_least";
     case PriorKind::kAtMost: return "at_most";
     case PriorKind::kBox: return "box";
+    case PriorKind::kPlainNuv: return "plain_nuv";
+    case PriorKind::kSmoothedNuv: return "smoothed_nuv";
+    case PriorKind::kLp: return "lp";
+    case PriorKind::kBinary: return "binary";
   }
   return "unknown";
 }
@@ -82,29 +86,36 @@ absl::Status ValidatePrior(const ScalarPrior& p, const char* field, int index) {
   if (!std::isfinite(p.mean)) return bad("mean", p.mean, "must be finite");
   // NaN is rejected in every field, also in those the kind does not use.
   for (const auto& [member, value] : {std::pair{"lower", p.lower}, std::pair{"upper", p.upper},
-                                      std::pair{"slope", p.slope}, std::pair{"radius", p.radius}}) {
+                                      std::pair{"slope", p.slope}, std::pair{"radius", p.radius},
+                                      std::pair{"exponent", p.exponent}}) {
     if (std::isnan(value)) return bad(member, value, "must not be NaN");
   }
   if (!(p.variance > 0.0)) return bad("variance", p.variance, "must be > 0 (use +inf for no Gaussian part)");
   if (std::isnan(p.variance)) return bad("variance", p.variance, "must not be NaN");
-  const bool uses_lower = p.kind == PriorKind::kAtLeast || p.kind == PriorKind::kBox ||
-                          p.kind == PriorKind::kL1 || p.kind == PriorKind::kHuber;
-  const bool uses_upper = p.kind == PriorKind::kAtMost || p.kind == PriorKind::kBox;
+  const bool two_sided = p.kind == PriorKind::kBox || p.kind == PriorKind::kBinary;
+  const bool uses_lower = p.kind != PriorKind::kNone && p.kind != PriorKind::kAtMost;
+  const bool uses_upper = p.kind == PriorKind::kAtMost || two_sided;
   if (uses_lower && !std::isfinite(p.lower)) return bad("lower", p.lower, "must be finite");
   if (uses_upper && !std::isfinite(p.upper)) return bad("upper", p.upper, "must be finite");
-  if (p.kind == PriorKind::kBox && !(p.lower < p.upper)) {
+  if (two_sided && !(p.lower < p.upper)) {
     return absl::InvalidArgumentError(absl::StrCat(Indexed(field, index), ": lower = ", p.lower,
                                                    " must be < upper = ", p.upper));
   }
-  if (p.kind != PriorKind::kNone) {
+  const bool uses_slope = p.kind != PriorKind::kNone && p.kind != PriorKind::kPlainNuv &&
+                          p.kind != PriorKind::kSmoothedNuv && p.kind != PriorKind::kBinary;
+  if (uses_slope) {
     if (!(p.slope > 0.0) || std::isnan(p.slope)) return bad("slope", p.slope, "must be > 0");
     const bool may_be_hard = p.is_constraint();
     if (!may_be_hard && !std::isfinite(p.slope)) {
       return bad("slope", p.slope, "must be finite for this kind (only constraints may be hard)");
     }
   }
-  if (p.kind == PriorKind::kHuber && !(p.radius > 0.0 && std::isfinite(p.radius))) {
+  if ((p.kind == PriorKind::kHuber || p.kind == PriorKind::kSmoothedNuv) &&
+      !(p.radius > 0.0 && std::isfinite(p.radius))) {
     return bad("radius", p.radius, "must be finite and > 0");
+  }
+  if (p.kind == PriorKind::kLp && !(p.exponent > 0.0 && p.exponent <= 1.0)) {
+    return bad("exponent", p.exponent, "must be in (0, 1]");
   }
   return absl::OkStatus();
 }

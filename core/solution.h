@@ -25,6 +25,10 @@ struct SolveSummary {
   double objective = 0.0;                  ///< J of the returned plan (benchmark convention)
   double max_violation = 0.0;              ///< largest distance of a hard-constrained scalar to its set
   bool polished = false;                   ///< the result was verified by the active-set polish
+  // Binary inputs: the plan is projected to the nearer level after the iterations
+  // (nup-algorithms.md §7.2), and the objective and violation are those of the rounded plan.
+  bool rounded = false;       ///< some input was binary and the plan was rounded
+  double discrete_gap = 0.0;  ///< before rounding: largest distance of a binary input to its nearer level
   bool warm_started = false;
   double solve_seconds = 0.0;
 

@@ -74,8 +74,18 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
   NUPMPC_ASSIGN_OR_RETURN(const PerStep upper, PerStep::Make(c.upper(), steps, kInf, Path(path, "upper")));
   NUPMPC_ASSIGN_OR_RETURN(const PerStep slope, PerStep::Make(c.slope(), steps, kInf, Path(path, "slope")));
   NUPMPC_ASSIGN_OR_RETURN(const PerStep radius, PerStep::Make(c.radius(), steps, 1.0, Path(path, "radius")));
+  NUPMPC_ASSIGN_OR_RETURN(const PerStep exponent,
+                          PerStep::Make(c.exponent(), steps, 1.0, Path(path, "exponent")));
   const v1::PriorKind kind = c.kind();
   if (!v1::PriorKind_IsValid(kind)) return Invalid(Path(path, "kind"), " = ", static_cast<int>(kind), ": unknown");
+  if (!v1::Estimation_IsValid(c.estimation())) {
+    return Invalid(Path(path, "estimation"), " = ", static_cast<int>(c.estimation()), ": unknown");
+  }
+  const bool em = c.estimation() != v1::ESTIMATION_AM;
+  if (kind == v1::PRIOR_KIND_BINARY && (lower.empty() || upper.empty())) {
+    return Invalid(path, ": BINARY needs both levels (lower and upper)");
+  }
+  if (kind == v1::PRIOR_KIND_LP && slope.empty()) return Invalid(Path(path, "slope"), ": required for LP");
   const bool needs_lower = kind == v1::PRIOR_KIND_AT_LEAST;
   const bool needs_upper = kind == v1::PRIOR_KIND_AT_MOST;
   if (needs_lower && lower.empty()) return Invalid(Path(path, "lower"), ": required for AT_LEAST");
@@ -114,6 +124,33 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
         }
         break;
       }
+      case v1::PRIOR_KIND_PLAIN_NUV:
+      case v1::PRIOR_KIND_SMOOTHED_NUV:
+      case v1::PRIOR_KIND_LP: {
+        const double centre = lower.empty() ? 0.0 : a;
+        if (!std::isfinite(centre)) return Invalid(Path(path, "lower"), " at step ", n, ": the centre must be finite");
+        if (kind == v1::PRIOR_KIND_PLAIN_NUV) {
+          p = core::ScalarPrior::PlainNuv(centre, em);
+        } else if (kind == v1::PRIOR_KIND_SMOOTHED_NUV) {
+          const double r = radius.at(n);
+          if (!(r > 0.0) || !std::isfinite(r)) {
+            return Invalid(Path(path, "radius"), " at step ", n, " = ", r, ": must be finite and > 0");
+          }
+          p = core::ScalarPrior::SmoothedNuv(centre, r, em);
+        } else {
+          const double e = exponent.at(n);
+          if (!(e > 0.0 && e <= 1.0)) return Invalid(Path(path, "exponent"), " at step ", n, " = ", e, ": must be in (0, 1]");
+          if (!std::isfinite(s)) return Invalid(Path(path, "slope"), " at step ", n, ": must be finite for LP");
+          p = core::ScalarPrior::Lp(centre, e, s);
+        }
+        break;
+      }
+      case v1::PRIOR_KIND_BINARY:
+        if (!std::isfinite(a) || !std::isfinite(b) || !(a < b)) {
+          return Invalid(path, " at step ", n, ": levels lower = ", a, ", upper = ", b, " must be finite with lower < upper");
+        }
+        p = core::ScalarPrior::Binary(a, b, em);
+        break;
       case v1::PRIOR_KIND_AT_LEAST:
       case v1::PRIOR_KIND_AT_MOST:
       case v1::PRIOR_KIND_BOX: {
@@ -377,6 +414,8 @@ void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, 
   out->set_algorithm(AlgorithmToProto(s.algorithm));
   out->set_warm_started(s.warm_started);
   out->set_polished(s.polished);
+  out->set_rounded(s.rounded);
+  out->set_discrete_gap(s.discrete_gap);
   CopyRows(solution.inputs, out->mutable_inputs());
   CopyRows(solution.outputs, out->mutable_outputs());
   CopyRows(solution.states, out->mutable_states());
@@ -420,18 +459,28 @@ absl::Status ComponentToProto(const std::vector<core::ScalarPrior>& priors, int 
     case core::PriorKind::kAtLeast: out->set_kind(v1::PRIOR_KIND_AT_LEAST); break;
     case core::PriorKind::kAtMost: out->set_kind(v1::PRIOR_KIND_AT_MOST); break;
     case core::PriorKind::kBox: out->set_kind(v1::PRIOR_KIND_BOX); break;
+    case core::PriorKind::kPlainNuv: out->set_kind(v1::PRIOR_KIND_PLAIN_NUV); break;
+    case core::PriorKind::kSmoothedNuv: out->set_kind(v1::PRIOR_KIND_SMOOTHED_NUV); break;
+    case core::PriorKind::kLp: out->set_kind(v1::PRIOR_KIND_LP); break;
+    case core::PriorKind::kBinary: out->set_kind(v1::PRIOR_KIND_BINARY); break;
   }
+  const bool em = priors[static_cast<std::size_t>(offset)].em;
   for (int n = 0; n < steps; ++n) {
     const core::ScalarPrior& p = priors[static_cast<std::size_t>(n) * stride + offset];
+    if (core::IsNonconvex(p.kind) && p.em != em) {
+      return absl::InvalidArgumentError(absl::StrCat(path, ": mixes EM and AM estimation over the horizon"));
+    }
     out->add_weight(p.has_gaussian() ? 1.0 / p.variance : 0.0);
     out->add_target(p.has_gaussian() ? p.mean : 0.0);
-    const bool lower_used = p.kind == core::PriorKind::kAtLeast || p.kind == core::PriorKind::kBox ||
-                            p.kind == core::PriorKind::kL1 || p.kind == core::PriorKind::kHuber;
-    const bool upper_used = p.kind == core::PriorKind::kAtMost || p.kind == core::PriorKind::kBox;
+    const bool lower_used = p.kind != core::PriorKind::kNone && p.kind != core::PriorKind::kAtMost;
+    const bool upper_used =
+        p.kind == core::PriorKind::kAtMost || p.kind == core::PriorKind::kBox || p.kind == core::PriorKind::kBinary;
     out->add_lower(lower_used ? p.lower : -kInf);
     out->add_upper(upper_used ? p.upper : kInf);
     out->add_slope(p.kind == core::PriorKind::kNone ? kInf : p.slope);
-    out->add_radius(p.kind == core::PriorKind::kHuber ? p.radius : 1.0);
+    out->add_radius(p.kind == core::PriorKind::kHuber || p.kind == core::PriorKind::kSmoothedNuv ? p.radius : 1.0);
+    out->add_exponent(p.kind == core::PriorKind::kLp ? p.exponent : 1.0);
+    if (core::IsNonconvex(p.kind) && !p.em) out->set_estimation(v1::ESTIMATION_AM);
   }
   // Compress constant arrays; drop arrays the kind does not use.
   const auto compress = [](google::protobuf::RepeatedField<double>* f) {
@@ -441,7 +490,7 @@ absl::Status ComponentToProto(const std::vector<core::ScalarPrior>& priors, int 
     f->Truncate(std::min(f->size(), 1));
   };
   for (auto* f : {out->mutable_weight(), out->mutable_target(), out->mutable_lower(), out->mutable_upper(),
-                  out->mutable_slope(), out->mutable_radius()}) {
+                  out->mutable_slope(), out->mutable_radius(), out->mutable_exponent()}) {
     compress(f);
   }
   if (out->kind() == v1::PRIOR_KIND_UNSPECIFIED) {
@@ -451,7 +500,12 @@ absl::Status ComponentToProto(const std::vector<core::ScalarPrior>& priors, int 
   }
   if (out->kind() == v1::PRIOR_KIND_AT_LEAST) out->clear_upper();
   if (out->kind() == v1::PRIOR_KIND_AT_MOST) out->clear_lower();
-  if (out->kind() != v1::PRIOR_KIND_HUBER) out->clear_radius();
+  if (out->kind() != v1::PRIOR_KIND_HUBER && out->kind() != v1::PRIOR_KIND_SMOOTHED_NUV) out->clear_radius();
+  if (out->kind() != v1::PRIOR_KIND_LP) out->clear_exponent();
+  if (out->kind() == v1::PRIOR_KIND_PLAIN_NUV || out->kind() == v1::PRIOR_KIND_SMOOTHED_NUV ||
+      out->kind() == v1::PRIOR_KIND_BINARY) {
+    out->clear_slope();
+  }
   return absl::OkStatus();
 }
 }  // namespace

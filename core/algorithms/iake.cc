@@ -53,6 +53,9 @@ void Iake::Refresh(const Problem& problem) {
   }
   if (scale == 0.0) scale = 1.0;
   variance_floor_ = options_.iake_variance_floor * scale * scale;
+  const auto em = [](const ScalarPrior& p) { return IsNonconvex(p.kind) && p.kind != PriorKind::kLp && p.em; };
+  needs_variances_ = std::any_of(graph_.input_prior.begin(), graph_.input_prior.end(), em) ||
+                     std::any_of(graph_.row_prior.begin(), graph_.row_prior.end(), em);
 }
 
 void Iake::ColdStart() {
@@ -64,6 +67,9 @@ void Iake::ColdStart() {
     switch (p.kind) {
       case PriorKind::kNone: input_nup_[i] = {}; continue;
       case PriorKind::kBox: centre = 0.5 * (p.lower + p.upper); break;
+      case PriorKind::kBinary:  // [KL] §V-A: N(0.5, 1) for {0, 1}, i.e. undecided
+        input_nup_[i] = {0.5 * (p.lower + p.upper), (p.upper - p.lower) * (p.upper - p.lower), 0.0, 0.0};
+        continue;
       case PriorKind::kAtMost: centre = p.upper; break;
       default: centre = p.lower; break;
     }
@@ -80,8 +86,8 @@ void Iake::ShiftWarmStart() {
   for (int r = 0; r < graph_.num_rows(); ++r) row_nup_[r] = row_nup_[graph_.row_shift_source[r]];
 }
 
-ScalarFactor Iake::Update(const ScalarPrior& prior, double estimate) const {
-  ScalarFactor f = NupUpdate(prior, EffectiveSlope(prior), estimate);
+ScalarFactor Iake::Update(const ScalarPrior& prior, double estimate, double posterior_variance) const {
+  ScalarFactor f = NupUpdate(prior, EffectiveSlope(prior), estimate, posterior_variance);
   if (prior.is_constraint() && f.V < variance_floor_) f.V = variance_floor_;  // §6.3 (a)
   return f;
 }
@@ -92,17 +98,19 @@ int Iake::Iterate(PrimalIterate* out) {
   }
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], row_nup_[r]);
   RunForwardFilter(graph_, input_factor_.data(), row_factor_.data(), /*keep_edges=*/true, &fw_);
-  RunSmootherBackward(graph_, fw_, /*with_variances=*/false, &sm_);
+  RunSmootherBackward(graph_, fw_, needs_variances_, &sm_);
   out->x0 = sm_.mX0;
   out->u = sm_.mU;
   for (int n = 0; n < graph_.N; ++n) {
     for (int l = 0; l < graph_.L; ++l) {
       const int i = n * graph_.L + l;
-      if (graph_.input_prior[i].kind != PriorKind::kNone) input_nup_[i] = Update(graph_.input_prior[i], sm_.mU(l, n));
+      if (graph_.input_prior[i].kind == PriorKind::kNone) continue;
+      input_nup_[i] = Update(graph_.input_prior[i], sm_.mU(l, n), needs_variances_ ? sm_.VU(l, n) : 0.0);
     }
   }
   for (int r = 0; r < graph_.num_rows(); ++r) {
-    if (graph_.row_prior[r].kind != PriorKind::kNone) row_nup_[r] = Update(graph_.row_prior[r], sm_.mY(r));
+    if (graph_.row_prior[r].kind == PriorKind::kNone) continue;
+    row_nup_[r] = Update(graph_.row_prior[r], sm_.mY(r), needs_variances_ ? sm_.VY(r) : 0.0);
   }
   return -1;
 }

@@ -40,7 +40,7 @@ class Iake final : public OuterIteration {
   double EffectiveSlope(const ScalarPrior& prior) const {
     return prior.is_hard() ? options_.iake_hard_slope : prior.slope;
   }
-  ScalarFactor Update(const ScalarPrior& prior, double estimate) const;
+  ScalarFactor Update(const ScalarPrior& prior, double estimate, double posterior_variance) const;
 
   SolverOptions options_;
   FactorGraph graph_;
@@ -50,6 +50,7 @@ class Iake final : public OuterIteration {
   std::vector<ScalarFactor> input_nup_, row_nup_;        ///< carried NUP parts
   std::vector<ScalarFactor> input_factor_, row_factor_;  ///< with Gaussian parts
   double variance_floor_ = 0.0;
+  bool needs_variances_ = false;  ///< an EM prior is present: the smoother computes variances
 };
 
 }  // namespace nupmpc::core

@@ -17,7 +17,7 @@ void ObjectiveEvaluator::Prepare(const Problem& p) {
   if (x0_free_) v0_llt_.compute(p.initial_covariance);
   double scale = 0.0;
   const auto visit = [&scale](const ScalarPrior& prior) {
-    if (!prior.is_constraint() || !prior.is_hard()) return;
+    if (!prior.is_discrete() && (!prior.is_constraint() || !prior.is_hard())) return;
     if (prior.kind != PriorKind::kAtMost) scale = std::max(scale, std::abs(prior.lower));
     if (prior.kind != PriorKind::kAtLeast) scale = std::max(scale, std::abs(prior.upper));
   };

@@ -18,7 +18,18 @@ enum class PriorKind : std::uint8_t {
   kAtLeast,    ///< z ≥ lower  (cost s (lower - z)_+)
   kAtMost,     ///< z ≤ upper  (cost s (z - upper)_+)
   kBox,        ///< lower ≤ z ≤ upper (cost s dist(z, [lower, upper]))
+  // Non-convex (IAKE only; nup-algorithms.md §5.1, §7). `em` picks the estimation variant.
+  kPlainNuv,     ///< sparsity: favours z = lower exactly (cost log|z - lower|)
+  kSmoothedNuv,  ///< plain NUV with its variance floored at radius² (no pull inside radius)
+  kLp,           ///< s |z - lower|^exponent, 0 < exponent ≤ 1
+  kBinary,       ///< z ∈ {lower, upper} (an indicator; plans are rounded to the levels)
 };
+
+// Whether a kind is non-convex (only IAKE's NUP updates handle it).
+constexpr bool IsNonconvex(PriorKind kind) {
+  return kind == PriorKind::kPlainNuv || kind == PriorKind::kSmoothedNuv || kind == PriorKind::kLp ||
+         kind == PriorKind::kBinary;
+}
 
 // A prior on one scalar (one input or output component at one step): an optional
 // Gaussian part N(mean, variance) times an optional kind κ. Gaussian priors
@@ -35,13 +46,19 @@ struct ScalarPrior {
   double lower = 0.0;           ///< kAtLeast/kBox lower bound; kL1/kHuber centre
   double upper = 0.0;           ///< kAtMost/kBox upper bound
   double slope = kInfinity;     ///< outside slope s > 0; +∞ = hard (half-space/box only)
-  double radius = 1.0;          ///< kHuber radius r > 0
+  double radius = 1.0;          ///< kHuber radius r > 0; kSmoothedNuv radius
+  double exponent = 1.0;        ///< kLp exponent p, 0 < p ≤ 1
+  // Non-convex kinds: expectation maximisation (type-II, uses the posterior variance;
+  // [KL] recommends it: far better plans, slower to settle) or alternating maximisation
+  // (joint MAP: settles in tens of iterations).
+  bool em = true;
 
   bool has_gaussian() const { return variance < kInfinity; }
   bool is_hard() const { return slope == kInfinity; }
   bool is_constraint() const {
     return kind == PriorKind::kAtLeast || kind == PriorKind::kAtMost || kind == PriorKind::kBox;
   }
+  bool is_discrete() const { return kind == PriorKind::kBinary; }
 
   static ScalarPrior Free() { return {}; }
   static ScalarPrior Gaussian(double mean, double variance) {
@@ -85,6 +102,35 @@ struct ScalarPrior {
     p.lower = centre;
     p.radius = radius;
     p.slope = slope;
+    return p;
+  }
+  static ScalarPrior PlainNuv(double centre, bool em = true) {
+    ScalarPrior p;
+    p.kind = PriorKind::kPlainNuv;
+    p.lower = centre;
+    p.em = em;
+    return p;
+  }
+  static ScalarPrior SmoothedNuv(double centre, double radius, bool em = true) {
+    ScalarPrior p = PlainNuv(centre, em);
+    p.kind = PriorKind::kSmoothedNuv;
+    p.radius = radius;
+    return p;
+  }
+  static ScalarPrior Lp(double centre, double exponent, double slope) {
+    ScalarPrior p;
+    p.kind = PriorKind::kLp;
+    p.lower = centre;
+    p.exponent = exponent;
+    p.slope = slope;
+    return p;
+  }
+  static ScalarPrior Binary(double a, double b, bool em = true) {
+    ScalarPrior p;
+    p.kind = PriorKind::kBinary;
+    p.lower = a;
+    p.upper = b;
+    p.em = em;
     return p;
   }
   // Adds a Gaussian part (quadratic cost ½(z-mean)²/variance) to any kind.

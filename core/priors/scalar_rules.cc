@@ -21,6 +21,12 @@ double KindPenalty(const ScalarPrior& p, double z) {
     case PriorKind::kAtLeast: return p.is_hard() ? 0.0 : s * Pos(p.lower - z);
     case PriorKind::kAtMost: return p.is_hard() ? 0.0 : s * Pos(z - p.upper);
     case PriorKind::kBox: return p.is_hard() ? 0.0 : s * (Pos(p.lower - z) + Pos(z - p.upper));
+    case PriorKind::kLp: return s * std::pow(std::abs(z - p.lower), p.exponent);
+    // log|z| is unbounded below at the centre: NUV priors are reported by their sparsity,
+    // not in J; a binary's indicator is 0 on the levels (the distance is the violation).
+    case PriorKind::kPlainNuv:
+    case PriorKind::kSmoothedNuv:
+    case PriorKind::kBinary: return 0.0;
   }
   return 0.0;
 }
@@ -37,6 +43,7 @@ double PriorCost(const ScalarPrior& p, double z) {
 }
 
 double HardViolation(const ScalarPrior& p, double z) {
+  if (p.kind == PriorKind::kBinary) return std::min(std::abs(z - p.lower), std::abs(z - p.upper));
   if (!p.is_constraint() || !p.is_hard()) return 0.0;
   switch (p.kind) {
     case PriorKind::kAtLeast: return Pos(p.lower - z);
@@ -90,11 +97,19 @@ Decision Decide(const ScalarPrior& p, double s, Message extrinsic) {
         return {p.upper, Region::kAtUpper};
       }
       return {m, Region::kInside};
+    case PriorKind::kPlainNuv:  // type-II rule (§5.1)
+      if ((m - p.lower) * (m - p.lower) > V) return {m - V / (m - p.lower), Region::kInside};
+      return {p.lower, Region::kAtLower};
+    case PriorKind::kSmoothedNuv:
+    case PriorKind::kLp:
+    case PriorKind::kBinary: return {m, Region::kInside};  // no deciding rule: IAKE only
   }
   return {m, Region::kInside};
 }
 
-ScalarFactor NupUpdate(const ScalarPrior& p, double s, double x) {
+ScalarFactor NupUpdate(const ScalarPrior& p, double s, double x, double posterior_variance) {
+  // EM variants add the posterior variance of the scalar to the squared distances (§5.1).
+  const double vp = p.em ? posterior_variance : 0.0;
   switch (p.kind) {
     case PriorKind::kNone: return {};
     case PriorKind::kL1: return {p.lower, std::abs(x - p.lower) / s, 0.0, 0.0};
@@ -114,6 +129,21 @@ ScalarFactor NupUpdate(const ScalarPrior& p, double s, double x) {
       // Product forms (§5.1 notes): no 0/0 at a bound, where V = 0 and m = x.
       const double da = std::abs(x - p.lower), db = std::abs(x - p.upper), sum = da + db;
       return {(p.lower * db + p.upper * da) / sum, 2.0 * da * db / (s * sum), 0.0, 0.0};
+    }
+    case PriorKind::kPlainNuv: {
+      const double d = x - p.lower;
+      return {p.lower, vp + d * d, 0.0, 0.0};
+    }
+    case PriorKind::kSmoothedNuv: {
+      const double d = x - p.lower;
+      return {p.lower, std::max(p.radius * p.radius, vp + d * d), 0.0, 0.0};
+    }
+    case PriorKind::kLp:
+      return {p.lower, std::pow(std::abs(x - p.lower), 2.0 - p.exponent) / (s * p.exponent), 0.0, 0.0};
+    case PriorKind::kBinary: {
+      const double da = x - p.lower, db = x - p.upper;
+      const double sa = vp + da * da, sb = vp + db * db, sum = sa + sb;  // sum > 0: lower < upper
+      return {(p.lower * sb + p.upper * sa) / sum, sa * sb / sum, 0.0, 0.0};
     }
   }
   return {};

@@ -45,9 +45,10 @@ struct Decision {
 };
 Decision Decide(const ScalarPrior& prior, double slope, Message extrinsic);
 
-// AM NUP update of the kind's part at the current estimate x (§5.1): the moment part
-// of the scalar's factor for the next Gaussian pass. V = ∞ for kind kNone.
-ScalarFactor NupUpdate(const ScalarPrior& prior, double slope, double x);
+// NUP update of the kind's part at the current estimate x (§5.1): the moment part of
+// the scalar's factor for the next Gaussian pass. V = ∞ for kind kNone. EM variants of
+// the non-convex kinds also use the scalar's posterior variance (ignored otherwise).
+ScalarFactor NupUpdate(const ScalarPrior& prior, double slope, double x, double posterior_variance = 0.0);
 
 // The prior's full factor for a Gaussian pass: the kind's NUP part times the Gaussian part.
 inline ScalarFactor WithGaussianPart(const ScalarPrior& prior, ScalarFactor nup) {

@@ -1,11 +1,13 @@
 #include "core/session/session.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "core/algorithms/select.h"
+#include "core/priors/scalar_rules.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::core {
@@ -116,6 +118,28 @@ absl::Status Session::Update(const Problem& problem) {
   return absl::OkStatus();
 }
 
+void Session::RoundDiscreteInputs(SolveSummary* summary) {
+  const int L = problem_.num_inputs;
+  double gap = 0.0;
+  bool any = false;
+  for (int n = 0; n < problem_.horizon; ++n) {
+    for (int l = 0; l < L; ++l) {
+      const ScalarPrior& prior = problem_.input_prior(n, l);
+      if (prior.kind != PriorKind::kBinary) continue;
+      any = true;
+      double& u = best_.u(l, n);
+      gap = std::max(gap, HardViolation(prior, u));
+      u = std::abs(u - prior.lower) <= std::abs(u - prior.upper) ? prior.lower : prior.upper;
+    }
+  }
+  if (!any) return;
+  const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
+  summary->objective = r.objective;
+  summary->max_violation = r.max_violation;
+  summary->rounded = true;
+  summary->discrete_gap = gap;
+}
+
 void Session::ShiftWarmStart() {
   if (!has_warm_state_) return;
   algorithm_->ShiftWarmStart();
@@ -136,6 +160,7 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   algorithm_->AcquireWorkspace();  // after ReleaseWorkspace(); outside the timed loop's iterations
   const auto start = std::chrono::steady_clock::now();
   SolveSummary summary = RunLoop(limits, warm);
+  if (summary.IsUsable()) RoundDiscreteInputs(&summary);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.warm_started = warm;
   summary.algorithm = algorithm_->algorithm();

@@ -52,6 +52,8 @@ class Session {
   Session(Problem problem, SolverOptions options);
   absl::Status Rebuild();
   SolveSummary RunLoop(const SolveLimits& limits, bool warm);
+  // Projects binary inputs of the returned plan to their nearer level and re-evaluates it.
+  void RoundDiscreteInputs(SolveSummary* summary);
 
   Problem problem_;
   SolverOptions options_;

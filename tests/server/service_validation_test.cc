@@ -90,6 +90,26 @@ std::vector<SpecCase> SpecCases() {
        C::kInvalidArgument, "spec.input_priors[0].slope"},
       {"negative slope", [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->add_slope(-2.0); }, C::kInvalidArgument,
        "spec.input_priors[0].slope"},
+      {"binary with one level",
+       [](v1::ProblemSpec* s) {
+         auto* c = s->mutable_input_priors(1);
+         c->set_kind(v1::PRIOR_KIND_BINARY);
+         c->clear_lower();
+         c->clear_upper();
+         c->add_lower(0.0);
+       },
+       C::kInvalidArgument, "spec.input_priors[1]: BINARY needs both levels"},
+      {"Lp exponent above one",
+       [](v1::ProblemSpec* s) {
+         auto* c = s->mutable_input_priors(2);
+         c->set_kind(v1::PRIOR_KIND_LP);
+         c->clear_slope();
+         c->add_slope(1.0);
+         c->add_exponent(1.5);
+       },
+       C::kInvalidArgument, "spec.input_priors[2].exponent"},
+      {"unknown estimation", [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_estimation(static_cast<v1::Estimation>(7)); },
+       C::kInvalidArgument, "spec.input_priors[0].estimation"},
       {"unknown prior kind", [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_kind(static_cast<v1::PriorKind>(42)); },
        C::kInvalidArgument, "spec.input_priors[0].kind"},
       {"asymmetric terminal weight",
