@@ -87,7 +87,8 @@ absl::Status ValidatePrior(const ScalarPrior& p, const char* field, int index) {
   // NaN is rejected in every field, also in those the kind does not use.
   for (const auto& [member, value] : {std::pair{"lower", p.lower}, std::pair{"upper", p.upper},
                                       std::pair{"slope", p.slope}, std::pair{"radius", p.radius},
-                                      std::pair{"exponent", p.exponent}}) {
+                                      std::pair{"exponent", p.exponent},
+                                      std::pair{"initial_variance", p.initial_variance}}) {
     if (std::isnan(value)) return bad(member, value, "must not be NaN");
   }
   if (!(p.variance > 0.0)) return bad("variance", p.variance, "must be > 0 (use +inf for no Gaussian part)");
@@ -113,6 +114,9 @@ absl::Status ValidatePrior(const ScalarPrior& p, const char* field, int index) {
   if ((p.kind == PriorKind::kHuber || p.kind == PriorKind::kSmoothedNuv) &&
       !(p.radius > 0.0 && std::isfinite(p.radius))) {
     return bad("radius", p.radius, "must be finite and > 0");
+  }
+  if (!(p.initial_variance >= 0.0) || !std::isfinite(p.initial_variance)) {
+    return bad("initial_variance", p.initial_variance, "must be finite and >= 0");
   }
   if (p.kind == PriorKind::kLp && !(p.exponent > 0.0 && p.exponent <= 1.0)) {
     return bad("exponent", p.exponent, "must be in (0, 1]");

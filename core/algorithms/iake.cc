@@ -68,7 +68,9 @@ void Iake::ColdStart() {
       case PriorKind::kNone: input_nup_[i] = {}; continue;
       case PriorKind::kBox: centre = 0.5 * (p.lower + p.upper); break;
       case PriorKind::kBinary:  // [KL] §V-A: N(0.5, 1) for {0, 1}, i.e. undecided
-        input_nup_[i] = {0.5 * (p.lower + p.upper), (p.upper - p.lower) * (p.upper - p.lower), 0.0, 0.0};
+        input_nup_[i] = {0.5 * (p.lower + p.upper),
+                         p.initial_variance > 0.0 ? p.initial_variance : (p.upper - p.lower) * (p.upper - p.lower),
+                         0.0, 0.0};
         continue;
       case PriorKind::kAtMost: centre = p.upper; break;
       default: centre = p.lower; break;

@@ -52,6 +52,9 @@ struct ScalarPrior {
   // [KL] recommends it: far better plans, slower to settle) or alternating maximisation
   // (joint MAP: settles in tens of iterations).
   bool em = true;
+  // kBinary: the NUP variance IAKE starts from (0: (upper - lower)²). The binaries of an
+  // M-level input start from slightly different values to break their symmetry.
+  double initial_variance = 0.0;
 
   bool has_gaussian() const { return variance < kInfinity; }
   bool is_hard() const { return slope == kInfinity; }
