@@ -43,7 +43,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       if (!built.ok()) return built.status();
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
           state_->registry.Add(std::move(built->solver), built->default_time_limit_ms,
-                               /*owned_by_stream=*/true);
+                               /*owned_by_stream=*/true, std::move(built->transform));
       if (!added.ok()) return added.status();
       entry = *std::move(added);
       entry->attached.store(true);

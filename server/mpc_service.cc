@@ -65,7 +65,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
     if (!built.ok()) return built.status();
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
         state->registry.Add(std::move(built->solver), built->default_time_limit_ms,
-                            /*owned_by_stream=*/false);
+                            /*owned_by_stream=*/false, std::move(built->transform));
     if (!entry.ok()) return entry.status();
     response->set_session_id((*entry)->id);
     *response->mutable_dimensions() = (*entry)->dims;

@@ -33,17 +33,19 @@ std::string SessionRegistry::NewId() {
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::Session> solver,
                                                                    double default_time_limit_ms,
-                                                                   bool owned_by_stream) {
+                                                                   bool owned_by_stream, InputTransform transform) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owned_by_stream = owned_by_stream;
   entry->default_time_limit_ms = default_time_limit_ms;
   entry->algorithm = solver->algorithm();
   const core::Problem& p = solver->problem();
-  entry->dims.set_num_states(p.num_states);
-  entry->dims.set_num_inputs(p.num_inputs);
-  entry->dims.set_num_outputs(p.num_outputs);
+  const bool own = transform.active();  // the client's dimensions, not the core's
+  entry->dims.set_num_states(own ? transform.num_states : p.num_states);
+  entry->dims.set_num_inputs(own ? transform.num_inputs : p.num_inputs);
+  entry->dims.set_num_outputs(own ? transform.num_outputs : p.num_outputs);
   entry->dims.set_horizon(p.horizon);
-  entry->x0.setZero(p.num_states);
+  entry->x0.setZero(entry->dims.num_states());
+  entry->transform = std::move(transform);
   entry->solver = std::move(solver);
   entry->Touch();
   std::lock_guard<std::mutex> lock(mu_);

@@ -12,6 +12,7 @@
 #include "absl/status/statusor.h"
 #include "core/session/session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
+#include "server/input_transform.h"
 
 namespace nupmpc::server {
 
@@ -23,11 +24,12 @@ struct SessionEntry {
   std::string id;
   bool owned_by_stream = false;
   double default_time_limit_ms = 0.0;  ///< from the spec's options
-  v1::Dimensions dims;                 ///< fixed at creation
+  v1::Dimensions dims;                 ///< fixed at creation (the spec's, before any transform)
 
   std::mutex mu;
   std::unique_ptr<core::Session> solver;  ///< guarded by mu; holds the session's problem
   Eigen::VectorXd x0;                     ///< guarded by mu; the measured state being applied
+  InputTransform transform;               ///< guarded by mu; multi-level / Δu mapping
   bool compacted = false;                 ///< guarded by mu: solver scratch released while idle
   core::Solution solution;                ///< guarded by mu; reused buffer
   bool closed = false;                    ///< guarded by mu: removed from the registry
@@ -51,7 +53,8 @@ class SessionRegistry {
 
   // RESOURCE_EXHAUSTED when full.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::Session> solver,
-                                                    double default_time_limit_ms, bool owned_by_stream);
+                                                    double default_time_limit_ms, bool owned_by_stream,
+                                                    InputTransform transform = {});
   // NOT_FOUND for unknown (or closed, or expired) ids.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id) const;
   absl::Status Close(const std::string& id);

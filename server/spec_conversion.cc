@@ -188,6 +188,11 @@ absl::Status CheckLimit(const char* field, long long value, long long limit) {
 
 }  // namespace
 
+absl::Status ComponentPriorsFromProto(const v1::ComponentPrior& component, int steps, const std::string& path,
+                                     std::vector<core::ScalarPrior>* out, int stride, int offset) {
+  return ComponentFromProto(component, steps, path, out, stride, offset);
+}
+
 absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const SizeLimits& limits) {
   if (!spec.has_model()) return Invalid("spec.model: required");
   const v1::Model& m = spec.model();

@@ -1,6 +1,7 @@
 #include "server/step_solver.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include "core/util/status_macros.h"
@@ -26,11 +27,34 @@ absl::Status MakeLimits(double session_limit_ms, const v1::Step* step, const Cal
   return absl::OkStatus();
 }
 
+// A step's previous_input (only for Δu sessions), else the session's; nothing written on error.
+absl::Status ReadPreviousInput(const v1::Step& step, const InputTransform& transform, Eigen::VectorXd* out) {
+  if (step.previous_input_size() == 0) {
+    if (transform.differences) *out = transform.previous_input;
+    return absl::OkStatus();
+  }
+  if (!transform.differences) {
+    return absl::InvalidArgumentError("step.previous_input: only for sessions with input_differences");
+  }
+  if (step.previous_input_size() != transform.num_inputs) {
+    return absl::FailedPreconditionError(absl::StrCat("step.previous_input: expected ", transform.num_inputs,
+                                                      " values (num_inputs), got ", step.previous_input_size()));
+  }
+  for (int l = 0; l < transform.num_inputs; ++l) {
+    if (!std::isfinite(step.previous_input(l))) {
+      return absl::InvalidArgumentError(absl::StrCat("step.previous_input[", l, "]: must be finite"));
+    }
+  }
+  *out = Eigen::Map<const Eigen::VectorXd>(step.previous_input().data(), transform.num_inputs);
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits) {
   BuiltSession built;
-  NUPMPC_ASSIGN_OR_RETURN(core::Problem problem, ProblemFromSpec(spec, limits));
+  NUPMPC_ASSIGN_OR_RETURN(core::Problem base, ProblemFromSpec(spec, limits));
+  NUPMPC_ASSIGN_OR_RETURN(core::Problem problem, TransformProblem(spec, std::move(base), &built.transform));
   NUPMPC_ASSIGN_OR_RETURN(const core::SolverOptions options, OptionsFromSpec(spec.options(), limits));
   absl::StatusOr<std::unique_ptr<core::Session>> solver = core::Session::Create(std::move(problem), options);
   if (!solver.ok()) {
@@ -53,18 +77,42 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   }
 
   core::Session& solver = *entry.solver;
+  InputTransform& transform = entry.transform;
+  Eigen::VectorXd previous_input;  // u[-1] of this solve (Δu sessions only)
+  NUPMPC_RETURN_IF_ERROR(ReadPreviousInput(step, transform, &previous_input));
   if (step.has_update()) {
     // References or bounds change: validate on a copy; Update() keeps the session as it
     // was if it rejects the problem.
+    if (transform.active() && step.update().inputs_size() > 0) {
+      return absl::FailedPreconditionError(
+          "step.update.inputs: this session's inputs are multi-level or carry input-difference priors; "
+          "their priors are fixed at creation");
+    }
     core::Problem candidate = solver.problem();
-    NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &candidate));
+    if (transform.differences) {  // the core's state is [x; u[-1]]: the step's state is x only
+      v1::Step update_only = step;
+      update_only.clear_state();
+      NUPMPC_RETURN_IF_ERROR(ApplyStep(update_only, "step", &candidate));
+      NUPMPC_RETURN_IF_ERROR(ReadStepState(step, "step", entry.dims.num_states(), &entry.x0));
+      if (step.state_size() > 0) candidate.initial_mean.head(transform.num_states) = entry.x0;
+      candidate.initial_mean.tail(transform.num_inputs) = previous_input;
+    } else {
+      NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &candidate));
+    }
     NUPMPC_RETURN_IF_ERROR(solver.Update(candidate));
     entry.algorithm.store(solver.algorithm());
   } else {
     // The common path: at most the measured state changes (no copy of the problem).
     // ReadStepState checks size and finiteness, which is all SetInitialState checks.
     NUPMPC_RETURN_IF_ERROR(ReadStepState(step, "step", entry.dims.num_states(), &entry.x0));
-    if (step.state_size() > 0) NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(entry.x0));
+    if (transform.differences) {
+      Eigen::VectorXd x = solver.problem().initial_mean;
+      if (step.state_size() > 0) x.head(transform.num_states) = entry.x0;
+      x.tail(transform.num_inputs) = previous_input;
+      NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(x));
+    } else if (step.state_size() > 0) {
+      NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(entry.x0));
+    }
   }
 
   switch (step.warm_start()) {
@@ -78,6 +126,11 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   entry.compacted = false;  // Solve() took its scratch back
   entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
+  if (transform.active()) {
+    transform.previous_input = previous_input;  // what this plan's differences start from
+    transform.MapBack(&entry.solution);
+    transform.RememberApplied(entry.solution);
+  }
   ResultToProto(summary, entry.solution, out);
   entry.Touch();
   return absl::OkStatus();
@@ -90,6 +143,7 @@ absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limit
   NUPMPC_RETURN_IF_ERROR(MakeLimits(built.default_time_limit_ms, nullptr, call, &limits));
   core::Solution solution;
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, built.solver->Solve(limits, &solution));
+  built.transform.MapBack(&solution);
   ResultToProto(summary, solution, out);
   return absl::OkStatus();
 }

@@ -30,6 +30,7 @@ absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& limits, co
 // streams that carry a spec).
 struct BuiltSession {
   std::unique_ptr<core::Session> solver;
+  InputTransform transform;
   double default_time_limit_ms = 0.0;
 };
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits);
