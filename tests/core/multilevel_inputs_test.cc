@@ -5,10 +5,10 @@
 
 #include <cmath>
 
-#include "Eigen/LU"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/util/dac_plant.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::core {
@@ -58,7 +58,7 @@ TEST(MultiLevelInputs, TheExpandedModelSimulatesLikeTheOriginal) {
   }
 }
 
-double DacTarget(int t) { return 0.8967 * 0.5 + 0.3 * std::sin(2.0 * M_PI * 2.0 * 0.003 * t); }
+using testing::DacTarget;
 
 TEST(MultiLevelInputs, ThreeLevelDacComesCloseToExhaustiveSearch) {
   // The DAC of [KL] §V-A with a three-level input {0, 0.5, 1} (two binaries), receding
@@ -66,12 +66,7 @@ TEST(MultiLevelInputs, ThreeLevelDacComesCloseToExhaustiveSearch) {
   // per step, each controller from its own state.
   const int K = 8, steps = 60;
   const double VY = 0.01;
-  Problem p = Problem::TimeInvariant(3, 1, 1, K);
-  p.A[0] << 0.7967, -6.3978, -94.2123, 0.0027, 0.9902, -0.1467, 0.0, 0.0030, 0.9999;
-  p.B[0] << 0.0027, 0.0, 0.0;
-  p.C[0] << 0.0, 0.0, 35037.9;
-  p.initial_mean = (Eigen::Matrix3d::Identity() - p.A[0]).partialPivLu().solve(0.5 * p.B[0]);
-  p.input_priors.assign(K, ScalarPrior::Free());
+  Problem p = testing::DacPlant(K);
   const std::vector<InputLevels> levels = {{.count = 3, .lowest = 0.0, .spacing = 0.5}};
   const Eigen::Matrix3d A = p.A[0];
   const Eigen::Vector3d B = p.B[0];

@@ -4,11 +4,11 @@
 #include <cmath>
 #include <vector>
 
-#include "Eigen/LU"
 #include "core/priors/scalar_rules.h"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/util/dac_plant.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::core {
@@ -122,20 +122,14 @@ TEST(NonconvexPriors, AreValidatedNamingTheField) {
   EXPECT_EQ((*session)->algorithm(), Algorithm::kIake);
 }
 
-// The DAC plant (85) of [KL] §V-A as printed (DC gain 0.8967, relative degree 3).
 Problem DacWindow(int K, double output_variance) {
-  Problem p = Problem::TimeInvariant(3, 1, 1, K);
-  p.A[0] << 0.7967, -6.3978, -94.2123, 0.0027, 0.9902, -0.1467, 0.0, 0.0030, 0.9999;
-  p.B[0] << 0.0027, 0.0, 0.0;
-  p.C[0] << 0.0, 0.0, 35037.9;
-  // x[0] = the steady state for u ≡ 0.5: (I - A) x = 0.5 B.
-  p.initial_mean = (Eigen::Matrix3d::Identity() - p.A[0]).partialPivLu().solve(0.5 * p.B[0]);
+  Problem p = testing::DacPlant(K);
   p.input_priors.assign(K, ScalarPrior::Binary(0.0, 1.0, /*em=*/true));
   p.output_priors.assign(K + 1, ScalarPrior::Gaussian(0.0, output_variance));
   return p;
 }
 
-double Target(int t) { return 0.8967 * 0.5 + 0.3 * std::sin(2.0 * M_PI * 2.0 * 0.003 * t); }
+using testing::DacTarget;
 
 TEST(BinaryControl, ShortHorizonIakeIsWithinAFewPercentOfExhaustiveSearch) {
   // §7.3: receding horizon K = 8, V_Y = 0.01; each step applies the first input of the
@@ -155,7 +149,7 @@ TEST(BinaryControl, ShortHorizonIakeIsWithinAFewPercentOfExhaustiveSearch) {
   double sse_nup = 0.0, sse_exh = 0.0, largest_gap = 0.0;
   Solution plan;
   for (int t = 0; t < steps; ++t) {
-    for (int n = 0; n <= K; ++n) window.output_priors[n] = ScalarPrior::Gaussian(Target(t + n), VY);
+    for (int n = 0; n <= K; ++n) window.output_priors[n] = ScalarPrior::Gaussian(DacTarget(t + n), VY);
     window.initial_mean = x_nup;
     ASSERT_THAT((*session)->Update(window), testing::IsOk());
     SolveLimits cold;
@@ -174,7 +168,7 @@ TEST(BinaryControl, ShortHorizonIakeIsWithinAFewPercentOfExhaustiveSearch) {
       double cost = 0.0;
       for (int n = 0; n < K; ++n) {
         x = A * x + B * ((code >> n) & 1);
-        const double e = C * x - Target(t + n + 1);
+        const double e = C * x - DacTarget(t + n + 1);
         cost += e * e;
       }
       if (cost < best_cost) {
@@ -184,8 +178,8 @@ TEST(BinaryControl, ShortHorizonIakeIsWithinAFewPercentOfExhaustiveSearch) {
     }
     x_nup = A * x_nup + B * plan.inputs(0, 0);
     x_exh = A * x_exh + B * best_u0;
-    sse_nup += std::pow(C * x_nup - Target(t + 1), 2);
-    sse_exh += std::pow(C * x_exh - Target(t + 1), 2);
+    sse_nup += std::pow(C * x_nup - DacTarget(t + 1), 2);
+    sse_exh += std::pow(C * x_exh - DacTarget(t + 1), 2);
   }
   const double mse_nup = sse_nup / steps, mse_exh = sse_exh / steps;
   RecordProperty("mse_iake", std::to_string(mse_nup));

@@ -1,13 +1,13 @@
 // Multi-level inputs and input-difference priors through the v1 API: the server's plan
 // is the core helpers' plan, reported in the client's own inputs, outputs and states;
 // sessions carry u[-1] from one step to the next; misuse is refused naming the field.
-#include "Eigen/LU"
 #include "core/model/input_differences.h"
 #include "core/model/multilevel_inputs.h"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "service_fixture.h"
+#include "tests/util/dac_plant.h"
 
 namespace nupmpc::testing {
 namespace {
@@ -88,12 +88,7 @@ TEST_F(ServiceTest, AnInputDifferenceSessionCarriesTheAppliedInput) {
 }
 
 TEST_F(ServiceTest, MultiLevelInputsGiveTheCoreHelpersPlanOnTheLevels) {
-  core::Problem p = core::Problem::TimeInvariant(3, 1, 1, 8);
-  p.A[0] << 0.7967, -6.3978, -94.2123, 0.0027, 0.9902, -0.1467, 0.0, 0.0030, 0.9999;
-  p.B[0] << 0.0027, 0.0, 0.0;
-  p.C[0] << 0.0, 0.0, 35037.9;
-  p.initial_mean = (Eigen::Matrix3d::Identity() - p.A[0]).partialPivLu().solve(0.5 * p.B[0]);
-  p.input_priors.assign(8, core::ScalarPrior::Free());
+  core::Problem p = DacPlant(8);
   p.output_priors.assign(9, core::ScalarPrior::Gaussian(0.6, 0.01));
   v1::ProblemSpec spec = SpecOrDie(p);
   v1::InputLevels* levels = spec.add_input_levels();
