@@ -41,18 +41,29 @@ absl::StatusOr<std::vector<core::InputLevels>> LevelsFromSpec(const v1::ProblemS
 
 }  // namespace
 
-Eigen::VectorXd InputTransform::CoreInitialState(const Eigen::VectorXd& measured) const {
-  if (!differences) return measured;
-  Eigen::VectorXd x(num_states + num_inputs);
-  x << measured, previous_input;
-  return x;
+absl::Status ReadInputVector(const google::protobuf::RepeatedField<double>& values, int size, const std::string& field,
+                              absl::StatusCode size_error, Eigen::VectorXd* out) {
+  if (values.size() != size) {
+    return absl::Status(size_error, absl::StrCat(field, ": expected ", size, " values (num_inputs), got ", values.size()));
+  }
+  for (int i = 0; i < size; ++i) {
+    if (!std::isfinite(values[i])) return Invalid(absl::StrCat(field, "[", i, "]"), "must be finite");
+  }
+  *out = Eigen::Map<const Eigen::VectorXd>(values.data(), size);
+  return absl::OkStatus();
 }
 
-void InputTransform::MapBack(core::Solution* s) const {
+void InputTransform::WriteCoreInitialState(const Eigen::VectorXd* measured, const Eigen::VectorXd& previous,
+                                           Eigen::VectorXd* core_x0) const {
+  if (measured != nullptr) core_x0->head(num_states) = *measured;
+  core_x0->tail(num_inputs) = previous;
+}
+
+void InputTransform::MapBack(const Eigen::VectorXd& previous, core::Solution* s) const {
   if (!active()) return;
   // Rows are steps: the core's inputs are N × L' (binaries or differences).
   if (differences) {
-    s->inputs = core::InputsFromDifferences(s->inputs, previous_input);
+    s->inputs = core::InputsFromDifferences(s->inputs, previous);
   } else {
     s->inputs = core::InputsFromLevels(s->inputs, levels);
   }
@@ -94,16 +105,8 @@ absl::StatusOr<core::Problem> TransformProblem(const v1::ProblemSpec& spec, core
   }
   t->previous_input = Eigen::VectorXd::Zero(L);
   if (d.previous_input_size() != 0) {
-    if (d.previous_input_size() != L) {
-      return Invalid("spec.input_differences.previous_input",
-                     absl::StrCat("expected ", L, " values (num_inputs), got ", d.previous_input_size()));
-    }
-    for (int l = 0; l < L; ++l) {
-      if (!std::isfinite(d.previous_input(l))) {
-        return Invalid(absl::StrCat("spec.input_differences.previous_input[", l, "]"), "must be finite");
-      }
-      t->previous_input(l) = d.previous_input(l);
-    }
+    NUPMPC_RETURN_IF_ERROR(ReadInputVector(d.previous_input(), L, "spec.input_differences.previous_input",
+                                            absl::StatusCode::kInvalidArgument, &t->previous_input));
   }
   absl::StatusOr<core::Problem> augmented = core::AugmentWithInputDifferences(base, delta, t->previous_input);
   if (!augmented.ok()) {

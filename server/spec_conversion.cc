@@ -345,13 +345,8 @@ absl::Status ReadStepState(const v1::Step& step, const char* field, int num_stat
   return absl::OkStatus();
 }
 
-absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* p) {
+absl::Status ApplyPriorUpdate(const v1::PriorUpdate& u, const std::string& base, core::Problem* p) {
   const int L = p->num_inputs, K = p->num_outputs, N = p->horizon;
-  // Every check that cannot depend on the update comes before the first write, so a step
-  // without an update that is rejected leaves the problem untouched.
-  NUPMPC_RETURN_IF_ERROR(ReadStepState(step, field, p->num_states, &p->initial_mean));
-  if (!step.has_update()) return absl::OkStatus();
-  const v1::PriorUpdate& u = step.update();
   if (u.shift()) {
     for (int n = 0; n + 1 < N; ++n) {
       for (int l = 0; l < L; ++l) p->mutable_input_prior(n, l) = p->input_prior(n + 1, l);
@@ -360,7 +355,6 @@ absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* p
       for (int k = 0; k < K; ++k) p->mutable_output_prior(n, k) = p->output_prior(n + 1, k);
     }
   }
-  const std::string base = Path(field, "update");
   for (int i = 0; i < u.inputs_size(); ++i) {
     const auto& e = u.inputs(i);
     if (e.index() >= static_cast<unsigned>(L)) {

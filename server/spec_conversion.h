@@ -40,10 +40,9 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& opt
 // the state). Writes nothing when it fails.
 absl::Status ReadStepState(const v1::Step& step, const char* field, int num_states, Eigen::VectorXd* x0);
 
-// Applies a step's state and prior update to the session's problem. `field` is the path
-// prefix used in messages ("step"). A step without an update is checked completely before
-// anything is written; with an update, pass a copy (a bad entry may fail half-way).
-absl::Status ApplyStep(const v1::Step& step, const char* field, core::Problem* problem);
+// Applies a prior update (shift, then replaced components) to a problem. `field` is the
+// path used in messages ("step.update"). A bad entry may fail half-way: pass a copy.
+absl::Status ApplyPriorUpdate(const v1::PriorUpdate& update, const std::string& field, core::Problem* problem);
 
 // Fills a SolveResult from the core's summary and solution.
 void ResultToProto(const core::SolveSummary& summary, const core::Solution& solution, v1::SolveResult* out);

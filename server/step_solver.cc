@@ -1,7 +1,6 @@
 #include "server/step_solver.h"
 
 #include <algorithm>
-#include <cmath>
 #include <limits>
 
 #include "core/util/status_macros.h"
@@ -36,17 +35,8 @@ absl::Status ReadPreviousInput(const v1::Step& step, const InputTransform& trans
   if (!transform.differences) {
     return absl::InvalidArgumentError("step.previous_input: only for sessions with input_differences");
   }
-  if (step.previous_input_size() != transform.num_inputs) {
-    return absl::FailedPreconditionError(absl::StrCat("step.previous_input: expected ", transform.num_inputs,
-                                                      " values (num_inputs), got ", step.previous_input_size()));
-  }
-  for (int l = 0; l < transform.num_inputs; ++l) {
-    if (!std::isfinite(step.previous_input(l))) {
-      return absl::InvalidArgumentError(absl::StrCat("step.previous_input[", l, "]: must be finite"));
-    }
-  }
-  *out = Eigen::Map<const Eigen::VectorXd>(step.previous_input().data(), transform.num_inputs);
-  return absl::OkStatus();
+  return ReadInputVector(step.previous_input(), transform.num_inputs, "step.previous_input",
+                          absl::StatusCode::kFailedPrecondition, out);
 }
 
 }  // namespace
@@ -78,8 +68,11 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 
   core::Session& solver = *entry.solver;
   InputTransform& transform = entry.transform;
+  // Everything but the update is checked before anything changes.
+  NUPMPC_RETURN_IF_ERROR(ReadStepState(step, "step", entry.dims.num_states(), &entry.x0));
   Eigen::VectorXd previous_input;  // u[-1] of this solve (Δu sessions only)
   NUPMPC_RETURN_IF_ERROR(ReadPreviousInput(step, transform, &previous_input));
+  const Eigen::VectorXd* measured = step.state_size() > 0 ? &entry.x0 : nullptr;
   if (step.has_update()) {
     // References or bounds change: validate on a copy; Update() keeps the session as it
     // was if it rejects the problem.
@@ -89,30 +82,22 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
           "their priors are fixed at creation");
     }
     core::Problem candidate = solver.problem();
-    if (transform.differences) {  // the core's state is [x; u[-1]]: the step's state is x only
-      v1::Step update_only = step;
-      update_only.clear_state();
-      NUPMPC_RETURN_IF_ERROR(ApplyStep(update_only, "step", &candidate));
-      NUPMPC_RETURN_IF_ERROR(ReadStepState(step, "step", entry.dims.num_states(), &entry.x0));
-      if (step.state_size() > 0) candidate.initial_mean.head(transform.num_states) = entry.x0;
-      candidate.initial_mean.tail(transform.num_inputs) = previous_input;
-    } else {
-      NUPMPC_RETURN_IF_ERROR(ApplyStep(step, "step", &candidate));
+    NUPMPC_RETURN_IF_ERROR(ApplyPriorUpdate(step.update(), "step.update", &candidate));
+    if (transform.differences) {
+      transform.WriteCoreInitialState(measured, previous_input, &candidate.initial_mean);
+    } else if (measured != nullptr) {
+      candidate.initial_mean = *measured;
     }
     NUPMPC_RETURN_IF_ERROR(solver.Update(candidate));
     entry.algorithm.store(solver.algorithm());
-  } else {
-    // The common path: at most the measured state changes (no copy of the problem).
-    // ReadStepState checks size and finiteness, which is all SetInitialState checks.
-    NUPMPC_RETURN_IF_ERROR(ReadStepState(step, "step", entry.dims.num_states(), &entry.x0));
-    if (transform.differences) {
-      Eigen::VectorXd x = solver.problem().initial_mean;
-      if (step.state_size() > 0) x.head(transform.num_states) = entry.x0;
-      x.tail(transform.num_inputs) = previous_input;
-      NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(x));
-    } else if (step.state_size() > 0) {
-      NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(entry.x0));
-    }
+  } else if (transform.differences) {
+    Eigen::VectorXd x = solver.problem().initial_mean;  // u[-1] changes every step
+    transform.WriteCoreInitialState(measured, previous_input, &x);
+    NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(x));
+  } else if (measured != nullptr) {
+    // The common path: only the measured state changes (no copy of the problem).
+    // ReadStepState checked size and finiteness, which is all SetInitialState checks.
+    NUPMPC_RETURN_IF_ERROR(solver.SetInitialState(*measured));
   }
 
   switch (step.warm_start()) {
@@ -127,8 +112,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
   if (transform.active()) {
-    transform.previous_input = previous_input;  // what this plan's differences start from
-    transform.MapBack(&entry.solution);
+    transform.MapBack(previous_input, &entry.solution);
     transform.RememberApplied(entry.solution);
   }
   ResultToProto(summary, entry.solution, out);
@@ -143,7 +127,7 @@ absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limit
   NUPMPC_RETURN_IF_ERROR(MakeLimits(built.default_time_limit_ms, nullptr, call, &limits));
   core::Solution solution;
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, built.solver->Solve(limits, &solution));
-  built.transform.MapBack(&solution);
+  built.transform.MapBack(built.transform.previous_input, &solution);
   ResultToProto(summary, solution, out);
   return absl::OkStatus();
 }

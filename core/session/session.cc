@@ -42,6 +42,11 @@ absl::Status CheckSameShape(const Problem& session, const Problem& update) {
 
 bool AllFinite(const PrimalIterate& it) { return it.x0.allFinite() && it.u.allFinite(); }
 
+bool AnyBinaryInput(const Problem& p) {
+  return std::any_of(p.input_priors.begin(), p.input_priors.end(),
+                     [](const ScalarPrior& prior) { return prior.kind == PriorKind::kBinary; });
+}
+
 }  // namespace
 
 const char* SolveStatusName(SolveStatus status) {
@@ -79,6 +84,7 @@ absl::Status Session::Rebuild() {
   candidate_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   best_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   has_warm_state_ = false;
+  has_binary_inputs_ = AnyBinaryInput(problem_);
   return absl::OkStatus();
 }
 
@@ -115,24 +121,22 @@ absl::Status Session::Update(const Problem& problem) {
     algorithm_->Refresh(problem_);
   }
   evaluator_.Prepare(problem_);
+  has_binary_inputs_ = AnyBinaryInput(problem_);
   return absl::OkStatus();
 }
 
 void Session::RoundDiscreteInputs(SolveSummary* summary) {
   const int L = problem_.num_inputs;
   double gap = 0.0;
-  bool any = false;
   for (int n = 0; n < problem_.horizon; ++n) {
     for (int l = 0; l < L; ++l) {
       const ScalarPrior& prior = problem_.input_prior(n, l);
       if (prior.kind != PriorKind::kBinary) continue;
-      any = true;
       double& u = best_.u(l, n);
       gap = std::max(gap, HardViolation(prior, u));
       u = std::abs(u - prior.lower) <= std::abs(u - prior.upper) ? prior.lower : prior.upper;
     }
   }
-  if (!any) return;
   const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
   summary->objective = r.objective;
   summary->max_violation = r.max_violation;
@@ -160,7 +164,7 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   algorithm_->AcquireWorkspace();  // after ReleaseWorkspace(); outside the timed loop's iterations
   const auto start = std::chrono::steady_clock::now();
   SolveSummary summary = RunLoop(limits, warm);
-  if (summary.IsUsable()) RoundDiscreteInputs(&summary);
+  if (has_binary_inputs_ && summary.IsUsable()) RoundDiscreteInputs(&summary);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.warm_started = warm;
   summary.algorithm = algorithm_->algorithm();

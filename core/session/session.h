@@ -61,6 +61,7 @@ class Session {
   ObjectiveEvaluator evaluator_;
   PrimalIterate current_, candidate_, best_;
   bool has_warm_state_ = false;
+  bool has_binary_inputs_ = false;  ///< derived from problem_ whenever it is replaced
 };
 
 }  // namespace nupmpc::core
