@@ -1,0 +1,116 @@
+#include "core/nonlinear/sequential_solver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "core/util/status_macros.h"
+
+namespace nupmpc::core {
+namespace {
+
+// The starting point of Create(): x[0] held, inputs zero. Only used to get a valid first
+// linearisation (the session needs one); Solve() relinearises around the caller's guess.
+Solution RestingPoint(const Problem& shape) {
+  Solution point;
+  point.inputs = Eigen::MatrixXd::Zero(shape.horizon, shape.num_inputs);
+  point.states = shape.initial_mean.transpose().replicate(shape.horizon + 1, 1);
+  point.outputs = Eigen::MatrixXd::Zero(shape.horizon + 1, shape.num_outputs);
+  return point;
+}
+
+double MaxAbs(const Eigen::MatrixXd& m) { return m.size() == 0 ? 0.0 : m.cwiseAbs().maxCoeff(); }
+
+// Relative max-norm change of states and inputs from `point` to `plan`.
+double RelativeStep(const Solution& point, const Solution& plan) {
+  const double change = std::max(MaxAbs(plan.states - point.states), MaxAbs(plan.inputs - point.inputs));
+  return change / (1.0 + std::max(MaxAbs(plan.states), MaxAbs(plan.inputs)));
+}
+
+}  // namespace
+
+absl::Status Validate(const SequentialOptions& options) {
+  if (options.max_linearisations < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("SequentialOptions.max_linearisations: must be ≥ 1, got ", options.max_linearisations));
+  }
+  if (options.inner_iterations < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("SequentialOptions.inner_iterations: must be ≥ 0, got ", options.inner_iterations));
+  }
+  if (!(options.step_tolerance > 0.0) || !std::isfinite(options.step_tolerance)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("SequentialOptions.step_tolerance: must be finite and > 0, got ", options.step_tolerance));
+  }
+  if (!(options.damping > 0.0 && options.damping <= 1.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("SequentialOptions.damping: must be in (0, 1], got ", options.damping));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::unique_ptr<SequentialSolver>> SequentialSolver::Create(
+    std::unique_ptr<Linearisation> linearisation, SolverOptions solver_options, SequentialOptions options) {
+  if (linearisation == nullptr) return absl::InvalidArgumentError("linearisation: must not be null");
+  NUPMPC_RETURN_IF_ERROR(Validate(options));
+  Problem problem = linearisation->shape();
+  if (problem.initial_mean.size() != problem.num_states) {
+    return absl::InvalidArgumentError(absl::StrCat("Problem.initial_mean: expected size ", problem.num_states,
+                                                   ", got ", problem.initial_mean.size()));
+  }
+  linearisation->Linearise(RestingPoint(problem), &problem);
+  std::unique_ptr<SequentialSolver> solver(new SequentialSolver(std::move(linearisation), options, problem));
+  NUPMPC_ASSIGN_OR_RETURN(solver->session_, Session::Create(std::move(problem), solver_options));
+  return solver;
+}
+
+absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initial_guess, Solution* plan) {
+  const int N = problem_.horizon;
+  if (initial_guess.states.rows() != N + 1 || initial_guess.states.cols() != problem_.num_states) {
+    return absl::InvalidArgumentError(absl::StrCat("initial_guess.states: expected ", N + 1, "x", problem_.num_states,
+                                                   ", got ", initial_guess.states.rows(), "x",
+                                                   initial_guess.states.cols()));
+  }
+  if (initial_guess.inputs.rows() != N || initial_guess.inputs.cols() != problem_.num_inputs) {
+    return absl::InvalidArgumentError(absl::StrCat("initial_guess.inputs: expected ", N, "x", problem_.num_inputs,
+                                                   ", got ", initial_guess.inputs.rows(), "x",
+                                                   initial_guess.inputs.cols()));
+  }
+  if (!initial_guess.states.allFinite() || !initial_guess.inputs.allFinite()) {
+    return absl::InvalidArgumentError("initial_guess: contains a non-finite number");
+  }
+  const auto start = std::chrono::steady_clock::now();
+  point_ = initial_guess;
+  SolveLimits limits;
+  limits.max_iterations = options_.inner_iterations;
+  SequentialSummary summary;
+  for (int k = 0; k < options_.max_linearisations; ++k) {
+    linearisation_->Linearise(point_, &problem_);
+    NUPMPC_RETURN_IF_ERROR(session_->Update(problem_));
+    // The first linearisation starts cold; later ones continue the NUP state.
+    limits.warm_start = k > 0;
+    NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(limits, &plan_));
+    ++summary.linearisations;
+    summary.inner_iterations += summary.last_inner.iterations;
+    if (!summary.last_inner.IsUsable()) break;
+    summary.last_step = RelativeStep(point_, plan_);
+    const bool inner_done = options_.inner_iterations > 0 || summary.last_inner.status == SolveStatus::kConverged;
+    if (options_.damping < 1.0 && summary.last_step > options_.step_tolerance) {
+      point_.states += options_.damping * (plan_.states - point_.states);
+      point_.inputs += options_.damping * (plan_.inputs - point_.inputs);
+    } else {
+      point_ = plan_;
+    }
+    if (inner_done && summary.last_step <= options_.step_tolerance) {
+      summary.converged = true;
+      break;
+    }
+  }
+  summary.nonlinear_violation = linearisation_->NonlinearViolation(plan_);
+  summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (plan != nullptr) *plan = plan_;
+  return summary;
+}
+
+}  // namespace nupmpc::core

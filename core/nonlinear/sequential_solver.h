@@ -1,0 +1,88 @@
+#ifndef NUPMPC_CORE_NONLINEAR_SEQUENTIAL_SOLVER_H_
+#define NUPMPC_CORE_NONLINEAR_SEQUENTIAL_SOLVER_H_
+
+// Sequential linearisation (nup-algorithms.md §6.4, [KL] §V-D/E): a nonlinear problem is
+// solved as a sequence of linear (LTV) NUP problems, each linearised around the previous
+// plan. The inner problems run on one core Session, so the NUP state (variances, active
+// sets) carries from one linearisation to the next and later subproblems settle in a few
+// passes.
+//
+// What is nonlinear is told by a Linearisation: a nonlinear plant model
+// (core/nonlinear/nonlinear_model.h) or keep-out regions on a linear plant
+// (core/nonlinear/keep_out.h).
+
+#include <memory>
+
+#include "absl/status/statusor.h"
+#include "core/options.h"
+#include "core/problem.h"
+#include "core/session/session.h"
+#include "core/solution.h"
+
+namespace nupmpc::core {
+
+// Writes the LTV model (and anything else that depends on the linearisation point) of one
+// nonlinear problem into a Problem of fixed shape.
+class Linearisation {
+ public:
+  virtual ~Linearisation() = default;
+  // The problem's shape and everything that does not depend on the linearisation point
+  // (priors, x[0], terminal cost). Its time-varying fields are sized but unset.
+  virtual const Problem& shape() const = 0;
+  // Overwrites `problem`'s point-dependent fields with the linearisation around `point`.
+  virtual void Linearise(const Solution& point, Problem* problem) const = 0;
+  // How far a plan of the linearised problem is from solving the nonlinear one: the
+  // largest model defect |x[n+1] - f(x[n], u[n])| or nonlinear constraint violation.
+  virtual double NonlinearViolation(const Solution& plan) const = 0;
+};
+
+struct SequentialOptions {
+  int max_linearisations = 100;
+  // Message-passing iterations per linearised problem; 0 runs each to convergence (a
+  // sequential convex program). [KL] re-linearises after every IAKE pass (1).
+  int inner_iterations = 0;
+  // Converged when the plan moved less than this between linearisations (max-norm over
+  // states and inputs, relative to 1 + the plan's max-norm) and the last inner solve
+  // converged.
+  double step_tolerance = 1e-6;
+  // The next linearisation point is point + damping·(plan - point); 1 takes the plan.
+  double damping = 1.0;
+};
+absl::Status Validate(const SequentialOptions& options);
+
+struct SequentialSummary {
+  bool converged = false;
+  int linearisations = 0;
+  int inner_iterations = 0;        ///< message-passing passes over all linearisations
+  double last_step = 0.0;          ///< relative plan change at the last linearisation
+  double nonlinear_violation = 0.0;
+  SolveSummary last_inner;         ///< the last linearised problem's summary
+  double solve_seconds = 0.0;
+};
+
+class SequentialSolver {
+ public:
+  static absl::StatusOr<std::unique_ptr<SequentialSolver>> Create(std::unique_ptr<Linearisation> linearisation,
+                                                                   SolverOptions solver_options = {},
+                                                                   SequentialOptions options = {});
+
+  // Starts from `initial_guess` (states (N+1)×M, inputs N×L; outputs are recomputed by
+  // the linearisation), writes the final plan to `plan`.
+  absl::StatusOr<SequentialSummary> Solve(const Solution& initial_guess, Solution* plan);
+
+  const Problem& linearised_problem() const { return problem_; }
+
+ private:
+  SequentialSolver(std::unique_ptr<Linearisation> linearisation, SequentialOptions options, Problem problem)
+      : linearisation_(std::move(linearisation)), options_(options), problem_(std::move(problem)) {}
+
+  std::unique_ptr<Linearisation> linearisation_;
+  SequentialOptions options_;
+  Problem problem_;  ///< the current linearisation
+  std::unique_ptr<Session> session_;
+  Solution point_, plan_;
+};
+
+}  // namespace nupmpc::core
+
+#endif  // NUPMPC_CORE_NONLINEAR_SEQUENTIAL_SOLVER_H_
