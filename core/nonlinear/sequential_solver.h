@@ -7,6 +7,12 @@
 // sets) carries from one linearisation to the next and later subproblems settle in a few
 // passes.
 //
+// A local method (Gauss-Newton / sequential convex programming, no second-order terms):
+// it converges where the linearised model describes the plant well around the optimum.
+// An optimum at a turning point of the model (a saturating actuator driven to its peak)
+// may stall or cycle; the summary then says converged = false. Damping and trust regions
+// (TrustRegion in nonlinear_model.h) keep steps inside the linearisation's validity.
+//
 // What is nonlinear is told by a Linearisation: a nonlinear plant model
 // (core/nonlinear/nonlinear_model.h) or keep-out regions on a linear plant
 // (core/nonlinear/keep_out.h).

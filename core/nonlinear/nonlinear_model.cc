@@ -1,0 +1,192 @@
+#include "core/nonlinear/nonlinear_model.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "core/util/status_macros.h"
+
+namespace nupmpc::core {
+namespace {
+
+absl::Status CheckDimensions(const NonlinearModel& model, const Problem& problem) {
+  if (!model.transition || !model.output) {
+    return absl::InvalidArgumentError("NonlinearModel.transition/output: both functions are required");
+  }
+  const auto mismatch = [](const char* field, int got, int want) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("Problem.", field, " = ", got, " does not match the nonlinear model's ", want));
+  };
+  if (problem.num_states != model.num_states) return mismatch("num_states", problem.num_states, model.num_states);
+  if (problem.num_inputs != model.num_inputs) return mismatch("num_inputs", problem.num_inputs, model.num_inputs);
+  if (problem.num_outputs != model.num_outputs) {
+    return mismatch("num_outputs", problem.num_outputs, model.num_outputs);
+  }
+  if (problem.horizon < 1) return mismatch("horizon", problem.horizon, 1);
+  const std::size_t N = problem.horizon;
+  if (problem.output_priors.size() != (N + 1) * model.num_outputs) {
+    return absl::InvalidArgumentError(absl::StrCat("Problem.output_priors: expected (N+1)·K = ",
+                                                   (N + 1) * model.num_outputs, " entries, got ",
+                                                   problem.output_priors.size()));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CheckTrustRegion(const TrustRegion& trust, int M) {
+  if (trust.state_radius.size() == 0) return absl::OkStatus();
+  if (trust.state_radius.size() != M) {
+    return absl::InvalidArgumentError(absl::StrCat("TrustRegion.state_radius: expected size ", M, " (one per state), got ",
+                                                   trust.state_radius.size()));
+  }
+  for (int i = 0; i < M; ++i) {
+    if (!(trust.state_radius(i) > 0.0)) {
+      return absl::InvalidArgumentError(absl::StrCat("TrustRegion.state_radius[", i, "]: must be > 0 (+inf for none), got ",
+                                                     trust.state_radius(i)));
+    }
+  }
+  return absl::OkStatus();
+}
+
+class ModelLinearisation final : public Linearisation {
+ public:
+  ModelLinearisation(NonlinearModel model, const Problem& problem, const TrustRegion& trust)
+      : model_(std::move(model)), shape_(problem) {
+    const int N = problem.horizon, M = model_.num_states, L = model_.num_inputs, K = model_.num_outputs;
+    for (int i = 0; i < trust.state_radius.size(); ++i) {
+      if (std::isfinite(trust.state_radius(i))) trusted_.push_back({i, trust.state_radius(i)});
+    }
+    const int T = static_cast<int>(trusted_.size());
+    shape_.A.assign(N, Eigen::MatrixXd::Zero(M, M));
+    shape_.B.assign(N, Eigen::MatrixXd::Zero(M, L));
+    shape_.state_offset.assign(N, Eigen::VectorXd::Zero(M));
+    shape_.num_outputs = K + T;
+    shape_.C.assign(N + 1, Eigen::MatrixXd::Zero(K + T, M));
+    shape_.output_offset.assign(N + 1, Eigen::VectorXd::Zero(K + T));
+    shape_.output_priors.assign(static_cast<std::size_t>(N + 1) * (K + T), ScalarPrior::Free());
+    for (int n = 0; n <= N; ++n) {
+      for (int k = 0; k < K; ++k) shape_.mutable_output_prior(n, k) = problem.output_prior(n, k);
+    }
+    for (int n = 1; n <= N; ++n) {  // x[0] is given
+      for (int t = 0; t < T; ++t) shape_.C[n](K + t, trusted_[t].state) = 1.0;
+    }
+    x_.resize(M);
+    u_.resize(L);
+    next_.resize(M);
+    y_.resize(K);
+    dhdx_.resize(K, M);
+  }
+
+  const Problem& shape() const override { return shape_; }
+
+  void Linearise(const Solution& point, Problem* problem) const override {
+    const int N = shape_.horizon;
+    for (int n = 0; n <= N; ++n) {
+      x_ = point.states.row(n).transpose();
+      if (n < N) {
+        u_ = point.inputs.row(n).transpose();
+        model_.transition(n, x_, u_, &next_, &problem->A[n], &problem->B[n]);
+        problem->state_offset[n] = next_ - problem->A[n] * x_ - problem->B[n] * u_;
+      }
+      auto C = problem->C[n].topRows(model_.num_outputs);
+      model_.output(n, x_, &y_, &dhdx_);
+      C = dhdx_;
+      problem->output_offset[n].head(model_.num_outputs) = y_ - dhdx_ * x_;
+      if (n == 0) continue;
+      for (std::size_t t = 0; t < trusted_.size(); ++t) {
+        const double centre = x_(trusted_[t].state), radius = trusted_[t].radius;
+        problem->mutable_output_prior(n, model_.num_outputs + static_cast<int>(t)) =
+            ScalarPrior::Box(centre - radius, centre + radius);
+      }
+    }
+  }
+
+  // The plan's dynamics defect and the gap between its (linearised) outputs and h.
+  double NonlinearViolation(const Solution& plan) const override {
+    const int N = shape_.horizon;
+    double worst = 0.0;
+    Eigen::MatrixXd A(model_.num_states, model_.num_states), B(model_.num_states, model_.num_inputs);
+    Eigen::MatrixXd C(model_.num_outputs, model_.num_states);
+    for (int n = 0; n <= N; ++n) {
+      x_ = plan.states.row(n).transpose();
+      if (n < N) {
+        u_ = plan.inputs.row(n).transpose();
+        model_.transition(n, x_, u_, &next_, &A, &B);
+        worst = std::max(worst, (plan.states.row(n + 1).transpose() - next_).cwiseAbs().maxCoeff());
+      }
+      model_.output(n, x_, &y_, &C);
+      worst = std::max(worst, (plan.outputs.row(n).head(model_.num_outputs).transpose() - y_).cwiseAbs().maxCoeff());
+    }
+    return worst;
+  }
+
+ private:
+  struct Trusted {
+    int state;
+    double radius;
+  };
+  NonlinearModel model_;
+  std::vector<Trusted> trusted_;  ///< states with a finite trust radius, in output order
+  Problem shape_;
+  mutable Eigen::MatrixXd dhdx_;
+  mutable Eigen::VectorXd x_, u_, next_, y_;  // scratch: Linearise() allocates nothing
+};
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<Linearisation>> MakeModelLinearisation(NonlinearModel model, const Problem& problem,
+                                                                        TrustRegion trust_region) {
+  NUPMPC_RETURN_IF_ERROR(CheckDimensions(model, problem));
+  NUPMPC_RETURN_IF_ERROR(CheckTrustRegion(trust_region, model.num_states));
+  return std::make_unique<ModelLinearisation>(std::move(model), problem, trust_region);
+}
+
+Eigen::MatrixXd SimulateNonlinear(const NonlinearModel& model, const Eigen::VectorXd& x0,
+                                  const Eigen::MatrixXd& inputs) {
+  const int N = static_cast<int>(inputs.rows());
+  Eigen::MatrixXd states(N + 1, model.num_states);
+  Eigen::MatrixXd A(model.num_states, model.num_states), B(model.num_states, model.num_inputs);
+  Eigen::VectorXd x = x0, next(model.num_states);
+  states.row(0) = x.transpose();
+  for (int n = 0; n < N; ++n) {
+    model.transition(n, x, inputs.row(n).transpose(), &next, &A, &B);
+    x = next;
+    states.row(n + 1) = x.transpose();
+  }
+  return states;
+}
+
+double JacobianError(const NonlinearModel& model, int n, const Eigen::VectorXd& x, const Eigen::VectorXd& u) {
+  const int M = model.num_states, L = model.num_inputs, K = model.num_outputs;
+  Eigen::MatrixXd A(M, M), B(M, L), C(K, M), scratch_a(M, M), scratch_b(M, L), scratch_c(K, M);
+  Eigen::VectorXd next(M), y(K), plus(M), minus(M), y_plus(K), y_minus(K);
+  model.transition(n, x, u, &next, &A, &B);
+  model.output(n, x, &y, &C);
+  double worst = 0.0;
+  const auto compare = [&](const Eigen::VectorXd& difference, const Eigen::VectorXd& analytic) {
+    worst = std::max(worst, (difference - analytic).cwiseAbs().maxCoeff() / (1.0 + analytic.cwiseAbs().maxCoeff()));
+  };
+  for (int j = 0; j < M; ++j) {
+    const double h = 1e-6 * (1.0 + std::abs(x(j)));
+    Eigen::VectorXd xp = x, xm = x;
+    xp(j) += h;
+    xm(j) -= h;
+    model.transition(n, xp, u, &plus, &scratch_a, &scratch_b);
+    model.transition(n, xm, u, &minus, &scratch_a, &scratch_b);
+    compare((plus - minus) / (2 * h), A.col(j));
+    model.output(n, xp, &y_plus, &scratch_c);
+    model.output(n, xm, &y_minus, &scratch_c);
+    compare((y_plus - y_minus) / (2 * h), C.col(j));
+  }
+  for (int j = 0; j < L; ++j) {
+    const double h = 1e-6 * (1.0 + std::abs(u(j)));
+    Eigen::VectorXd up = u, um = u;
+    up(j) += h;
+    um(j) -= h;
+    model.transition(n, x, up, &plus, &scratch_a, &scratch_b);
+    model.transition(n, x, um, &minus, &scratch_a, &scratch_b);
+    compare((plus - minus) / (2 * h), B.col(j));
+  }
+  return worst;
+}
+
+}  // namespace nupmpc::core
