@@ -199,6 +199,21 @@ absl::Status Validate(const Problem& p) {
   }
   for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
     NUPMPC_RETURN_IF_ERROR(ValidatePrior(p.output_priors[i], "Problem.output_priors", static_cast<int>(i)));
+    if (p.output_priors[i].rounds_with_next) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("Problem.output_priors[", i, "].rounds_with_next: only binary inputs are rounded"));
+    }
+  }
+  for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
+    const ScalarPrior& prior = p.input_priors[i];
+    if (!prior.rounds_with_next) continue;
+    const bool next_fits = (i + 1) % L != 0 && p.input_priors[i + 1].kind == PriorKind::kBinary &&
+                           p.input_priors[i + 1].lower == prior.lower && p.input_priors[i + 1].upper == prior.upper;
+    if (prior.kind != PriorKind::kBinary || !next_fits) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "Problem.input_priors[", i,
+          "].rounds_with_next: must be a binary followed, at the same step, by a binary with the same levels"));
+    }
   }
 
   if (p.terminal.has_value()) {

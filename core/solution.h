@@ -28,7 +28,7 @@ struct SolveSummary {
   // Binary inputs: the plan is projected to the nearer level after the iterations
   // (nup-algorithms.md §7.2), and the objective and violation are those of the rounded plan.
   bool rounded = false;       ///< some input was binary and the plan was rounded
-  double discrete_gap = 0.0;  ///< before rounding: largest distance of a binary input to its nearer level
+  double discrete_gap = 0.0;  ///< before rounding: largest distance of a binary (or an M-level sum) to its nearer level
   bool warm_started = false;
   double solve_seconds = 0.0;
 

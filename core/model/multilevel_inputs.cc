@@ -79,6 +79,7 @@ absl::StatusOr<Problem> ExpandMultiLevelInputs(const Problem& p, const std::vect
         } else {
           prior = ScalarPrior::Binary(0.0, 1.0, em);
           prior.initial_variance = 1.0 + 0.01 * j;  // symmetry breaking ([KL] eq. 80)
+          prior.rounds_with_next = j + 1 < columns;
         }
       }
     }

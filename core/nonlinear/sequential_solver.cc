@@ -87,7 +87,11 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
   SequentialSummary summary;
   for (int k = 0; k < options_.max_linearisations; ++k) {
     linearisation_->Linearise(point_, &problem_);
-    NUPMPC_RETURN_IF_ERROR(session_->Update(problem_));
+    if (absl::Status updated = session_->Update(problem_); !updated.ok()) {
+      // Typically a plan that left the model's domain (a Jacobian became non-finite).
+      return absl::Status(updated.code(), absl::StrCat("linearisation ", k, " around the previous plan: ",
+                                                       updated.message()));
+    }
     // The first linearisation starts cold; later ones continue the NUP state.
     limits.warm_start = k > 0;
     NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(limits, &plan_));

@@ -55,6 +55,11 @@ struct ScalarPrior {
   // kBinary: the NUP variance IAKE starts from (0: (upper - lower)²). The binaries of an
   // M-level input start from slightly different values to break their symmetry.
   double initial_variance = 0.0;
+  // kBinary input: this binary and the next input component at the same step are summed
+  // into one M-level input (core/model/multilevel_inputs.h). The plan then rounds the
+  // sum to the nearest level instead of each binary on its own: two binaries stuck
+  // symmetrically at ½ mean the middle level, not both low or both high.
+  bool rounds_with_next = false;
 
   bool has_gaussian() const { return variance < kInfinity; }
   bool is_hard() const { return slope == kInfinity; }

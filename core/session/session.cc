@@ -13,6 +13,10 @@
 namespace nupmpc::core {
 namespace {
 
+// Largest input change between passes (relative to 1 + the largest input) at which a
+// problem with non-convex priors counts as settled.
+constexpr double kNonconvexStepTolerance = 1e-9;
+
 bool AnyInputConstrained(const Problem& p) {
   for (const ScalarPrior& prior : p.input_priors) {
     if (prior.kind != PriorKind::kNone) return true;
@@ -41,6 +45,12 @@ absl::Status CheckSameShape(const Problem& session, const Problem& update) {
 }
 
 bool AllFinite(const PrimalIterate& it) { return it.x0.allFinite() && it.u.allFinite(); }
+
+bool AnyNonconvexPrior(const Problem& p) {
+  const auto nonconvex = [](const ScalarPrior& prior) { return IsNonconvex(prior.kind); };
+  return std::any_of(p.input_priors.begin(), p.input_priors.end(), nonconvex) ||
+         std::any_of(p.output_priors.begin(), p.output_priors.end(), nonconvex);
+}
 
 bool AnyBinaryInput(const Problem& p) {
   return std::any_of(p.input_priors.begin(), p.input_priors.end(),
@@ -85,6 +95,7 @@ absl::Status Session::Rebuild() {
   best_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   has_warm_state_ = false;
   has_binary_inputs_ = AnyBinaryInput(problem_);
+  has_nonconvex_priors_ = AnyNonconvexPrior(problem_);
   return absl::OkStatus();
 }
 
@@ -122,6 +133,7 @@ absl::Status Session::Update(const Problem& problem) {
   }
   evaluator_.Prepare(problem_);
   has_binary_inputs_ = AnyBinaryInput(problem_);
+  has_nonconvex_priors_ = AnyNonconvexPrior(problem_);
   return absl::OkStatus();
 }
 
@@ -132,9 +144,17 @@ void Session::RoundDiscreteInputs(SolveSummary* summary) {
     for (int l = 0; l < L; ++l) {
       const ScalarPrior& prior = problem_.input_prior(n, l);
       if (prior.kind != PriorKind::kBinary) continue;
-      double& u = best_.u(l, n);
-      gap = std::max(gap, HardViolation(prior, u));
-      u = std::abs(u - prior.lower) <= std::abs(u - prior.upper) ? prior.lower : prior.upper;
+      // A run of binaries summed into one M-level input (rounds_with_next) is rounded as
+      // its sum: the nearest level, written as the first k binaries high.
+      int last = l;
+      while (problem_.input_prior(n, last).rounds_with_next) ++last;
+      const double a = prior.lower, b = prior.upper;
+      double sum = 0.0;
+      for (int j = l; j <= last; ++j) sum += (best_.u(j, n) - a) / (b - a);
+      const double high = std::clamp(std::round(sum), 0.0, static_cast<double>(last - l + 1));
+      gap = std::max(gap, std::abs(sum - high) * std::abs(b - a));
+      for (int j = l; j <= last; ++j) best_.u(j, n) = j - l < high ? b : a;
+      l = last;
     }
   }
   const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
@@ -243,11 +263,18 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
       summary.status = SolveStatus::kNumericalError;
       break;
     }
+    // Non-convex priors (NUV, binary) leave no trace in J (§5.1): J alone can sit still
+    // while the inputs are still being sparsified or binarised, so the plan must settle
+    // too.
+    const bool iterate_settled =
+        !has_nonconvex_priors_ ||
+        (current_.u - best_.u).cwiseAbs().maxCoeff() <= kNonconvexStepTolerance * (1.0 + current_.u.cwiseAbs().maxCoeff());
     std::swap(best_, current_);
     have_finite = true;
     summary.objective = r.objective;
     summary.max_violation = r.max_violation;
     const bool objective_settled =
+        iterate_settled &&
         std::abs(r.objective - previous_objective) <= options_.objective_tolerance * std::abs(r.objective);
     if (objective_settled && r.max_violation <= violation_tolerance) {
       summary.status = SolveStatus::kConverged;

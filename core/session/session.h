@@ -62,6 +62,7 @@ class Session {
   PrimalIterate current_, candidate_, best_;
   bool has_warm_state_ = false;
   bool has_binary_inputs_ = false;  ///< derived from problem_ whenever it is replaced
+  bool has_nonconvex_priors_ = false;  ///< likewise
 };
 
 }  // namespace nupmpc::core

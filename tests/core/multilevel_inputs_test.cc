@@ -8,7 +8,7 @@
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/util/dac_plant.h"
+#include "core/examples/scenarios/dac.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::core {
@@ -58,7 +58,7 @@ TEST(MultiLevelInputs, TheExpandedModelSimulatesLikeTheOriginal) {
   }
 }
 
-using testing::DacTarget;
+using examples::DacTarget;
 
 TEST(MultiLevelInputs, ThreeLevelDacComesCloseToExhaustiveSearch) {
   // The DAC of [KL] §V-A with a three-level input {0, 0.5, 1} (two binaries), receding
@@ -66,7 +66,7 @@ TEST(MultiLevelInputs, ThreeLevelDacComesCloseToExhaustiveSearch) {
   // per step, each controller from its own state.
   const int K = 8, steps = 60;
   const double VY = 0.01;
-  Problem p = testing::DacPlant(K);
+  Problem p = examples::DacPlant(K);
   const std::vector<InputLevels> levels = {{.count = 3, .lowest = 0.0, .spacing = 0.5}};
   const Eigen::Matrix3d A = p.A[0];
   const Eigen::Vector3d B = p.B[0];
@@ -125,6 +125,24 @@ TEST(MultiLevelInputs, BadLevelsAndOwnPriorsAreRefused) {
               testing::StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("input_priors[1]")));
   EXPECT_THAT(ExpandMultiLevelInputs(p, {{}}).status(),
               testing::StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("levels")));
+}
+
+}  // namespace
+}  // namespace nupmpc::core
+
+namespace nupmpc::core {
+namespace {
+
+TEST(MultiLevelInputs, BinariesRoundedTogetherMustBeFollowedByAMatchingBinary) {
+  Problem p = Plant();
+  auto e = ExpandMultiLevelInputs(p, {{.count = 3, .lowest = -1.0, .spacing = 1.0}, {}});
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_TRUE(e->input_prior(0, 0).rounds_with_next);   // first of the two binaries
+  EXPECT_FALSE(e->input_prior(0, 1).rounds_with_next);  // the last one closes the group
+  Problem broken = *e;
+  broken.mutable_input_prior(2, 1).rounds_with_next = true;  // followed by the Gaussian input
+  EXPECT_THAT(Validate(broken), testing::StatusIs(absl::StatusCode::kInvalidArgument,
+                                                  ::testing::HasSubstr("input_priors[7].rounds_with_next")));
 }
 
 }  // namespace

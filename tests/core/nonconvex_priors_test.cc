@@ -4,11 +4,11 @@
 #include <cmath>
 #include <vector>
 
+#include "core/examples/scenarios/dac.h"
 #include "core/priors/scalar_rules.h"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/util/dac_plant.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::core {
@@ -122,72 +122,21 @@ TEST(NonconvexPriors, AreValidatedNamingTheField) {
   EXPECT_EQ((*session)->algorithm(), Algorithm::kIake);
 }
 
-Problem DacWindow(int K, double output_variance) {
-  Problem p = testing::DacPlant(K);
-  p.input_priors.assign(K, ScalarPrior::Binary(0.0, 1.0, /*em=*/true));
-  p.output_priors.assign(K + 1, ScalarPrior::Gaussian(0.0, output_variance));
-  return p;
-}
-
-using testing::DacTarget;
-
 TEST(BinaryControl, ShortHorizonIakeIsWithinAFewPercentOfExhaustiveSearch) {
   // §7.3: receding horizon K = 8, V_Y = 0.01; each step applies the first input of the
-  // window's plan. IAKE-EM (300 iterations, rounded) vs all 256 binary sequences.
-  const int K = 8, steps = 150;
-  const double VY = 0.01;
-  Problem window = DacWindow(K, VY);
-  const Eigen::Matrix3d A = window.A[0];
-  const Eigen::Vector3d B = window.B[0];
-  const Eigen::RowVector3d C = window.C[0];
-  SolverOptions options;
-  options.max_iterations = 300;  // a budget (§7.2): EM stops early only once every input is binary
-  auto session = Session::Create(window, options);
-  ASSERT_TRUE(session.ok()) << session.status();
-
-  Eigen::Vector3d x_nup = window.initial_mean, x_exh = window.initial_mean;
-  double sse_nup = 0.0, sse_exh = 0.0, largest_gap = 0.0;
-  Solution plan;
-  for (int t = 0; t < steps; ++t) {
-    for (int n = 0; n <= K; ++n) window.output_priors[n] = ScalarPrior::Gaussian(DacTarget(t + n), VY);
-    window.initial_mean = x_nup;
-    ASSERT_THAT((*session)->Update(window), testing::IsOk());
-    SolveLimits cold;
-    cold.warm_start = false;
-    auto summary = (*session)->Solve(cold, &plan);
-    ASSERT_TRUE(summary.ok()) << summary.status();
-    ASSERT_TRUE(summary->rounded);
-    largest_gap = std::max(largest_gap, summary->discrete_gap);
-    for (int n = 0; n < K; ++n) ASSERT_TRUE(plan.inputs(n, 0) == 0.0 || plan.inputs(n, 0) == 1.0);
-
-    // Exhaustive search over the window from the exhaustive controller's own state.
-    double best_cost = INFINITY;
-    double best_u0 = 0.0;
-    for (int code = 0; code < (1 << K); ++code) {
-      Eigen::Vector3d x = x_exh;
-      double cost = 0.0;
-      for (int n = 0; n < K; ++n) {
-        x = A * x + B * ((code >> n) & 1);
-        const double e = C * x - DacTarget(t + n + 1);
-        cost += e * e;
-      }
-      if (cost < best_cost) {
-        best_cost = cost;
-        best_u0 = code & 1;
-      }
-    }
-    x_nup = A * x_nup + B * plan.inputs(0, 0);
-    x_exh = A * x_exh + B * best_u0;
-    sse_nup += std::pow(C * x_nup - DacTarget(t + 1), 2);
-    sse_exh += std::pow(C * x_exh - DacTarget(t + 1), 2);
+  // window's plan. IAKE-EM (300 iterations, cold, rounded) vs all 256 binary sequences.
+  auto run = examples::DacOnline(/*window=*/8, /*steps=*/150, /*output_variance=*/0.01, /*frequency_hz=*/2.0,
+                                 /*iterations=*/300);
+  ASSERT_TRUE(run.ok()) << run.status();
+  for (int t = 0; t < run->nup_inputs.size(); ++t) {
+    ASSERT_TRUE(run->nup_inputs(t) == 0.0 || run->nup_inputs(t) == 1.0) << t;
   }
-  const double mse_nup = sse_nup / steps, mse_exh = sse_exh / steps;
-  RecordProperty("mse_iake", std::to_string(mse_nup));
-  RecordProperty("mse_exhaustive", std::to_string(mse_exh));
-  std::printf("DAC K=8: MSE IAKE-EM %.4e vs exhaustive %.4e (ratio %.3f), largest pre-rounding gap %.3g\n", mse_nup,
-              mse_exh, mse_nup / mse_exh, largest_gap);
-  EXPECT_LE(mse_nup, 1.10 * mse_exh);
-  EXPECT_GT(largest_gap, 0.0);  // EM had not binarised everything: rounding mattered
+  RecordProperty("mse_iake", std::to_string(run->nup_mse));
+  RecordProperty("mse_exhaustive", std::to_string(run->exhaustive_mse));
+  std::printf("DAC K=8: MSE IAKE-EM %.4e vs exhaustive %.4e (ratio %.3f), largest pre-rounding gap %.3g\n",
+              run->nup_mse, run->exhaustive_mse, run->nup_mse / run->exhaustive_mse, run->largest_gap);
+  EXPECT_LE(run->nup_mse, 1.10 * run->exhaustive_mse);
+  EXPECT_GT(run->largest_gap, 0.0);  // EM had not binarised everything: rounding mattered
 }
 
 }  // namespace

@@ -7,7 +7,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "service_fixture.h"
-#include "tests/util/dac_plant.h"
+#include "core/examples/scenarios/dac.h"
 
 namespace nupmpc::testing {
 namespace {
@@ -88,7 +88,7 @@ TEST_F(ServiceTest, AnInputDifferenceSessionCarriesTheAppliedInput) {
 }
 
 TEST_F(ServiceTest, MultiLevelInputsGiveTheCoreHelpersPlanOnTheLevels) {
-  core::Problem p = DacPlant(8);
+  core::Problem p = examples::DacPlant(8);
   p.output_priors.assign(9, core::ScalarPrior::Gaussian(0.6, 0.01));
   v1::ProblemSpec spec = SpecOrDie(p);
   v1::InputLevels* levels = spec.add_input_levels();

@@ -1,0 +1,108 @@
+#!/usr/bin/python3
+"""Renders the examples' CSV (written by the nupmpc-example-* programs) as PNG figures
+like [KL] Figs. 2, 19, 20, 21 and 23. Usage: plot_examples.py DIR (reads and writes DIR).
+Needs Debian's python3-matplotlib."""
+import csv
+import math
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.patches as patches  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def read(path):
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    return {k: [float(r[k]) for r in rows if r[k] != ""] for k in rows[0]}
+
+
+def dac(d):
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8))
+    for ax, hz in zip(axes[:2], (2, 40)):
+        t = read(f"{d}/dac_long_{hz}hz.csv")
+        ax.plot(t["step"], t["target"], "k--", label="target")
+        ax.plot(t["step"], t["output"], label="output y")
+        ax.step(t["step"][:-1], t["input"], where="post", alpha=0.3, label="binary input u")
+        ax.set_title(f"DAC, one plan K = 450, target {hz} Hz")
+        ax.legend(loc="upper right", fontsize=7)
+    t = read(f"{d}/dac_online.csv")
+    ax = axes[2]
+    ax.plot(t["step"], t["target"], "k--", label="target")
+    ax.plot(t["step"], t["nup_output"], label="IAKE-EM, horizon 8")
+    ax.plot(t["step"], t["exhaustive_output"], ":", label="exhaustive, horizon 8")
+    ax.set_title("DAC receding horizon (Fig. 19)")
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(f"{d}/dac.png", dpi=120)
+
+
+def corridor(d):
+    t = read(f"{d}/corridor.csv")
+    versions = ["l2_input", "rate_limit", "sparse_input", "three_levels", "sparse_changes"]
+    fig, axes = plt.subplots(6, 1, figsize=(8, 12), sharex=True)
+    w = t["half_width"][0]
+    lo = [y - w for y in t["target"]]
+    hi = [y + w for y in t["target"]]
+    axes[0].plot(t["step"], lo, "k--", t["step"], hi, "k--")
+    for v in versions:
+        axes[0].plot(t["step"], t["y_" + v], label=v)
+    axes[0].legend(fontsize=7)
+    axes[0].set_title("corridor control (Fig. 20): outputs")
+    for ax, v in zip(axes[1:], versions):
+        ax.step(t["step"][: len(t["u_" + v])], t["u_" + v], where="post")
+        ax.set_ylabel(v, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(f"{d}/corridor.png", dpi=120)
+
+
+def flappy(d):
+    t = read(f"{d}/flappy_bird.csv")
+    walls = read(f"{d}/flappy_walls.csv")
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for first, width, low, sep in zip(walls["first_step"], walls["width"], walls["upper_low"], walls["separation"]):
+        # Bars: below the lower slit, between the slits, above the upper slit.
+        for y0, y1 in ((0, low - sep), (low - sep + 1, low), (low + 1, 10)):
+            ax.add_patch(patches.Rectangle((first, y0), width, y1 - y0, color="k"))
+    ax.plot(t["step"], t["height"], label="height y")
+    flaps = [s for s, u in zip(t["step"], t["flap"]) if u > 0.5]
+    ax.plot(flaps, [0.2] * len(flaps), "r|", label="flap u = 1")
+    ax.set_ylim(0, 10)
+    ax.legend(loc="upper right", fontsize=7)
+    ax.set_title("flappy bird (Fig. 21)")
+    fig.tight_layout()
+    fig.savefig(f"{d}/flappy_bird.png", dpi=120)
+
+
+def obstacles(d):
+    regions = read(f"{d}/obstacles_regions.csv")
+    fig, axes = plt.subplots(1, 2, figsize=(10, 5))
+    for scene, (ax, name) in enumerate(zip(axes, ("single", "mixed"))):
+        for i, s in enumerate(regions["scene"]):
+            if int(s) != scene:
+                continue
+            c = (regions["c1"][i], regions["c2"][i])
+            a, b, rot = regions["a"][i], regions["b"][i], regions["rotation"][i]
+            if regions["shape"][i] == 0:
+                shape = patches.Ellipse(c, 2 * a, 2 * b, angle=math.degrees(rot), color="grey")
+            else:
+                corner = (c[0] - a * math.cos(rot) + b * math.sin(rot), c[1] - a * math.sin(rot) - b * math.cos(rot))
+                shape = patches.Rectangle(corner, 2 * a, 2 * b, angle=math.degrees(rot), color="grey")
+            ax.add_patch(shape)
+        t = read(f"{d}/obstacles_{name}.csv")
+        ax.plot(t["p1"], t["p2"], "o-", ms=3)
+        ax.set_aspect("equal")
+        ax.set_xlim(-0.2, 3.4)
+        ax.set_ylim(-0.2, 3.4)
+        ax.set_title(f"obstacle avoidance: {name} (Fig. 23)")
+    fig.tight_layout()
+    fig.savefig(f"{d}/obstacles.png", dpi=120)
+
+
+if __name__ == "__main__":
+    directory = sys.argv[1] if len(sys.argv) > 1 else "figures"
+    for plot in (dac, corridor, flappy, obstacles):
+        plot(directory)
+        print(f"{plot.__name__}: written to {directory}")

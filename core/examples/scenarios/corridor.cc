@@ -1,0 +1,136 @@
+#include "core/examples/scenarios/corridor.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "core/model/input_differences.h"
+#include "core/model/multilevel_inputs.h"
+#include "core/session/session.h"
+#include "core/util/status_macros.h"
+
+namespace nupmpc::examples {
+namespace {
+
+using core::ScalarPrior;
+
+constexpr double kThreeLevelCorridorSlope = 10.0;
+
+// Model (89) with the corridor as a hard box on y[1..K]; input priors left to the version.
+core::Problem CorridorPlant(double slope) {
+  core::Problem p = core::Problem::TimeInvariant(3, 1, 1, kCorridorSteps);
+  p.A[0] << 1, 0, 0, 1, 1, 0, 0.5, 1, 1;
+  p.B[0] << 0.0015, 0.0015 / 2, 0.0015 / 3;
+  p.C[0] << 0, 0, 1;
+  p.initial_mean = Eigen::Vector3d::Zero();
+  for (int n = 1; n <= kCorridorSteps; ++n) {
+    p.output_priors[n] =
+        ScalarPrior::Box(CorridorTarget(n) - kCorridorHalfWidth, CorridorTarget(n) + kCorridorHalfWidth, slope);
+  }
+  return p;
+}
+
+Eigen::VectorXd Simulate(const core::Problem& p, const Eigen::VectorXd& u) {
+  Eigen::VectorXd y(p.horizon + 1);
+  Eigen::Vector3d x = p.initial_mean;
+  y(0) = p.C[0].row(0).dot(x);
+  for (int n = 0; n < p.horizon; ++n) {
+    x = p.A[0] * x + p.B[0] * u(n);
+    y(n + 1) = p.C[0].row(0).dot(x);
+  }
+  return y;
+}
+
+}  // namespace
+
+const char* CorridorVersionName(CorridorVersion version) {
+  switch (version) {
+    case CorridorVersion::kL2: return "l2_input";
+    case CorridorVersion::kRateLimit: return "rate_limit";
+    case CorridorVersion::kSparseInput: return "sparse_input";
+    case CorridorVersion::kThreeLevels: return "three_levels";
+    case CorridorVersion::kSparseChanges: return "sparse_changes";
+  }
+  return "unknown";
+}
+
+double CorridorTarget(int step) {
+  // 0 until 20, ramp to 4 at 70, hold to 100, down to 1.6 at 130, hold.
+  const auto ramp = [](double s, double from, double to) { return std::clamp((s - from) / (to - from), 0.0, 1.0); };
+  return 4.0 * (ramp(step, 20, 70) - 0.6 * ramp(step, 100, 130));
+}
+
+absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations) {
+  // Hard corridor, except for three levels: there the paper's λ_o = 10 (a hard corridor
+  // overwhelms the binaries' pull and leaves them far from {0, 1}).
+  const core::Problem plant =
+      CorridorPlant(version == CorridorVersion::kThreeLevels ? kThreeLevelCorridorSlope : core::kInfinity);
+  const int K = kCorridorSteps;
+  const Eigen::VectorXd no_previous_input = Eigen::VectorXd::Zero(1);
+  core::Problem problem = plant;
+  switch (version) {
+    case CorridorVersion::kL2:
+      problem.input_priors.assign(K, ScalarPrior::Gaussian(0.0, 10.0));
+      break;
+    case CorridorVersion::kSparseInput:
+      problem.input_priors.assign(K, ScalarPrior::PlainNuv(0.0));
+      break;
+    case CorridorVersion::kRateLimit: {
+      // [KL]: only the half-space on Δu; a weak Gaussian on Δu picks one plan among the
+      // many feasible ones.
+      NUPMPC_ASSIGN_OR_RETURN(problem, core::AugmentWithInputDifferences(
+                                           plant, std::vector(K, ScalarPrior::AtLeast(-0.03).WithGaussian(0.0, 10.0)),
+                                           no_previous_input));
+      break;
+    }
+    case CorridorVersion::kSparseChanges: {
+      NUPMPC_ASSIGN_OR_RETURN(problem, core::AugmentWithInputDifferences(
+                                           plant, std::vector(K, ScalarPrior::PlainNuv(0.0)), no_previous_input));
+      break;
+    }
+    case CorridorVersion::kThreeLevels: {
+      NUPMPC_ASSIGN_OR_RETURN(problem, core::ExpandMultiLevelInputs(plant, {{.count = 3, .lowest = -1.0, .spacing = 1.0}}));
+      break;
+    }
+  }
+  core::SolverOptions options;
+  options.max_iterations = iterations;
+  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Session> session, core::Session::Create(problem, options));
+  core::Solution plan;
+  const auto start = std::chrono::steady_clock::now();
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, session->Solve(&plan));
+  CorridorRun run;
+  run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  run.iterations = summary.iterations;
+  run.discrete_gap = summary.discrete_gap;
+  switch (version) {
+    case CorridorVersion::kRateLimit:
+    case CorridorVersion::kSparseChanges:
+      run.inputs = core::InputsFromDifferences(plan.inputs, no_previous_input).col(0);
+      break;
+    case CorridorVersion::kThreeLevels:
+      run.inputs = core::InputsFromLevels(plan.inputs, {{.count = 3, .lowest = -1.0, .spacing = 1.0}}).col(0);
+      break;
+    default:
+      run.inputs = plan.inputs.col(0);
+  }
+  run.outputs = Simulate(plant, run.inputs);
+  run.min_input_change = core::kInfinity;
+  double previous = 0.0;
+  for (int n = 0; n < K; ++n) {
+    const double u = run.inputs(n), change = u - previous;
+    run.nonzero_inputs += std::abs(u) > 1e-3;
+    run.input_switches += std::abs(change) > 1e-3;
+    run.min_input_change = std::min(run.min_input_change, change);
+    run.level_gap = std::max(run.level_gap, std::abs(u - std::round(std::clamp(u, -1.0, 1.0))));
+    previous = u;
+  }
+  for (int n = 1; n <= K; ++n) {
+    run.max_corridor_violation =
+        std::max(run.max_corridor_violation, std::abs(run.outputs(n) - CorridorTarget(n)) - kCorridorHalfWidth);
+  }
+  run.max_corridor_violation = std::max(run.max_corridor_violation, 0.0);
+  return run;
+}
+
+}  // namespace nupmpc::examples

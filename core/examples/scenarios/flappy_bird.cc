@@ -1,0 +1,91 @@
+#include "core/examples/scenarios/flappy_bird.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+
+#include "core/session/session.h"
+#include "core/util/status_macros.h"
+
+namespace nupmpc::examples {
+namespace {
+
+using core::ScalarPrior;
+
+constexpr double kFloor = 0.0, kCeiling = 10.0;
+
+// The wall (if any) at step n.
+const Wall* WallAt(const std::vector<Wall>& walls, int n) {
+  for (const Wall& wall : walls) {
+    if (n >= wall.first_step && n < wall.first_step + wall.width) return &wall;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+std::vector<Wall> RandomWalls(int steps, int count, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> low(4.0, 7.0), separation(2.0, 3.5);
+  std::vector<Wall> walls;
+  const int spacing = steps / (count + 1);
+  for (int i = 1; i <= count; ++i) {
+    Wall wall;
+    wall.first_step = i * spacing;
+    wall.width = 4;
+    wall.upper_low = low(rng);
+    wall.upper_high = wall.upper_low + 1.0;
+    wall.separation = separation(rng);
+    walls.push_back(wall);
+  }
+  return walls;
+}
+
+absl::StatusOr<FlappyRun> FlyThroughWalls(int steps, const std::vector<Wall>& walls, const FlappyParameters& params,
+                                          int iterations) {
+  core::Problem p = core::Problem::TimeInvariant(3, 2, 2, steps);
+  const double T = params.period;
+  p.A[0] << 1, T, 0, 0, 1, 0, 0, 0, 0;
+  p.B[0] << 0, 0, 1 / params.mass, 0, 0, 1;
+  p.C[0] << 1, 0, 0, 1, 0, 1;  // y, and ỹ = y + s
+  p.state_offset = {Eigen::Vector3d(0, -T * params.gravity, 0)};
+  p.initial_mean = Eigen::Vector3d(params.start_height, 0, 0);
+  for (int n = 0; n < steps; ++n) {
+    p.mutable_input_prior(n, 0) = ScalarPrior::Binary(0.0, 1.0);
+    const Wall* next = WallAt(walls, n + 1);
+    p.mutable_input_prior(n, 1) =
+        next != nullptr ? ScalarPrior::Binary(0.0, next->separation) : ScalarPrior::Gaussian(0.0, 1.0);
+  }
+  for (int n = 1; n <= steps; ++n) {
+    p.mutable_output_prior(n, 0) = ScalarPrior::Box(kFloor, kCeiling, params.slope);
+    if (const Wall* wall = WallAt(walls, n)) {
+      p.mutable_output_prior(n, 1) = ScalarPrior::Box(wall->upper_low, wall->upper_high, params.slope);
+    }
+  }
+  core::SolverOptions options;
+  options.max_iterations = iterations;
+  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Session> session, core::Session::Create(p, options));
+  core::Solution plan;
+  const auto start = std::chrono::steady_clock::now();
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, session->Solve(&plan));
+  FlappyRun run;
+  run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  run.iterations = summary.iterations;
+  run.discrete_gap = summary.discrete_gap;
+  run.flaps = plan.inputs.col(0);
+  run.height = plan.outputs.col(0);  // the rounded plan, re-simulated by the session
+  for (int n = 1; n <= steps; ++n) {
+    if (const Wall* wall = WallAt(walls, n)) {
+      const double y = run.height(n);
+      const auto outside = [y](double lo, double hi) { return std::max({lo - y, y - hi, 0.0}); };
+      run.worst_slit_violation =
+          std::max(run.worst_slit_violation,
+                   std::min(outside(wall->upper_low, wall->upper_high),
+                            outside(wall->upper_low - wall->separation, wall->upper_high - wall->separation)));
+    }
+  }
+  return run;
+}
+
+}  // namespace nupmpc::examples
