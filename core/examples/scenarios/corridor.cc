@@ -1,12 +1,11 @@
 #include "core/examples/scenarios/corridor.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 #include "core/model/input_differences.h"
 #include "core/model/multilevel_inputs.h"
-#include "core/session/session.h"
+#include "core/examples/scenarios/timed_solve.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::examples {
@@ -93,16 +92,12 @@ absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations)
       break;
     }
   }
-  core::SolverOptions options;
-  options.max_iterations = iterations;
-  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Session> session, core::Session::Create(problem, options));
-  core::Solution plan;
-  const auto start = std::chrono::steady_clock::now();
-  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, session->Solve(&plan));
+  NUPMPC_ASSIGN_OR_RETURN(const TimedPlan solved, SolveWithBudget(problem, iterations));
+  const core::Solution& plan = solved.plan;
   CorridorRun run;
-  run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  run.iterations = summary.iterations;
-  run.discrete_gap = summary.discrete_gap;
+  run.seconds = solved.seconds;
+  run.iterations = solved.summary.iterations;
+  run.discrete_gap = solved.summary.discrete_gap;
   switch (version) {
     case CorridorVersion::kRateLimit:
     case CorridorVersion::kSparseChanges:

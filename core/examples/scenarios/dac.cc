@@ -5,6 +5,7 @@
 #include <numbers>
 
 #include "Eigen/LU"
+#include "core/examples/scenarios/timed_solve.h"
 #include "core/session/session.h"
 #include "core/util/status_macros.h"
 
@@ -63,22 +64,17 @@ core::Problem DacWindow(int K, double output_variance, int first_step, double fr
 }
 
 absl::StatusOr<DacPlan> DacLongPlan(int K, double output_variance, double frequency_hz, int iterations, bool em) {
-  const core::Problem p = DacWindow(K, output_variance, 0, frequency_hz, em);
-  core::SolverOptions options;
-  options.max_iterations = iterations;
-  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Session> session, core::Session::Create(p, options));
-  core::Solution plan;
-  const auto start = std::chrono::steady_clock::now();
-  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, session->Solve(&plan));
+  NUPMPC_ASSIGN_OR_RETURN(const TimedPlan solved,
+                          SolveWithBudget(DacWindow(K, output_variance, 0, frequency_hz, em), iterations));
   DacPlan result;
-  result.seconds = Seconds(start);
-  result.inputs = plan.inputs.col(0);
-  result.outputs = plan.outputs.col(0);
+  result.seconds = solved.seconds;
+  result.inputs = solved.plan.inputs.col(0);
+  result.outputs = solved.plan.outputs.col(0);
   result.target.resize(K + 1);
   for (int n = 0; n <= K; ++n) result.target(n) = DacTarget(n, frequency_hz);
   result.mse = (result.outputs - result.target).segment(1, K - 2).squaredNorm() / (K - 2);
-  result.iterations = summary.iterations;
-  result.discrete_gap = summary.discrete_gap;
+  result.iterations = solved.summary.iterations;
+  result.discrete_gap = solved.summary.discrete_gap;
   return result;
 }
 

@@ -1,11 +1,10 @@
 #include "core/examples/scenarios/flappy_bird.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <random>
 
-#include "core/session/session.h"
+#include "core/examples/scenarios/timed_solve.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::examples {
@@ -49,8 +48,8 @@ absl::StatusOr<FlappyRun> FlyThroughWalls(int steps, const std::vector<Wall>& wa
   p.A[0] << 1, T, 0, 0, 1, 0, 0, 0, 0;
   p.B[0] << 0, 0, 1 / params.mass, 0, 0, 1;
   p.C[0] << 1, 0, 0, 1, 0, 1;  // y, and ỹ = y + s
-  p.state_offset = {Eigen::Vector3d(0, -T * params.gravity, 0)};
-  p.initial_mean = Eigen::Vector3d(params.start_height, 0, 0);
+  p.state_offset = {(Eigen::VectorXd(3) << 0, -T * params.gravity, 0).finished()};
+  p.initial_mean = (Eigen::VectorXd(3) << params.start_height, 0, 0).finished();
   for (int n = 0; n < steps; ++n) {
     p.mutable_input_prior(n, 0) = ScalarPrior::Binary(0.0, 1.0);
     const Wall* next = WallAt(walls, n + 1);
@@ -63,18 +62,13 @@ absl::StatusOr<FlappyRun> FlyThroughWalls(int steps, const std::vector<Wall>& wa
       p.mutable_output_prior(n, 1) = ScalarPrior::Box(wall->upper_low, wall->upper_high, params.slope);
     }
   }
-  core::SolverOptions options;
-  options.max_iterations = iterations;
-  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Session> session, core::Session::Create(p, options));
-  core::Solution plan;
-  const auto start = std::chrono::steady_clock::now();
-  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, session->Solve(&plan));
+  NUPMPC_ASSIGN_OR_RETURN(const TimedPlan solved, SolveWithBudget(p, iterations));
   FlappyRun run;
-  run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  run.iterations = summary.iterations;
-  run.discrete_gap = summary.discrete_gap;
-  run.flaps = plan.inputs.col(0);
-  run.height = plan.outputs.col(0);  // the rounded plan, re-simulated by the session
+  run.seconds = solved.seconds;
+  run.iterations = solved.summary.iterations;
+  run.discrete_gap = solved.summary.discrete_gap;
+  run.flaps = solved.plan.inputs.col(0);
+  run.height = solved.plan.outputs.col(0);  // the rounded plan, re-simulated by the session
   for (int n = 1; n <= steps; ++n) {
     if (const Wall* wall = WallAt(walls, n)) {
       const double y = run.height(n);

@@ -102,9 +102,8 @@ core::NonlinearModel RaceModel(const Track& track, const Vehicle& vehicle, int s
     const double k = kappa[n], z = x(0), th = x(1), v = x(2), a = x(3), d = x(4);
     const double e = 1 - k * z, c = std::cos(th), s = std::sin(th), td = std::tan(d);
     const double g = e / (v * c);
-    Eigen::Matrix<double, 6, 1> f;
-    f << e * s / c, e * td / (ell * c) - k, g * a, g * u(1), g * u(0), g;
-    *next = x + ds * f;
+    *next << e * s / c, e * td / (ell * c) - k, g * a, g * u(1), g * u(0), g;  // f_s
+    *next = x + ds * *next;
     // ∂g/∂(z, θ, v)
     const Eigen::RowVector3d dg(-k / (v * c), e * s / (v * c * c), -e / (v * v * c));
     Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Zero();
