@@ -148,7 +148,7 @@ class KeepOutLinearisation final : public Linearisation {
   // carry outputs).
   void PlanePoints(const Solution& point) const {
     for (int n = 0; n <= plant_.horizon; ++n) {
-      const Eigen::VectorXd& x = point.states.row(n).transpose();
+      const auto x = point.states.row(n);
       plane_(0, n) = plant_.C_at(n).row(keep_out_.first_output).dot(x) +
                      plant_.output_offset_at(n, keep_out_.first_output);
       plane_(1, n) = plant_.C_at(n).row(keep_out_.second_output).dot(x) +
