@@ -158,34 +158,36 @@ Eigen::MatrixXd SimulateNonlinear(const NonlinearModel& model, const Eigen::Vect
 double JacobianError(const NonlinearModel& model, int n, const Eigen::VectorXd& x, const Eigen::VectorXd& u) {
   const int M = model.num_states, L = model.num_inputs, K = model.num_outputs;
   Eigen::MatrixXd A(M, M), B(M, L), C(K, M), scratch_a(M, M), scratch_b(M, L), scratch_c(K, M);
-  Eigen::VectorXd next(M), y(K), plus(M), minus(M), y_plus(K), y_minus(K);
+  Eigen::VectorXd next(M), y(K);
   model.transition(n, x, u, &next, &A, &B);
   model.output(n, x, &y, &C);
+  // The three maps as functions of one vector, for the finite differences.
+  const auto f_of_x = [&](const Eigen::VectorXd& v) {
+    model.transition(n, v, u, &next, &scratch_a, &scratch_b);
+    return Eigen::VectorXd(next);
+  };
+  const auto f_of_u = [&](const Eigen::VectorXd& v) {
+    model.transition(n, x, v, &next, &scratch_a, &scratch_b);
+    return Eigen::VectorXd(next);
+  };
+  const auto h_of_x = [&](const Eigen::VectorXd& v) {
+    model.output(n, v, &y, &scratch_c);
+    return Eigen::VectorXd(y);
+  };
   double worst = 0.0;
-  const auto compare = [&](const Eigen::VectorXd& difference, const Eigen::VectorXd& analytic) {
+  const auto compare = [&](const auto& map, const Eigen::VectorXd& at, int j, const Eigen::VectorXd& analytic) {
+    const double h = 1e-6 * (1.0 + std::abs(at(j)));
+    Eigen::VectorXd plus = at, minus = at;
+    plus(j) += h;
+    minus(j) -= h;
+    const Eigen::VectorXd difference = (map(plus) - map(minus)) / (2 * h);
     worst = std::max(worst, (difference - analytic).cwiseAbs().maxCoeff() / (1.0 + analytic.cwiseAbs().maxCoeff()));
   };
   for (int j = 0; j < M; ++j) {
-    const double h = 1e-6 * (1.0 + std::abs(x(j)));
-    Eigen::VectorXd xp = x, xm = x;
-    xp(j) += h;
-    xm(j) -= h;
-    model.transition(n, xp, u, &plus, &scratch_a, &scratch_b);
-    model.transition(n, xm, u, &minus, &scratch_a, &scratch_b);
-    compare((plus - minus) / (2 * h), A.col(j));
-    model.output(n, xp, &y_plus, &scratch_c);
-    model.output(n, xm, &y_minus, &scratch_c);
-    compare((y_plus - y_minus) / (2 * h), C.col(j));
+    compare(f_of_x, x, j, A.col(j));
+    compare(h_of_x, x, j, C.col(j));
   }
-  for (int j = 0; j < L; ++j) {
-    const double h = 1e-6 * (1.0 + std::abs(u(j)));
-    Eigen::VectorXd up = u, um = u;
-    up(j) += h;
-    um(j) -= h;
-    model.transition(n, x, up, &plus, &scratch_a, &scratch_b);
-    model.transition(n, x, um, &minus, &scratch_a, &scratch_b);
-    compare((plus - minus) / (2 * h), B.col(j));
-  }
+  for (int j = 0; j < L; ++j) compare(f_of_u, u, j, B.col(j));
   return worst;
 }
 
