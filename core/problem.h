@@ -75,6 +75,11 @@ struct Problem {
 // e.g. "Problem.A[3]: expected 4x4, got 4x3".
 absl::Status Validate(const Problem& problem);
 
+// FAILED_PRECONDITION unless `update` has `session`'s shape: dimensions, horizon, which
+// matrices vary per step, terminal cost present. A session's problem may only be replaced
+// by one of the same shape.
+absl::Status CheckSameShape(const Problem& session, const Problem& update);
+
 // Checks one scalar prior; `field` is the path used in the message.
 absl::Status ValidatePrior(const ScalarPrior& prior, const char* field, int index);
 

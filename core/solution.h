@@ -31,6 +31,12 @@ struct SolveSummary {
   double discrete_gap = 0.0;  ///< before rounding: largest distance of a binary (or an M-level sum) to its nearer level
   bool warm_started = false;
   double solve_seconds = 0.0;
+  // Nonlinear problems solved by sequential linearisation (KeepOutSession): how many
+  // linearised problems were solved (iterations counts the passes over all of them) and
+  // the plan's nonlinear violation (deepest intrusion into a keep-out region). 0 for
+  // linear problems.
+  int linearisations = 0;
+  double nonlinear_violation = 0.0;
 
   // May u[0] be applied? True unless the solve broke down numerically before any
   // finite iterate existed.

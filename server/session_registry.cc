@@ -31,7 +31,7 @@ std::string SessionRegistry::NewId() {
   return id;
 }
 
-absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::Session> solver,
+absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
                                                                    double default_time_limit_ms,
                                                                    bool owned_by_stream, InputTransform transform) {
   auto entry = std::make_shared<SessionEntry>();

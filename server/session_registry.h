@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "core/session/session.h"
+#include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/input_transform.h"
 
@@ -27,7 +27,7 @@ struct SessionEntry {
   v1::Dimensions dims;                 ///< fixed at creation (the spec's, before any transform)
 
   std::mutex mu;
-  std::unique_ptr<core::Session> solver;  ///< guarded by mu; holds the session's problem
+  std::unique_ptr<core::MpcSession> solver;  ///< guarded by mu; holds the session's problem
   Eigen::VectorXd x0;                     ///< guarded by mu; the measured state being applied
   InputTransform transform;               ///< guarded by mu; multi-level / Δu mapping
   bool compacted = false;                 ///< guarded by mu: solver scratch released while idle
@@ -52,7 +52,7 @@ class SessionRegistry {
   explicit SessionRegistry(int max_sessions) : max_sessions_(max_sessions) {}
 
   // RESOURCE_EXHAUSTED when full.
-  absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::Session> solver,
+  absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver,
                                                     double default_time_limit_ms, bool owned_by_stream,
                                                     InputTransform transform = {});
   // NOT_FOUND for unknown (or closed, or expired) ids.

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <limits>
 
+#include "core/nonlinear/keep_out_session.h"
 #include "core/util/status_macros.h"
+#include "server/keep_out_conversion.h"
 
 namespace nupmpc::server {
 namespace {
@@ -46,7 +48,15 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
   NUPMPC_ASSIGN_OR_RETURN(core::Problem base, ProblemFromSpec(spec, limits));
   NUPMPC_ASSIGN_OR_RETURN(core::Problem problem, TransformProblem(spec, std::move(base), &built.transform));
   NUPMPC_ASSIGN_OR_RETURN(const core::SolverOptions options, OptionsFromSpec(spec.options(), limits));
-  absl::StatusOr<std::unique_ptr<core::Session>> solver = core::Session::Create(std::move(problem), options);
+  absl::StatusOr<std::unique_ptr<core::MpcSession>> solver;
+  if (spec.has_keep_out()) {
+    NUPMPC_ASSIGN_OR_RETURN(core::KeepOut keep_out,
+                            KeepOutFromSpec(spec.keep_out(), static_cast<int>(spec.model().num_outputs())));
+    NUPMPC_ASSIGN_OR_RETURN(const core::SequentialOptions sequential, SequentialOptionsFromSpec(spec.keep_out()));
+    solver = core::KeepOutSession::Create(std::move(problem), std::move(keep_out), options, sequential);
+  } else {
+    solver = core::Session::Create(std::move(problem), options);
+  }
   if (!solver.ok()) {
     // e.g. a forced algorithm that cannot handle the priors: the spec's fault.
     return absl::Status(solver.status().code(), absl::StrCat("spec: ", solver.status().message()));
@@ -66,7 +76,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     return absl::InvalidArgumentError("step.max_iterations: too large");
   }
 
-  core::Session& solver = *entry.solver;
+  core::MpcSession& solver = *entry.solver;
   InputTransform& transform = entry.transform;
   // Everything but the update is checked before anything changes.
   NUPMPC_RETURN_IF_ERROR(ReadStepState(step, "step", entry.dims.num_states(), &entry.x0));

@@ -29,7 +29,7 @@ absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& limits, co
 // Converts a spec and builds its core session (shared by CreateSession, SolveOnce and
 // streams that carry a spec).
 struct BuiltSession {
-  std::unique_ptr<core::Session> solver;
+  std::unique_ptr<core::MpcSession> solver;  ///< a core::Session, or a KeepOutSession
   InputTransform transform;
   double default_time_limit_ms = 0.0;
 };

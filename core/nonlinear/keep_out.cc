@@ -86,31 +86,22 @@ absl::Status ValidateKeepOut(const Problem& plant, const KeepOut& k) {
 class KeepOutLinearisation final : public Linearisation {
  public:
   KeepOutLinearisation(const Problem& plant, const KeepOut& keep_out) : plant_(plant), keep_out_(keep_out) {
-    const int N = plant.horizon, K = plant.num_outputs, R = static_cast<int>(keep_out.regions.size());
     for (const KeepOutRegion& region : keep_out.regions) {
       geometry_.push_back(Geometry(region, keep_out.rectangle_order));
     }
-    shape_ = plant;
-    shape_.num_outputs = K + R;
-    shape_.C.assign(N + 1, Eigen::MatrixXd::Zero(K + R, plant.num_states));
-    shape_.output_offset.assign(N + 1, Eigen::VectorXd::Zero(K + R));
-    shape_.output_priors.assign(static_cast<std::size_t>(N + 1) * (K + R), ScalarPrior::Free());
-    for (int n = 0; n <= N; ++n) {
-      shape_.C[n].topRows(K) = plant.C_at(n);
-      for (int k = 0; k < K; ++k) {
-        shape_.output_offset[n](k) = plant.output_offset_at(n, k);
-        shape_.mutable_output_prior(n, k) = plant.output_prior(n, k);
-      }
-      if (n == 0) continue;  // x[0] is given: nothing to keep out
-      for (int r = 0; r < R; ++r) {
-        shape_.mutable_output_prior(n, K + r) =
-            ScalarPrior::AtLeast(geometry_[r].threshold, keep_out.regions[r].slope);
-      }
-    }
-    plane_.resize(2, N + 1);
+    BuildShape();
+    plane_.resize(2, plant.horizon + 1);
   }
 
   const Problem& shape() const override { return shape_; }
+
+  absl::Status SetBase(const Problem& base) override {
+    NUPMPC_RETURN_IF_ERROR(CheckSameShape(plant_, base));
+    NUPMPC_RETURN_IF_ERROR(Validate(base));
+    plant_ = base;
+    BuildShape();
+    return absl::OkStatus();
+  }
 
   void Linearise(const Solution& point, Problem* problem) const override {
     const int N = plant_.horizon, K = plant_.num_outputs;
@@ -144,6 +135,30 @@ class KeepOutLinearisation final : public Linearisation {
   }
 
  private:
+  // The plant's problem with one more output per region: its C rows and offsets are the
+  // linearisation's (zero until the first Linearise()), its prior the region's half-space
+  // at steps 1..N (x[0] is given: nothing to keep out).
+  void BuildShape() {
+    const int N = plant_.horizon, K = plant_.num_outputs, R = static_cast<int>(keep_out_.regions.size());
+    shape_ = plant_;
+    shape_.num_outputs = K + R;
+    shape_.C.assign(N + 1, Eigen::MatrixXd::Zero(K + R, plant_.num_states));
+    shape_.output_offset.assign(N + 1, Eigen::VectorXd::Zero(K + R));
+    shape_.output_priors.assign(static_cast<std::size_t>(N + 1) * (K + R), ScalarPrior::Free());
+    for (int n = 0; n <= N; ++n) {
+      shape_.C[n].topRows(K) = plant_.C_at(n);
+      for (int k = 0; k < K; ++k) {
+        shape_.output_offset[n](k) = plant_.output_offset_at(n, k);
+        shape_.mutable_output_prior(n, k) = plant_.output_prior(n, k);
+      }
+      if (n == 0) continue;
+      for (int r = 0; r < R; ++r) {
+        shape_.mutable_output_prior(n, K + r) =
+            ScalarPrior::AtLeast(geometry_[r].threshold, keep_out_.regions[r].slope);
+      }
+    }
+  }
+
   // The plan's points in the keep-out plane, from its states (the initial guess need not
   // carry outputs).
   void PlanePoints(const Solution& point) const {

@@ -63,9 +63,7 @@ class ModelLinearisation final : public Linearisation {
     shape_.C.assign(N + 1, Eigen::MatrixXd::Zero(K + T, M));
     shape_.output_offset.assign(N + 1, Eigen::VectorXd::Zero(K + T));
     shape_.output_priors.assign(static_cast<std::size_t>(N + 1) * (K + T), ScalarPrior::Free());
-    for (int n = 0; n <= N; ++n) {
-      for (int k = 0; k < K; ++k) shape_.mutable_output_prior(n, k) = problem.output_prior(n, k);
-    }
+    CopyBase(problem, &shape_);
     for (int n = 1; n <= N; ++n) {  // x[0] is given
       for (int t = 0; t < T; ++t) shape_.C[n](K + t, trusted_[t].state) = 1.0;
     }
@@ -77,6 +75,25 @@ class ModelLinearisation final : public Linearisation {
   }
 
   const Problem& shape() const override { return shape_; }
+
+  // Only the point-independent fields are taken from `base`; its model fields are ignored
+  // as in MakeModelLinearisation().
+  absl::Status SetBase(const Problem& base) override {
+    NUPMPC_RETURN_IF_ERROR(CheckDimensions(model_, base));
+    if (base.horizon != shape_.horizon) {
+      return absl::FailedPreconditionError(absl::StrCat("Problem.horizon = ", base.horizon,
+                                                        " does not match the linearisation's ", shape_.horizon));
+    }
+    if (base.terminal.has_value() != shape_.terminal.has_value()) {
+      return absl::FailedPreconditionError("Problem.terminal: presence does not match the linearisation's");
+    }
+    // Validate the priors and x[0] in the linearised problem's shape, on a copy.
+    Problem candidate = shape_;
+    CopyBase(base, &candidate);
+    NUPMPC_RETURN_IF_ERROR(Validate(candidate));
+    shape_ = std::move(candidate);
+    return absl::OkStatus();
+  }
 
   void Linearise(const Solution& point, Problem* problem) const override {
     const int N = shape_.horizon;
@@ -120,6 +137,18 @@ class ModelLinearisation final : public Linearisation {
   }
 
  private:
+  // The point-independent fields: x[0], priors on inputs and on the model's outputs,
+  // terminal cost (the trust-region outputs keep theirs).
+  void CopyBase(const Problem& base, Problem* linearised) const {
+    linearised->initial_mean = base.initial_mean;
+    linearised->initial_covariance = base.initial_covariance;
+    linearised->input_priors = base.input_priors;
+    linearised->terminal = base.terminal;
+    for (int n = 0; n <= base.horizon; ++n) {
+      for (int k = 0; k < base.num_outputs; ++k) linearised->mutable_output_prior(n, k) = base.output_prior(n, k);
+    }
+  }
+
   struct Trusted {
     int state;
     double radius;

@@ -65,7 +65,26 @@ absl::StatusOr<std::unique_ptr<SequentialSolver>> SequentialSolver::Create(
   return solver;
 }
 
-absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initial_guess, Solution* plan) {
+absl::Status SequentialSolver::SetInitialState(const Eigen::VectorXd& x0) {
+  if (x0.size() != problem_.num_states) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("initial_state: expected size ", problem_.num_states, ", got ", x0.size()));
+  }
+  if (!x0.allFinite()) return absl::InvalidArgumentError("initial_state: contains a non-finite number");
+  problem_.initial_mean = x0;
+  return absl::OkStatus();
+}
+
+absl::Status SequentialSolver::SetBase(const Problem& base) {
+  NUPMPC_RETURN_IF_ERROR(linearisation_->SetBase(base));
+  // The point-dependent fields are rewritten by the next Solve()'s first linearisation.
+  problem_ = linearisation_->shape();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initial_guess, Solution* plan,
+                                                          const SolveLimits& limits) {
+  NUPMPC_RETURN_IF_ERROR(Validate(limits));
   const int N = problem_.horizon;
   if (initial_guess.states.rows() != N + 1 || initial_guess.states.cols() != problem_.num_states) {
     return absl::InvalidArgumentError(absl::StrCat("initial_guess.states: expected ", N + 1, "x", problem_.num_states,
@@ -82,19 +101,31 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
   }
   const auto start = std::chrono::steady_clock::now();
   point_ = initial_guess;
-  SolveLimits limits;
-  limits.max_iterations = options_.inner_iterations;
+  SolveLimits inner = limits;
   SequentialSummary summary;
   for (int k = 0; k < options_.max_linearisations; ++k) {
+    // The limits are for the whole sequence: each inner solve gets what is left.
+    inner.max_iterations = options_.inner_iterations;
+    if (limits.max_iterations > 0) {
+      const int left = limits.max_iterations - summary.inner_iterations;
+      if (left <= 0) break;
+      inner.max_iterations = inner.max_iterations > 0 ? std::min(inner.max_iterations, left) : left;
+    }
+    if (limits.time_limit_seconds > 0.0) {
+      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (elapsed >= limits.time_limit_seconds) break;
+      inner.time_limit_seconds = limits.time_limit_seconds - elapsed;
+    }
+    // The first linearisation continues the previous Solve()'s NUP state if asked to;
+    // later ones always continue the one before.
+    inner.warm_start = k > 0 || limits.warm_start;
     linearisation_->Linearise(point_, &problem_);
     if (absl::Status updated = session_->Update(problem_); !updated.ok()) {
       // Typically a plan that left the model's domain (a Jacobian became non-finite).
       return absl::Status(updated.code(), absl::StrCat("linearisation ", k, " around the previous plan: ",
                                                        updated.message()));
     }
-    // The first linearisation starts cold; later ones continue the NUP state.
-    limits.warm_start = k > 0;
-    NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(limits, &plan_));
+    NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(inner, &plan_));
     ++summary.linearisations;
     summary.inner_iterations += summary.last_inner.iterations;
     if (!summary.last_inner.IsUsable()) break;
@@ -110,6 +141,13 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
       summary.converged = true;
       break;
     }
+    // A time limit or a cancel inside the inner solve ends the sequence too.
+    if (summary.last_inner.status == SolveStatus::kTimeLimit || summary.last_inner.status == SolveStatus::kCancelled) {
+      break;
+    }
+  }
+  if (summary.linearisations == 0) {
+    return absl::DeadlineExceededError("no time or iterations left for a first linearisation");
   }
   summary.nonlinear_violation = linearisation_->NonlinearViolation(plan_);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

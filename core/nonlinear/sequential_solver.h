@@ -40,6 +40,11 @@ class Linearisation {
   // How far a plan of the linearised problem is from solving the nonlinear one: the
   // largest model defect |x[n+1] - f(x[n], u[n])| or nonlinear constraint violation.
   virtual double NonlinearViolation(const Solution& plan) const = 0;
+  // Replaces the point-independent part (priors, x[0], terminal cost, and the plant's
+  // matrices where they are not linearised) with `base`'s: a problem in the caller's terms,
+  // of the shape the linearisation was made for. Validated first; a rejected base leaves
+  // the linearisation as it was.
+  virtual absl::Status SetBase(const Problem& base) = 0;
 };
 
 struct SequentialOptions {
@@ -73,8 +78,20 @@ class SequentialSolver {
                                                                    SequentialOptions options = {});
 
   // Starts from `initial_guess` (states (N+1)×M, inputs N×L; outputs are recomputed by
-  // the linearisation), writes the final plan to `plan`.
-  absl::StatusOr<SequentialSummary> Solve(const Solution& initial_guess, Solution* plan);
+  // the linearisation), writes the final plan to `plan`. `limits` apply to the whole
+  // sequence: max_iterations caps the passes over all linearisations (0: only the options'
+  // caps), the time limit and the cancel flag are checked in every pass, and warm_start
+  // lets the first linearised problem continue the NUP state of the previous Solve() (later
+  // ones always continue from the one before).
+  absl::StatusOr<SequentialSummary> Solve(const Solution& initial_guess, Solution* plan,
+                                          const SolveLimits& limits = {});
+
+  // Between solves, for sessions (core/nonlinear/keep_out_session.h):
+  absl::Status SetInitialState(const Eigen::VectorXd& x0);
+  absl::Status SetBase(const Problem& base);  // see Linearisation::SetBase
+  void ShiftWarmStart() { session_->ShiftWarmStart(); }
+  void ReleaseWorkspace() { session_->ReleaseWorkspace(); }
+  Algorithm algorithm() const { return session_->algorithm(); }
 
   const Problem& linearised_problem() const { return problem_; }
 

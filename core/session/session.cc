@@ -24,26 +24,6 @@ bool AnyInputConstrained(const Problem& p) {
   return false;
 }
 
-absl::Status CheckSameShape(const Problem& session, const Problem& update) {
-  const auto mismatch = [](const char* field, std::size_t got, std::size_t want) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("Problem.", field, " = ", got, " does not match the session's ", want));
-  };
-  if (update.num_states != session.num_states) return mismatch("num_states", update.num_states, session.num_states);
-  if (update.num_inputs != session.num_inputs) return mismatch("num_inputs", update.num_inputs, session.num_inputs);
-  if (update.num_outputs != session.num_outputs) {
-    return mismatch("num_outputs", update.num_outputs, session.num_outputs);
-  }
-  if (update.horizon != session.horizon) return mismatch("horizon", update.horizon, session.horizon);
-  if (update.A.size() != session.A.size()) return mismatch("A (number of matrices)", update.A.size(), session.A.size());
-  if (update.B.size() != session.B.size()) return mismatch("B (number of matrices)", update.B.size(), session.B.size());
-  if (update.C.size() != session.C.size()) return mismatch("C (number of matrices)", update.C.size(), session.C.size());
-  if (update.terminal.has_value() != session.terminal.has_value()) {
-    return absl::FailedPreconditionError("Problem.terminal: presence does not match the session's");
-  }
-  return absl::OkStatus();
-}
-
 bool AllFinite(const PrimalIterate& it) { return it.x0.allFinite() && it.u.allFinite(); }
 
 bool AnyNonconvexPrior(const Problem& p) {
@@ -73,7 +53,10 @@ const char* SolveStatusName(SolveStatus status) {
 std::string SolveSummary::Describe() const {
   return absl::StrCat(AlgorithmName(algorithm), ": ", SolveStatusName(status), " after ", iterations, " iterations",
                       polished ? " (polished)" : "", warm_started ? ", warm" : "", ", J = ", objective,
-                      ", max violation = ", max_violation);
+                      ", max violation = ", max_violation,
+                      linearisations > 0 ? absl::StrCat(", ", linearisations, " linearisations, nonlinear violation = ",
+                                                        nonlinear_violation)
+                                         : "");
 }
 
 Session::Session(Problem problem, SolverOptions options)

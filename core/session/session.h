@@ -10,6 +10,7 @@
 #include "core/algorithms/outer_iteration.h"
 #include "core/options.h"
 #include "core/problem.h"
+#include "core/session/mpc_session.h"
 #include "core/solution.h"
 
 namespace nupmpc::core {
@@ -25,27 +26,27 @@ namespace nupmpc::core {
 //  * ShiftWarmStart(): receding horizon; the carried state moves one step earlier.
 //
 // Thread safety: none; one thread uses a session at a time.
-class Session {
+class Session final : public MpcSession {
  public:
   static absl::StatusOr<std::unique_ptr<Session>> Create(Problem problem, SolverOptions options = {});
 
-  const Problem& problem() const { return problem_; }
+  const Problem& problem() const override { return problem_; }
   const SolverOptions& options() const { return options_; }
-  Algorithm algorithm() const { return algorithm_->algorithm(); }
+  Algorithm algorithm() const override { return algorithm_->algorithm(); }
 
-  absl::Status SetInitialState(const Eigen::VectorXd& x0);
+  absl::Status SetInitialState(const Eigen::VectorXd& x0) override;
   // Replaces the problem's values. The shape (dimensions, horizon, which matrices vary
   // per step, terminal cost present) must match: FAILED_PRECONDITION otherwise.
-  absl::Status Update(const Problem& problem);
+  absl::Status Update(const Problem& problem) override;
 
-  void ShiftWarmStart();
+  void ShiftWarmStart() override;
   void ResetWarmStart();
   // For idle sessions: frees the algorithm's scratch memory (most of the session's), keeps
   // the problem and the warm start. The next Solve() allocates it again before iterating.
-  void ReleaseWorkspace() { algorithm_->ReleaseWorkspace(); }
+  void ReleaseWorkspace() override { algorithm_->ReleaseWorkspace(); }
   bool has_warm_start() const { return has_warm_state_; }
 
-  absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution);
+  absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) override;
   absl::StatusOr<SolveSummary> Solve(Solution* solution) { return Solve(SolveLimits{}, solution); }
 
  private:

@@ -1,0 +1,111 @@
+#include "core/nonlinear/keep_out_session.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "core/util/status_macros.h"
+
+namespace nupmpc::core {
+namespace {
+
+// Receding horizon: row n+1 becomes row n, the last row repeated. In place, no allocation.
+void ShiftRowsUp(Eigen::MatrixXd* m) {
+  const Eigen::Index rows = m->rows();
+  if (rows < 2) return;
+  for (Eigen::Index r = 0; r + 1 < rows; ++r) m->row(r) = m->row(r + 1);
+}
+
+}  // namespace
+
+KeepOutSession::KeepOutSession(Problem plant, KeepOut keep_out, std::unique_ptr<SequentialSolver> solver,
+                               std::unique_ptr<Session> free_planner, int max_iterations)
+    : plant_(std::move(plant)),
+      keep_out_(std::move(keep_out)),
+      max_iterations_(max_iterations),
+      solver_(std::move(solver)),
+      free_planner_(std::move(free_planner)) {
+  all_regions_hard_ = std::all_of(keep_out_.regions.begin(), keep_out_.regions.end(),
+                                  [](const KeepOutRegion& region) { return std::isinf(region.slope); });
+  free_planner_->ReleaseWorkspace();
+}
+
+absl::StatusOr<std::unique_ptr<KeepOutSession>> KeepOutSession::Create(Problem plant, KeepOut keep_out,
+                                                                       SolverOptions solver_options,
+                                                                       SequentialOptions options) {
+  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<Linearisation> linearisation, MakeKeepOutLinearisation(plant, keep_out));
+  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<SequentialSolver> solver,
+                          SequentialSolver::Create(std::move(linearisation), solver_options, options));
+  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<Session> free_planner, Session::Create(plant, solver_options));
+  return std::unique_ptr<KeepOutSession>(
+      new KeepOutSession(std::move(plant), std::move(keep_out), std::move(solver), std::move(free_planner),
+                         solver_options.max_iterations));
+}
+
+absl::Status KeepOutSession::PlanWithoutRegions(const SolveLimits& limits) {
+  SolveLimits cold = limits;
+  cold.warm_start = false;
+  NUPMPC_RETURN_IF_ERROR(free_planner_->SetInitialState(plant_.initial_mean));
+  NUPMPC_ASSIGN_OR_RETURN(const SolveSummary summary, free_planner_->Solve(cold, &guess_));
+  free_planner_->ReleaseWorkspace();
+  if (!summary.IsUsable()) {
+    // Without regions the plant's problem is convex; failing it is the problem's fault.
+    return absl::InvalidArgumentError(
+        absl::StrCat("the problem without keep-out regions has no usable plan: ", summary.Describe()));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status KeepOutSession::SetInitialState(const Eigen::VectorXd& x0) {
+  NUPMPC_RETURN_IF_ERROR(solver_->SetInitialState(x0));  // checks x0 for both
+  plant_.initial_mean = x0;
+  return absl::OkStatus();
+}
+
+absl::Status KeepOutSession::Update(const Problem& plant) {
+  NUPMPC_RETURN_IF_ERROR(solver_->SetBase(plant));  // validates first; unchanged on error
+  // Same shape and valid: only an algorithm that cannot be built could refuse it now.
+  NUPMPC_RETURN_IF_ERROR(free_planner_->Update(plant));
+  free_planner_->ReleaseWorkspace();
+  plant_ = plant;
+  return absl::OkStatus();
+}
+
+void KeepOutSession::ShiftWarmStart() {
+  solver_->ShiftWarmStart();
+  ShiftRowsUp(&guess_.states);
+  ShiftRowsUp(&guess_.inputs);
+}
+
+absl::StatusOr<SolveSummary> KeepOutSession::Solve(const SolveLimits& limits, Solution* solution) {
+  const bool warm = limits.warm_start && has_plan_;
+  if (!warm) NUPMPC_RETURN_IF_ERROR(PlanWithoutRegions(limits));
+  // The plan starts at the measured state whatever the previous plan predicted.
+  guess_.states.row(0) = plant_.initial_mean.transpose();
+  SolveLimits capped = limits;
+  if (capped.max_iterations == 0) capped.max_iterations = max_iterations_;
+  NUPMPC_ASSIGN_OR_RETURN(const SequentialSummary sequence, solver_->Solve(guess_, &plan_, capped));
+
+  SolveSummary summary = sequence.last_inner;
+  summary.iterations = sequence.inner_iterations;
+  summary.linearisations = sequence.linearisations;
+  summary.nonlinear_violation = sequence.nonlinear_violation;
+  summary.solve_seconds = sequence.solve_seconds;
+  summary.warm_started = warm;
+  if (all_regions_hard_) summary.max_violation = std::max(summary.max_violation, sequence.nonlinear_violation);
+  if (!sequence.converged && summary.status == SolveStatus::kConverged) summary.status = SolveStatus::kIterationLimit;
+
+  if (summary.IsUsable()) {
+    guess_.states = plan_.states;
+    guess_.inputs = plan_.inputs;
+    has_plan_ = true;
+  }
+  if (solution != nullptr) {
+    solution->inputs = plan_.inputs;
+    solution->states = plan_.states;
+    solution->outputs = plan_.outputs.leftCols(plant_.num_outputs);
+  }
+  return summary;
+}
+
+}  // namespace nupmpc::core
