@@ -1,0 +1,147 @@
+#include "core/gp/gp_model.h"
+
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+
+namespace nupmpc::gp {
+
+absl::Status Validate(const SeArdKernel& kernel, int dimension) {
+  if (!(kernel.signal_variance > 0.0) || !std::isfinite(kernel.signal_variance)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("kernel.signal_variance: must be finite and > 0, got ", kernel.signal_variance));
+  }
+  if (!(kernel.noise_variance > 0.0) || !std::isfinite(kernel.noise_variance)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("kernel.noise_variance: must be finite and > 0, got ", kernel.noise_variance));
+  }
+  if (kernel.length_scales.size() != dimension) {
+    return absl::InvalidArgumentError(absl::StrCat("kernel.length_scales: expected ", dimension,
+                                                   " values (one per regressor), got ", kernel.length_scales.size()));
+  }
+  for (int i = 0; i < dimension; ++i) {
+    if (!(kernel.length_scales(i) > 0.0) || !std::isfinite(kernel.length_scales(i))) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("kernel.length_scales[", i, "]: must be finite and > 0, got ", kernel.length_scales(i)));
+    }
+  }
+  return absl::OkStatus();
+}
+
+double LinGp::Mean(const Eigen::VectorXd& delta) const {
+  return mean(0) + mean.tail(mean.size() - 1).dot(delta);
+}
+
+double LinGp::Variance(const Eigen::VectorXd& delta) const {
+  const Eigen::Index d = delta.size();
+  return covariance(0, 0) + 2.0 * covariance.col(0).tail(d).dot(delta) +
+         delta.dot(covariance.bottomRightCorner(d, d) * delta);
+}
+
+Eigen::MatrixXd KernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs) {
+  const Eigen::Index n = inputs.rows();
+  const Eigen::RowVectorXd scale = kernel.length_scales.cwiseInverse().transpose();
+  const Eigen::MatrixXd scaled = inputs.array().rowwise() * scale.array();
+  const Eigen::VectorXd norms = scaled.rowwise().squaredNorm();
+  Eigen::MatrixXd k = scaled * scaled.transpose();  // r² = |a|² + |b|² - 2 a·b
+  for (Eigen::Index j = 0; j < n; ++j) {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double r2 = std::max(0.0, norms(i) + norms(j) - 2.0 * k(i, j));
+      k(i, j) = kernel.signal_variance * std::exp(-0.5 * r2);
+    }
+    k(j, j) = kernel.signal_variance;
+  }
+  return k;
+}
+
+GpModel::GpModel(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel)
+    : inputs_(std::move(inputs)), targets_(std::move(targets)), kernel_(std::move(kernel)) {
+  inverse_squared_lengths_ = kernel_.length_scales.array().square().inverse().matrix();
+}
+
+absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel) {
+  if (inputs.rows() < 1 || inputs.cols() < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("inputs: need at least one point of dimension ≥ 1, got ", inputs.rows(), "x", inputs.cols()));
+  }
+  if (targets.size() != inputs.rows()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("targets: expected ", inputs.rows(), " values (one per input row), got ", targets.size()));
+  }
+  if (!inputs.allFinite()) return absl::InvalidArgumentError("inputs: contains a non-finite number");
+  if (!targets.allFinite()) return absl::InvalidArgumentError("targets: contains a non-finite number");
+  if (absl::Status valid = Validate(kernel, static_cast<int>(inputs.cols())); !valid.ok()) return valid;
+
+  GpModel model(std::move(inputs), std::move(targets), std::move(kernel));
+  Eigen::MatrixXd k = KernelMatrix(model.kernel_, model.inputs_);
+  k.diagonal().array() += model.kernel_.noise_variance;
+  model.cholesky_.compute(k);
+  if (model.cholesky_.info() != Eigen::Success) {
+    return absl::FailedPreconditionError("K + noise_variance·I is not positive definite (raise noise_variance)");
+  }
+  model.alpha_ = model.cholesky_.solve(model.targets_);
+  return model;
+}
+
+double GpModel::Kernel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) const {
+  return kernel_.signal_variance * std::exp(-0.5 * (a - b).array().square().matrix().dot(inverse_squared_lengths_));
+}
+
+double GpModel::Mean(const Eigen::VectorXd& x) const {
+  double mean = 0.0;
+  for (int j = 0; j < num_points(); ++j) {
+    mean += alpha_(j) * Kernel(inputs_.row(j).transpose(), x);
+  }
+  return mean;
+}
+
+void GpModel::CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const {
+  const int d = dimension();
+  for (int j = 0; j < num_points(); ++j) {
+    double r2 = 0.0;
+    for (int i = 0; i < d; ++i) {
+      const double diff = x(i) - inputs_(j, i);
+      r2 += diff * diff * inverse_squared_lengths_(i);
+    }
+    const double k = kernel_.signal_variance * std::exp(-0.5 * r2);
+    (*w)(j, first) = k;
+    // ∂k(X_j, x)/∂x_i = -k (x_i - X_ji)/ℓ_i²
+    for (int i = 0; i < d; ++i) (*w)(j, first + 1 + i) = -k * (x(i) - inputs_(j, i)) * inverse_squared_lengths_(i);
+  }
+}
+
+void GpModel::Predict(const Eigen::VectorXd& x, double* mean, double* variance) const {
+  Eigen::MatrixXd w(num_points(), dimension() + 1);
+  CrossCovariances(x, &w, 0);
+  *mean = w.col(0).dot(alpha_);
+  const Eigen::VectorXd z = cholesky_.matrixL().solve(w.col(0));
+  *variance = std::max(0.0, kernel_.signal_variance - z.squaredNorm());
+}
+
+void GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out) const {
+  const int d = dimension(), P = static_cast<int>(points.rows());
+  Eigen::MatrixXd w(num_points(), P * (d + 1));
+  for (int p = 0; p < P; ++p) CrossCovariances(points.row(p).transpose(), &w, p * (d + 1));
+  const Eigen::MatrixXd means = w.transpose() * alpha_;  // [μ; ∇μ] per point, stacked
+  cholesky_.matrixL().solveInPlace(w);                    // Z = L⁻¹ W
+  out->resize(P);
+  for (int p = 0; p < P; ++p) {
+    LinGp& lin = (*out)[p];
+    lin.mean = means.col(0).segment(p * (d + 1), d + 1);
+    const auto z = w.middleCols(p * (d + 1), d + 1);
+    // Prior covariance of [f; ∇f] at one point: diag(σ_f², σ_f²/ℓ²) (k and ∇k are
+    // uncorrelated at coincident points); minus what the data explain.
+    lin.covariance = -(z.transpose() * z);
+    lin.covariance(0, 0) += kernel_.signal_variance;
+    for (int i = 0; i < d; ++i) lin.covariance(1 + i, 1 + i) += kernel_.signal_variance * inverse_squared_lengths_(i);
+    lin.covariance(0, 0) = std::max(lin.covariance(0, 0), 0.0);
+  }
+}
+
+LinGp GpModel::Linearise(const Eigen::VectorXd& x) const {
+  std::vector<LinGp> out;
+  Linearise(x.transpose(), &out);
+  return out[0];
+}
+
+}  // namespace nupmpc::gp

@@ -1,0 +1,83 @@
+#ifndef NUPMPC_CORE_GP_GP_MODEL_H_
+#define NUPMPC_CORE_GP_GP_MODEL_H_
+
+// Gaussian-process regression with a squared-exponential ARD kernel and zero prior mean
+// (Rasmussen & Williams ch. 2; [Nghiem] §II):
+//
+//   k(x, x') = σ_f² exp(-½ Σ_i (x_i - x'_i)² / ℓ_i²),   y = f(x) + ε,  ε ~ N(0, σ_n²)
+//
+// The Cholesky factor of K + σ_n² I and α = (K + σ_n² I)⁻¹ Y are computed once per model
+// (Create) and reused by every prediction. Predictions are of the latent f (no noise
+// term), as in [Nghiem] (1).
+//
+// The linGP ([Nghiem] (3)–(6)): at a point x, f̂ = [f(x); ∇f(x)] is Gaussian with mean
+// m̂ and covariance V̂; the linearised process f(x + Δ) ≈ [1; Δ]ᵀ f̂ has mean m̂ᵀ[1; Δ]
+// (the exact mean's first-order Taylor expansion: the mean of the gradient is the
+// gradient of the mean) and variance [1; Δ]ᵀ V̂ [1; Δ], convex in Δ.
+
+#include <vector>
+
+#include "Eigen/Cholesky"
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+
+namespace nupmpc::gp {
+
+struct SeArdKernel {
+  double signal_variance = 1.0;  ///< σ_f² > 0
+  Eigen::VectorXd length_scales;  ///< ℓ_i > 0, one per regressor
+  double noise_variance = 1e-2;  ///< σ_n² > 0
+};
+absl::Status Validate(const SeArdKernel& kernel, int dimension);
+
+// The linGP at one point: m̂ (size d+1) and V̂ ((d+1)×(d+1), symmetric PSD).
+struct LinGp {
+  Eigen::VectorXd mean;        ///< m̂ = [μ(x); ∇μ(x)]
+  Eigen::MatrixXd covariance;  ///< V̂; V̂(0,0) = σ²(x), the exact predictive variance
+  double Mean(const Eigen::VectorXd& delta) const;      ///< m̂ᵀ[1; Δ]
+  double Variance(const Eigen::VectorXd& delta) const;  ///< [1; Δ]ᵀ V̂ [1; Δ]
+};
+
+class GpModel {
+ public:
+  // inputs: N×d (one training regressor per row), targets: N. INVALID_ARGUMENT naming the
+  // field for bad sizes or values; FAILED_PRECONDITION when K + σ_n² I is not positive
+  // definite in floating point.
+  static absl::StatusOr<GpModel> Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel);
+
+  int num_points() const { return static_cast<int>(inputs_.rows()); }
+  int dimension() const { return static_cast<int>(inputs_.cols()); }
+  const SeArdKernel& kernel() const { return kernel_; }
+  const Eigen::MatrixXd& inputs() const { return inputs_; }
+  const Eigen::VectorXd& targets() const { return targets_; }
+
+  double Kernel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) const;
+  // Predictive mean μ(x) (O(N d)).
+  double Mean(const Eigen::VectorXd& x) const;
+  // Predictive mean and variance of f(x) (O(N² ) for the variance).
+  void Predict(const Eigen::VectorXd& x, double* mean, double* variance) const;
+  // The linGP at each row of `points` (P×d), batched: one triangular solve with P·(d+1)
+  // right-hand sides. `out` is resized to P.
+  void Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out) const;
+  LinGp Linearise(const Eigen::VectorXd& x) const;
+
+ private:
+  GpModel(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel);
+  // Column j of `w` gets [k(X, x), ∂k(X, x)/∂x_1, ..., ∂k(X, x)/∂x_d] for x = `x`,
+  // starting at column `first`.
+  void CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const;
+
+  Eigen::MatrixXd inputs_;
+  Eigen::VectorXd targets_;
+  SeArdKernel kernel_;
+  Eigen::VectorXd inverse_squared_lengths_;  ///< 1/ℓ_i²
+  Eigen::LLT<Eigen::MatrixXd> cholesky_;     ///< of K + σ_n² I
+  Eigen::VectorXd alpha_;                    ///< (K + σ_n² I)⁻¹ Y
+};
+
+// The covariance matrix K(X, X) (without noise) of a kernel on the rows of `inputs`.
+Eigen::MatrixXd KernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs);
+
+}  // namespace nupmpc::gp
+
+#endif  // NUPMPC_CORE_GP_GP_MODEL_H_

@@ -1,0 +1,46 @@
+#ifndef NUPMPC_CORE_GP_HYPERPARAMETER_FIT_H_
+#define NUPMPC_CORE_GP_HYPERPARAMETER_FIT_H_
+
+// Maximum-likelihood hyper-parameters of a squared-exponential ARD GP: minimises the
+// negative log marginal likelihood
+//   NLL(θ) = ½ Yᵀ K_y⁻¹ Y + ½ log det K_y + (N/2) log 2π,   K_y = K + σ_n² I
+// over θ = log(σ_f², ℓ_1..ℓ_d, σ_n²) with its analytic gradient
+//   ∂NLL/∂θ_j = -½ tr((α αᵀ - K_y⁻¹) ∂K_y/∂θ_j)          (Rasmussen & Williams (5.9))
+// by Ceres' L-BFGS (a gradient problem). O(N³) per evaluation: fit on a few hundred
+// points; the model for more data reuses the hyper-parameters.
+
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+#include "core/gp/gp_model.h"
+
+namespace nupmpc::gp {
+
+struct FitOptions {
+  int max_iterations = 200;
+  double gradient_tolerance = 1e-8;
+  double function_tolerance = 1e-10;
+  // Lower bound on σ_n² (keeps K_y well conditioned on noise-free data).
+  double min_noise_variance = 1e-8;
+};
+
+struct FitResult {
+  SeArdKernel kernel;
+  double negative_log_likelihood = 0.0;
+  double initial_negative_log_likelihood = 0.0;
+  int iterations = 0;
+  bool converged = false;  ///< Ceres reported convergence (not the iteration cap)
+  double gradient_norm = 0.0;  ///< max-norm of the gradient in log parameters at the end
+  double seconds = 0.0;
+  std::string report;      ///< Ceres' one-line summary
+};
+
+// NLL and its gradient with respect to log(σ_f², ℓ, σ_n²) (exposed for tests).
+absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
+                                             const SeArdKernel& kernel, Eigen::VectorXd* log_gradient);
+
+absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
+                                             const SeArdKernel& initial, const FitOptions& options = {});
+
+}  // namespace nupmpc::gp
+
+#endif  // NUPMPC_CORE_GP_HYPERPARAMETER_FIT_H_
