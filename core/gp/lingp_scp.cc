@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 
@@ -59,6 +60,7 @@ absl::Status Validate(const ScpOptions& o) {
   if (!(o.tolerance > 0.0)) return bad("tolerance", "must be > 0");
   if (o.max_iterations < 1) return bad("max_iterations", "must be ≥ 1");
   if (!(o.penalty > 0.0) || !std::isfinite(o.penalty)) return bad("penalty", "must be finite and > 0");
+  if (o.cold_start_levels < 0) return bad("cold_start_levels", "must be ≥ 0");
   return absl::OkStatus();
 }
 
@@ -236,6 +238,16 @@ void LinGpScp::BuildSubproblem(double rho) {
   }
 }
 
+void LinGpScp::ProjectToInputConstraints(Eigen::VectorXd* inputs) const {
+  double previous = past_inputs_(p_.layout.input_lags);
+  for (Eigen::Index n = 0; n < inputs->size(); ++n) {
+    const double lo = std::max(p_.input_min, previous + p_.rate_min);
+    const double hi = std::min(p_.input_max, previous + p_.rate_max);
+    (*inputs)(n) = std::clamp((*inputs)(n), std::min(lo, hi), std::max(lo, hi));
+    previous = (*inputs)(n);
+  }
+}
+
 void LinGpScp::ShiftWarmStart() {
   if (!has_warm_) return;
   const int H = p_.horizon;
@@ -264,23 +276,41 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
   past_inputs_ = past_inputs;
   reference_ = reference.size() == H ? reference : Eigen::VectorXd::Constant(H, reference(0));
 
-  // A feasible nominal plan: the warm one (or u[t-1] held), clipped to the input box and
-  // rate-limited from u[t-1], so that the first subproblem (which contains it) is feasible.
-  if (!has_warm_) nominal_u_ = Eigen::VectorXd::Constant(H, past_inputs_(m));
-  double previous = past_inputs_(m);
-  for (int n = 0; n < H; ++n) {
-    const double lo = std::max(p_.input_min, previous + p_.rate_min);
-    const double hi = std::min(p_.input_max, previous + p_.rate_max);
-    nominal_u_(n) = std::clamp(nominal_u_(n), std::min(lo, hi), std::max(lo, hi));
-    previous = nominal_u_(n);
-  }
-  Simulate(nominal_u_, &nominal_x_, &nominal_y_, &nominal_lin_);
   Eigen::VectorXd sigmas(H);
   const auto sigmas_of = [&](const std::vector<LinGp>& lin) {
     for (int n = 0; n < H; ++n) sigmas(n) = std::sqrt(std::max(lin[n].covariance(0, 0), 0.0));
     return sigmas;
   };
-  double merit = Merit(nominal_u_, nominal_y_, sigmas_of(nominal_lin_), nullptr, nullptr);
+  // A feasible nominal plan: the warm one, clipped to the input box and rate-limited
+  // from u[t-1], so that the first subproblem (which contains it) is feasible. Without a
+  // warm plan, the best of a few input levels held over the horizon (exact merit): a
+  // stationary point of the model (here u³ has zero slope at u = 0) would otherwise hold
+  // the SCP, whose steps only see first-order information, where it started.
+  double merit = 0.0;
+  if (has_warm_) {
+    ProjectToInputConstraints(&nominal_u_);
+    Simulate(nominal_u_, &nominal_x_, &nominal_y_, &nominal_lin_);
+    merit = Merit(nominal_u_, nominal_y_, sigmas_of(nominal_lin_), nullptr, nullptr);
+  } else {
+    merit = std::numeric_limits<double>::infinity();
+    for (int level = -1; level < options_.cold_start_levels; ++level) {
+      // level -1: u[t-1] held; then evenly spaced levels of the input box.
+      const double value = level < 0 ? past_inputs_(m)
+                                     : p_.input_min + (p_.input_max - p_.input_min) * level /
+                                                          std::max(1, options_.cold_start_levels - 1);
+      candidate_u_ = Eigen::VectorXd::Constant(H, value);
+      ProjectToInputConstraints(&candidate_u_);
+      Simulate(candidate_u_, &candidate_x_, &candidate_y_, &candidate_lin_);
+      const double candidate_merit = Merit(candidate_u_, candidate_y_, sigmas_of(candidate_lin_), nullptr, nullptr);
+      if (candidate_merit < merit) {
+        merit = candidate_merit;
+        std::swap(nominal_u_, candidate_u_);
+        std::swap(nominal_x_, candidate_x_);
+        std::swap(nominal_y_, candidate_y_);
+        std::swap(nominal_lin_, candidate_lin_);
+      }
+    }
+  }
 
   ScpSummary summary;
   double rho = options_.initial_trust_radius;

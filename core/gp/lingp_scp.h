@@ -59,6 +59,9 @@ struct ScpOptions {
   double tolerance = 1e-9;  ///< ε on the predicted reduction |δ̃|
   int max_iterations = 50;  ///< j_max
   double penalty = 1e3;     ///< λ of the exact penalty
+  // Cold starts try u[t-1] and this many evenly spaced levels of the input box held over
+  // the horizon, and start from the one with the least exact merit.
+  int cold_start_levels = 9;
 };
 absl::Status Validate(const ScpOptions& options);
 
@@ -90,7 +93,7 @@ class LinGpScp {
   // One MPC step at time t. past_outputs: y[t-l..t-1] (l values, measured); past_inputs:
   // u[t-m-1..t-1] (m+1 values, applied); reference: r[t..t+H-1] (H values, or 1).
   // Starts from the warm plan if there is one (ShiftWarmStart() between steps), else
-  // from u ≡ u[t-1] (projected onto the input box).
+  // from the best of a few constant inputs (ScpOptions.cold_start_levels).
   absl::StatusOr<ScpSummary> Solve(const Eigen::VectorXd& past_outputs, const Eigen::VectorXd& past_inputs,
                                    const Eigen::VectorXd& reference, ScpPlan* plan);
   void ShiftWarmStart();
@@ -110,6 +113,8 @@ class LinGpScp {
                double* objective, double* max_violation) const;
   // Writes the linearised subproblem around the nominal plan into problem_.
   void BuildSubproblem(double trust_radius);
+  // Clips to the input box and the rate limits from u[t-1], in order.
+  void ProjectToInputConstraints(Eigen::VectorXd* inputs) const;
   double UpperBound(int k) const;
   double LowerBound(int k) const;
 

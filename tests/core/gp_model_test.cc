@@ -1,0 +1,200 @@
+// GP regression and the linGP against independent references: predictions against dense
+// formulas with an explicit inverse, gradients and the linGP against finite differences
+// of the exact GP, V̂ positive semidefinite; the likelihood gradient against finite
+// differences; the hyper-parameter fit recovers the parameters of data drawn from a
+// known GP; NARX data layout.
+#include <cmath>
+#include <random>
+
+#include "Eigen/Eigenvalues"
+#include "Eigen/LU"
+#include "core/gp/gp_model.h"
+#include "core/gp/hyperparameter_fit.h"
+#include "core/gp/narx.h"
+#include "gtest/gtest.h"
+
+namespace nupmpc::gp {
+namespace {
+
+SeArdKernel TestKernel() {
+  SeArdKernel k;
+  k.signal_variance = 1.7;
+  k.length_scales = Eigen::Vector2d(0.8, 1.4);
+  k.noise_variance = 0.02;
+  return k;
+}
+
+struct Data {
+  Eigen::MatrixXd x;
+  Eigen::VectorXd y;
+};
+
+Data SmoothData(int n, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> coord(-2.0, 2.0);
+  Data d{Eigen::MatrixXd(n, 2), Eigen::VectorXd(n)};
+  for (int i = 0; i < n; ++i) {
+    d.x(i, 0) = coord(rng);
+    d.x(i, 1) = coord(rng);
+    d.y(i) = std::sin(d.x(i, 0)) * std::cos(0.5 * d.x(i, 1)) + 0.1 * d.x(i, 1);
+  }
+  return d;
+}
+
+// Dense reference: k(x,x') written out, K_y inverted by LU.
+double RefKernel(const SeArdKernel& k, const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  return k.signal_variance * std::exp(-0.5 * ((a - b).array() / k.length_scales.array()).square().sum());
+}
+
+TEST(GpModel, PredictionsMatchDenseFormulas) {
+  const Data d = SmoothData(25, 1);
+  const SeArdKernel kernel = TestKernel();
+  auto model = GpModel::Create(d.x, d.y, kernel);
+  ASSERT_TRUE(model.ok()) << model.status();
+  Eigen::MatrixXd ky(25, 25);
+  for (int i = 0; i < 25; ++i) {
+    for (int j = 0; j < 25; ++j) ky(i, j) = RefKernel(kernel, d.x.row(i).transpose(), d.x.row(j).transpose());
+  }
+  ky.diagonal().array() += kernel.noise_variance;
+  const Eigen::MatrixXd inverse = ky.fullPivLu().inverse();
+  for (const Eigen::Vector2d x : {Eigen::Vector2d(0.3, -0.4), Eigen::Vector2d(1.9, 1.2), Eigen::Vector2d(-3.0, 0.0)}) {
+    Eigen::VectorXd kx(25);
+    for (int i = 0; i < 25; ++i) kx(i) = RefKernel(kernel, d.x.row(i).transpose(), x);
+    const double ref_mean = kx.dot(inverse * d.y);
+    const double ref_var = kernel.signal_variance - kx.dot(inverse * kx);
+    double mean = 0.0, var = 0.0;
+    model->Predict(x, &mean, &var);
+    EXPECT_NEAR(mean, ref_mean, 1e-10);
+    EXPECT_NEAR(var, ref_var, 1e-10);
+    EXPECT_NEAR(model->Mean(x), ref_mean, 1e-10);
+  }
+}
+
+TEST(GpModel, LinGpIsTheExactGpsFirstOrderExpansion) {
+  const Data d = SmoothData(60, 2);
+  auto model = GpModel::Create(d.x, d.y, TestKernel());
+  ASSERT_TRUE(model.ok());
+  const Eigen::Vector2d x(0.4, -0.7);
+  const LinGp lin = model->Linearise(x);
+  double mean = 0.0, var = 0.0;
+  model->Predict(x, &mean, &var);
+  EXPECT_NEAR(lin.mean(0), mean, 1e-12);
+  EXPECT_NEAR(lin.covariance(0, 0), var, 1e-12);
+  constexpr double h = 1e-6;
+  for (int i = 0; i < 2; ++i) {
+    Eigen::Vector2d step = Eigen::Vector2d::Zero();
+    step(i) = h;
+    double mp, vp, mm, vm;
+    model->Predict(x + step, &mp, &vp);
+    model->Predict(x - step, &mm, &vm);
+    EXPECT_NEAR(lin.mean(1 + i), (mp - mm) / (2 * h), 1e-7) << "∇μ_" << i;
+    // ∂σ²/∂x_i = 2 V̂(i+1, 0): the prior cross-covariance of f and ∇f vanishes at x.
+    EXPECT_NEAR(2.0 * lin.covariance(1 + i, 0), (vp - vm) / (2 * h), 1e-7) << "∇σ²_" << i;
+  }
+  // The linGP mean is the linearised exact mean: error O(|Δ|²).
+  for (const double scale : {1e-2, 1e-3}) {
+    const Eigen::Vector2d delta = scale * Eigen::Vector2d(0.6, -0.8);
+    EXPECT_LT(std::abs(lin.Mean(delta) - model->Mean(x + delta)), 5.0 * scale * scale);
+  }
+  // V̂ is a covariance: symmetric PSD (so the linGP variance is convex in Δ).
+  EXPECT_LT((lin.covariance - lin.covariance.transpose()).norm(), 1e-12);
+  EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(lin.covariance).eigenvalues().minCoeff(), -1e-10);
+}
+
+TEST(GpModel, BatchedLinearisationEqualsOneByOne) {
+  const Data d = SmoothData(40, 3);
+  auto model = GpModel::Create(d.x, d.y, TestKernel());
+  ASSERT_TRUE(model.ok());
+  Eigen::MatrixXd points(3, 2);
+  points << 0.1, 0.2, -1.0, 1.5, 2.5, -0.3;
+  std::vector<LinGp> batch;
+  model->Linearise(points, &batch);
+  ASSERT_EQ(batch.size(), 3u);
+  for (int p = 0; p < 3; ++p) {
+    const LinGp one = model->Linearise(Eigen::VectorXd(points.row(p).transpose()));
+    EXPECT_LT((batch[p].mean - one.mean).cwiseAbs().maxCoeff(), 1e-13);
+    EXPECT_LT((batch[p].covariance - one.covariance).cwiseAbs().maxCoeff(), 1e-13);
+  }
+}
+
+TEST(GpModel, BadInputIsRefusedNamingTheField) {
+  const Data d = SmoothData(5, 4);
+  SeArdKernel k = TestKernel();
+  k.length_scales(1) = -1.0;
+  EXPECT_NE(GpModel::Create(d.x, d.y, k).status().message().find("length_scales[1]"), std::string::npos);
+  EXPECT_NE(GpModel::Create(d.x, Eigen::VectorXd::Zero(4), TestKernel()).status().message().find("targets"),
+            std::string::npos);
+  k = TestKernel();
+  k.noise_variance = 0.0;
+  EXPECT_NE(GpModel::Create(d.x, d.y, k).status().message().find("noise_variance"), std::string::npos);
+}
+
+TEST(HyperparameterFit, LikelihoodGradientMatchesFiniteDifferences) {
+  const Data d = SmoothData(30, 5);
+  const SeArdKernel kernel = TestKernel();
+  Eigen::VectorXd gradient;
+  ASSERT_TRUE(NegativeLogLikelihood(d.x, d.y, kernel, &gradient).ok());
+  constexpr double h = 1e-6;
+  const auto nll_with = [&](int j, double step) {
+    SeArdKernel k = kernel;
+    if (j == 0) k.signal_variance *= std::exp(step);
+    if (j == 1 || j == 2) k.length_scales(j - 1) *= std::exp(step);
+    if (j == 3) k.noise_variance *= std::exp(step);
+    return *NegativeLogLikelihood(d.x, d.y, k, nullptr);
+  };
+  for (int j = 0; j < 4; ++j) {
+    const double fd = (nll_with(j, h) - nll_with(j, -h)) / (2 * h);
+    EXPECT_NEAR(gradient(j), fd, 1e-5 * (1.0 + std::abs(fd))) << "log-parameter " << j;
+  }
+}
+
+// Data drawn from a GP with known hyper-parameters: the fit finds a likelihood at least as
+// good as the truth's and parameters close to it.
+TEST(HyperparameterFit, RecoversKnownParameters) {
+  constexpr int n = 300;
+  SeArdKernel truth;
+  truth.signal_variance = 1.5;
+  truth.length_scales = Eigen::Vector2d(0.7, 1.6);
+  truth.noise_variance = 0.01;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> coord(-3.0, 3.0);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::MatrixXd x(n, 2);
+  for (int i = 0; i < n; ++i) x.row(i) << coord(rng), coord(rng);
+  Eigen::MatrixXd ky = KernelMatrix(truth, x);
+  ky.diagonal().array() += truth.noise_variance;
+  Eigen::VectorXd z(n);
+  for (int i = 0; i < n; ++i) z(i) = normal(rng);
+  const Eigen::VectorXd y = Eigen::LLT<Eigen::MatrixXd>(ky).matrixL() * z;
+
+  SeArdKernel start;
+  start.signal_variance = 1.0;
+  start.length_scales = Eigen::Vector2d(1.0, 1.0);
+  start.noise_variance = 0.1;
+  auto fit = FitHyperparameters(x, y, start);
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_TRUE(fit->converged) << fit->report;
+  EXPECT_LE(fit->negative_log_likelihood, *NegativeLogLikelihood(x, y, truth, nullptr) + 1e-6);
+  EXPECT_LT(fit->gradient_norm, 1e-3);
+  EXPECT_NEAR(std::log(fit->kernel.length_scales(0) / truth.length_scales(0)), 0.0, std::log(1.3));
+  EXPECT_NEAR(std::log(fit->kernel.length_scales(1) / truth.length_scales(1)), 0.0, std::log(1.3));
+  EXPECT_NEAR(std::log(fit->kernel.noise_variance / truth.noise_variance), 0.0, std::log(1.5));
+  EXPECT_NEAR(std::log(fit->kernel.signal_variance / truth.signal_variance), 0.0, std::log(2.5));
+}
+
+TEST(Narx, RegressorsFollowTheLayout) {
+  Eigen::VectorXd y(6), u(6);
+  y << 0, 1, 2, 3, 4, 5;
+  u << 10, 11, 12, 13, 14, 15;
+  auto data = MakeNarxData(NarxLayout{.output_lags = 2, .input_lags = 1}, y, u);
+  ASSERT_TRUE(data.ok());
+  ASSERT_EQ(data->regressors.rows(), 4);  // k = 2..5
+  // y[k] from [y[k-2], y[k-1], u[k-1], u[k]].
+  EXPECT_EQ(data->regressors.row(0), Eigen::RowVector4d(0, 1, 11, 12));
+  EXPECT_EQ(data->targets(0), 2);
+  EXPECT_EQ(data->regressors.row(3), Eigen::RowVector4d(3, 4, 14, 15));
+  EXPECT_FALSE(MakeNarxData(NarxLayout{.output_lags = 0}, y, u).ok());
+}
+
+}  // namespace
+}  // namespace nupmpc::gp
