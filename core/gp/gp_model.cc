@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "Eigen/Eigenvalues"
+
 #include "absl/strings/str_cat.h"
 
 namespace nupmpc::gp {
@@ -74,6 +76,16 @@ absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd 
 
   GpModel model(std::move(inputs), std::move(targets), std::move(kernel));
   Eigen::MatrixXd k = KernelMatrix(model.kernel_, model.inputs_);
+  {
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(k);
+    if (eigen.info() != Eigen::Success) return absl::InternalError("eigendecomposition of K failed");
+    const double cut = kDroppedEigenvalue * model.kernel_.noise_variance;
+    const Eigen::VectorXd& s = eigen.eigenvalues();  // ascending
+    Eigen::Index kept = 0;
+    while (kept < s.size() && s(s.size() - 1 - kept) > cut) ++kept;
+    model.basis_ = eigen.eigenvectors().rightCols(kept);
+    model.basis_weights_ = (s.tail(kept).array() + model.kernel_.noise_variance).inverse().matrix();
+  }
   k.diagonal().array() += model.kernel_.noise_variance;
   model.cholesky_.compute(k);
   if (model.cholesky_.info() != Eigen::Success) {
@@ -118,20 +130,27 @@ void GpModel::Predict(const Eigen::VectorXd& x, double* mean, double* variance) 
   *variance = std::max(0.0, kernel_.signal_variance - z.squaredNorm());
 }
 
-void GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out) const {
-  const int d = dimension(), P = static_cast<int>(points.rows());
-  Eigen::MatrixXd w(num_points(), P * (d + 1));
-  for (int p = 0; p < P; ++p) CrossCovariances(points.row(p).transpose(), &w, p * (d + 1));
-  const Eigen::MatrixXd means = w.transpose() * alpha_;  // [μ; ∇μ] per point, stacked
-  cholesky_.matrixL().solveInPlace(w);                    // Z = L⁻¹ W
+void GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
+                        LinearisationScratch* scratch) const {
+  const int d = dimension(), P = static_cast<int>(points.rows()), c = d + 1;
+  Eigen::MatrixXd& w = scratch->cross;
+  Eigen::MatrixXd& projection = scratch->projection;
+  w.resize(num_points(), P * c);
+  for (int p = 0; p < P; ++p) CrossCovariances(points.row(p).transpose(), &w, p * c);
+  const Eigen::VectorXd means = w.transpose() * alpha_;  // [μ; ∇μ] per point, stacked
+  projection.noalias() = basis_.transpose() * w;        // A = U_rᵀ W
+  w.noalias() -= basis_ * projection;                   // W⊥ = W - U_r A
+  const double inverse_noise = 1.0 / kernel_.noise_variance;
   out->resize(P);
   for (int p = 0; p < P; ++p) {
     LinGp& lin = (*out)[p];
-    lin.mean = means.col(0).segment(p * (d + 1), d + 1);
-    const auto z = w.middleCols(p * (d + 1), d + 1);
+    lin.mean = means.segment(p * c, c);
+    const auto a = projection.middleCols(p * c, c);
+    const auto residual = w.middleCols(p * c, c);
+    lin.covariance.noalias() = -(a.transpose() * basis_weights_.asDiagonal() * a);
+    lin.covariance.noalias() -= inverse_noise * (residual.transpose() * residual);
     // Prior covariance of [f; ∇f] at one point: diag(σ_f², σ_f²/ℓ²) (k and ∇k are
     // uncorrelated at coincident points); minus what the data explain.
-    lin.covariance = -(z.transpose() * z);
     lin.covariance(0, 0) += kernel_.signal_variance;
     for (int i = 0; i < d; ++i) lin.covariance(1 + i, 1 + i) += kernel_.signal_variance * inverse_squared_lengths_(i);
     lin.covariance(0, 0) = std::max(lin.covariance(0, 0), 0.0);

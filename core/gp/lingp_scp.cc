@@ -140,7 +140,7 @@ void LinGpScp::Simulate(const Eigen::VectorXd& inputs, Eigen::MatrixXd* regresso
     y(l + n) = model_->Mean(x);
     (*means)(n) = y(l + n);
   }
-  model_->Linearise(*regressors, lin);  // the exact σ² is each V̂(0, 0)
+  model_->Linearise(*regressors, lin, &scratch_);  // the exact σ² is each V̂(0, 0)
 }
 
 double LinGpScp::Merit(const Eigen::VectorXd& inputs, const Eigen::VectorXd& means, const Eigen::VectorXd& sigmas,

@@ -130,6 +130,7 @@ class LinGpScp {
   Eigen::VectorXd nominal_u_, nominal_y_, candidate_u_, candidate_y_;
   Eigen::MatrixXd nominal_x_, candidate_x_;
   std::vector<LinGp> nominal_lin_, candidate_lin_;
+  mutable LinearisationScratch scratch_;  // Simulate() is const; the scratch is per solver
   bool has_warm_ = false;
 };
 

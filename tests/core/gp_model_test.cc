@@ -117,6 +117,27 @@ TEST(GpModel, BatchedLinearisationEqualsOneByOne) {
   }
 }
 
+// Linearise() uses K's numerically low-rank eigendecomposition; Predict() the Cholesky
+// factor. On 1200 points the two agree to rounding, with a basis far smaller than N.
+TEST(GpModel, LowRankLinearisationMatchesTheCholeskyPrediction) {
+  const Data d = SmoothData(1200, 6);
+  SeArdKernel kernel = TestKernel();
+  kernel.noise_variance = 1e-3;
+  auto model = GpModel::Create(d.x, d.y, kernel);
+  ASSERT_TRUE(model.ok());
+  EXPECT_LT(model->basis_rank(), 300);
+  Eigen::MatrixXd points(6, 2);
+  points << 0.0, 0.0, 1.3, -1.7, -1.9, 1.9, 0.7, 0.2, 2.5, 2.5, -4.0, 1.0;  // inside, edge, outside the data
+  std::vector<LinGp> lin;
+  model->Linearise(points, &lin);
+  for (int p = 0; p < 6; ++p) {
+    double mean = 0.0, variance = 0.0;
+    model->Predict(Eigen::VectorXd(points.row(p).transpose()), &mean, &variance);
+    EXPECT_NEAR(lin[p].mean(0), mean, 1e-12);
+    EXPECT_NEAR(lin[p].covariance(0, 0), variance, 1e-10 * kernel.signal_variance) << "point " << p;
+  }
+}
+
 TEST(GpModel, BadInputIsRefusedNamingTheField) {
   const Data d = SmoothData(5, 4);
   SeArdKernel k = TestKernel();
