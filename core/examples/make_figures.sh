@@ -14,4 +14,6 @@ for example in dac corridor flappy-bird obstacle-avoidance; do
   echo "== nupmpc-example-${example}"
   "build/bin/nupmpc-example-${example}" "${out}"
 done
+echo "== nupmpc-gp-bench (N = 200, 1500)"
+build/bin/nupmpc-gp-bench --sizes 200,1500 --csv "${out}"
 /usr/bin/python3 core/examples/plot_examples.py "${out}"

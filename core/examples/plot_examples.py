@@ -101,8 +101,32 @@ def obstacles(d):
     fig.savefig(f"{d}/obstacles.png", dpi=120)
 
 
+def gp_closed_loop(d):
+    """[Nghiem] §V: closed loops driven by linGP-SCP and by Ipopt (nupmpc-gp-bench --csv)."""
+    import glob
+    import os
+    for path in sorted(glob.glob(f"{d}/gp_closed_loop_N*.csv")):
+        t = read(path)
+        name = os.path.splitext(os.path.basename(path))[0]
+        steps = list(range(len(t["y_scp"])))
+        fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+        top.step(steps, t["reference"], "k--", where="post", label="reference")
+        top.plot(steps, t["y_scp"], label="y, linGP-SCP (NUP)")
+        if t.get("y_ipopt"):
+            top.plot(steps, t["y_ipopt"], ":", label="y, Ipopt")
+        top.set_title(f"GP-MPC closed loop, N = {name.split('_N')[-1]} training points")
+        top.legend(fontsize=7)
+        bottom.step(steps, t["u_scp"], where="post", label="u, linGP-SCP")
+        if t.get("u_ipopt"):
+            bottom.step(steps, t["u_ipopt"], ":", where="post", label="u, Ipopt")
+        bottom.set_xlabel("step")
+        bottom.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(f"{d}/{name}.png", dpi=120)
+
+
 if __name__ == "__main__":
     directory = sys.argv[1] if len(sys.argv) > 1 else "figures"
-    for plot in (dac, corridor, flappy, obstacles):
+    for plot in (dac, corridor, flappy, obstacles, gp_closed_loop):
         plot(directory)
         print(f"{plot.__name__}: written to {directory}")
