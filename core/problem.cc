@@ -261,4 +261,13 @@ absl::Status CheckSameShape(const Problem& session, const Problem& update) {
   return absl::OkStatus();
 }
 
+absl::Status CheckInitialState(const Problem& session, const Eigen::VectorXd& x0) {
+  if (x0.size() != session.num_states) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("initial_state: expected size ", session.num_states, ", got ", x0.size()));
+  }
+  if (!x0.allFinite()) return absl::InvalidArgumentError("initial_state: contains a non-finite number");
+  return absl::OkStatus();
+}
+
 }  // namespace nupmpc::core

@@ -80,6 +80,10 @@ absl::Status Validate(const Problem& problem);
 // by one of the same shape.
 absl::Status CheckSameShape(const Problem& session, const Problem& update);
 
+// A new measured x[0] for a session of `session`'s shape: FAILED_PRECONDITION for a wrong
+// size, INVALID_ARGUMENT for non-finite values.
+absl::Status CheckInitialState(const Problem& session, const Eigen::VectorXd& x0);
+
 // Checks one scalar prior; `field` is the path used in the message.
 absl::Status ValidatePrior(const ScalarPrior& prior, const char* field, int index);
 

@@ -66,11 +66,7 @@ absl::StatusOr<std::unique_ptr<SequentialSolver>> SequentialSolver::Create(
 }
 
 absl::Status SequentialSolver::SetInitialState(const Eigen::VectorXd& x0) {
-  if (x0.size() != problem_.num_states) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("initial_state: expected size ", problem_.num_states, ", got ", x0.size()));
-  }
-  if (!x0.allFinite()) return absl::InvalidArgumentError("initial_state: contains a non-finite number");
+  NUPMPC_RETURN_IF_ERROR(CheckInitialState(problem_, x0));
   problem_.initial_mean = x0;
   return absl::OkStatus();
 }

@@ -83,11 +83,7 @@ absl::Status Session::Rebuild() {
 }
 
 absl::Status Session::SetInitialState(const Eigen::VectorXd& x0) {
-  if (x0.size() != problem_.num_states) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("initial_state: expected size ", problem_.num_states, ", got ", x0.size()));
-  }
-  if (!x0.allFinite()) return absl::InvalidArgumentError("initial_state: contains a non-finite number");
+  NUPMPC_RETURN_IF_ERROR(CheckInitialState(problem_, x0));
   problem_.initial_mean = x0;
   algorithm_->RefreshInitialState(problem_);
   return absl::OkStatus();
