@@ -123,13 +123,11 @@ class GpMpcNlp final : public Ipopt::TNLP {
     for (int k = 0; k < H; ++k) {
       gp::Regressor(p_.layout, y.segment(k, l), uh.segment(k + 1, m + 1), &reg);
       regressors_.row(k) = reg.transpose();
-      y(l + k) = model_->Mean(reg);
-      // Mean gradient for the sensitivities (the batch below recomputes it with σ).
-      const gp::LinGp lin = model_->Linearise(reg);
+      y(l + k) = model_->MeanAndGradient(reg, &mean_gradient_);  // O(N d); σ comes in one batch below
       RegressorSensitivity(k, dy, &dreg);
-      dy.row(l + k) = lin.mean.tail(d).transpose() * dreg;
+      dy.row(l + k) = mean_gradient_.transpose() * dreg;
     }
-    model_->Linearise(regressors_, &lin_);
+    model_->Linearise(regressors_, &lin_, &scratch_);
     f_ = 0.0;
     grad_f_ = Eigen::VectorXd::Zero(H);
     g_.resize(3 * H);
@@ -177,6 +175,8 @@ class GpMpcNlp final : public Ipopt::TNLP {
   Eigen::VectorXd grad_f_, g_;
   Eigen::MatrixXd jac_, regressors_;
   std::vector<gp::LinGp> lin_;
+  gp::LinearisationScratch scratch_;
+  Eigen::VectorXd mean_gradient_;
 };
 
 }  // namespace

@@ -107,6 +107,18 @@ double GpModel::Mean(const Eigen::VectorXd& x) const {
   return mean;
 }
 
+double GpModel::MeanAndGradient(const Eigen::VectorXd& x, Eigen::VectorXd* gradient) const {
+  const int d = dimension();
+  gradient->setZero(d);
+  double mean = 0.0;
+  for (int j = 0; j < num_points(); ++j) {
+    const double weighted = alpha_(j) * Kernel(inputs_.row(j).transpose(), x);
+    mean += weighted;
+    for (int i = 0; i < d; ++i) (*gradient)(i) -= weighted * (x(i) - inputs_(j, i)) * inverse_squared_lengths_(i);
+  }
+  return mean;
+}
+
 void GpModel::CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const {
   const int d = dimension();
   for (int j = 0; j < num_points(); ++j) {

@@ -64,6 +64,8 @@ class GpModel {
   double Kernel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) const;
   // Predictive mean μ(x) (O(N d)).
   double Mean(const Eigen::VectorXd& x) const;
+  // μ(x) and ∇μ(x) (O(N d)).
+  double MeanAndGradient(const Eigen::VectorXd& x, Eigen::VectorXd* gradient) const;
   // Predictive mean and variance of f(x) (O(N² ) for the variance).
   void Predict(const Eigen::VectorXd& x, double* mean, double* variance) const;
   // The linGP at each row of `points` (P×d), batched over P·(d+1) cross-covariance

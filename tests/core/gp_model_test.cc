@@ -80,6 +80,9 @@ TEST(GpModel, LinGpIsTheExactGpsFirstOrderExpansion) {
   model->Predict(x, &mean, &var);
   EXPECT_NEAR(lin.mean(0), mean, 1e-12);
   EXPECT_NEAR(lin.covariance(0, 0), var, 1e-12);
+  Eigen::VectorXd gradient;
+  EXPECT_NEAR(model->MeanAndGradient(x, &gradient), mean, 1e-12);
+  EXPECT_LT((gradient - lin.mean.tail(2)).cwiseAbs().maxCoeff(), 1e-12);
   constexpr double h = 1e-6;
   for (int i = 0; i < 2; ++i) {
     Eigen::Vector2d step = Eigen::Vector2d::Zero();
