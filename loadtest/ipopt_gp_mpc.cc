@@ -115,7 +115,8 @@ class GpMpcNlp final : public Ipopt::TNLP {
     const Eigen::Map<const Eigen::VectorXd> u(x, n);
     // Histories (past first) and their sensitivities to u: dy(i, :) = ∂y_hist(i)/∂u.
     Eigen::VectorXd y(l + H), uh(m + 1 + H), reg(d);
-    Eigen::MatrixXd dy = Eigen::MatrixXd::Zero(l + H, H), dreg(d, H);
+    Eigen::MatrixXd dy = Eigen::MatrixXd::Zero(l + H, H);
+    dreg_.resize(H);  // ∂(regressor of ȳ[t+k])/∂u, reused for σ's gradient below
     y.head(l) = past_outputs_;
     uh.head(m + 1) = past_inputs_;
     uh.tail(H) = u;
@@ -124,8 +125,9 @@ class GpMpcNlp final : public Ipopt::TNLP {
       gp::Regressor(p_.layout, y.segment(k, l), uh.segment(k + 1, m + 1), &reg);
       regressors_.row(k) = reg.transpose();
       y(l + k) = model_->MeanAndGradient(reg, &mean_gradient_);  // O(N d); σ comes in one batch below
-      RegressorSensitivity(k, dy, &dreg);
-      dy.row(l + k) = mean_gradient_.transpose() * dreg;
+      dreg_[k].resize(d, H);
+      RegressorSensitivity(k, dy, &dreg_[k]);
+      dy.row(l + k) = mean_gradient_.transpose() * dreg_[k];
     }
     model_->Linearise(regressors_, &lin_, &scratch_);
     f_ = 0.0;
@@ -145,8 +147,7 @@ class GpMpcNlp final : public Ipopt::TNLP {
       previous = u(k);
       // σ and its gradient: ∇σ = V̂[1:, 0]/σ (∇σ² = 2 V̂[1:, 0]).
       const double sigma = std::sqrt(std::max(lin_[k].covariance(0, 0), 1e-300));
-      RegressorSensitivity(k, dy, &dreg);
-      const Eigen::RowVectorXd dsigma = (lin_[k].covariance.col(0).tail(d) / sigma).transpose() * dreg;
+      const Eigen::RowVectorXd dsigma = (lin_[k].covariance.col(0).tail(d) / sigma).transpose() * dreg_[k];
       g_(H + k) = y(l + k) + p_.sigma_multiple * sigma;
       g_(2 * H + k) = y(l + k) - p_.sigma_multiple * sigma;
       jac_.row(H + k) = dy.row(l + k) + p_.sigma_multiple * dsigma;
@@ -177,6 +178,7 @@ class GpMpcNlp final : public Ipopt::TNLP {
   std::vector<gp::LinGp> lin_;
   gp::LinearisationScratch scratch_;
   Eigen::VectorXd mean_gradient_;
+  std::vector<Eigen::MatrixXd> dreg_;
 };
 
 }  // namespace

@@ -78,7 +78,10 @@ void InputTransform::RememberApplied(const core::Solution& mapped) {
 absl::StatusOr<core::Problem> TransformProblem(const v1::ProblemSpec& spec, core::Problem base,
                                                InputTransform* t) {
   const int M = base.num_states, L = base.num_inputs, N = base.horizon;
-  *t = InputTransform{.num_states = M, .num_inputs = L, .num_outputs = base.num_outputs};
+  *t = InputTransform{};
+  t->num_states = M;
+  t->num_inputs = L;
+  t->num_outputs = base.num_outputs;
   const bool has_levels = spec.input_levels_size() > 0;
   t->differences = spec.has_input_differences();
   if (has_levels && t->differences) {

@@ -95,15 +95,18 @@ absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd 
   return model;
 }
 
-double GpModel::Kernel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) const {
-  return kernel_.signal_variance * std::exp(-0.5 * (a - b).array().square().matrix().dot(inverse_squared_lengths_));
+double GpModel::KernelToPoint(int j, const Eigen::VectorXd& x) const {
+  double r2 = 0.0;
+  for (int i = 0; i < dimension(); ++i) {
+    const double diff = x(i) - inputs_(j, i);
+    r2 += diff * diff * inverse_squared_lengths_(i);
+  }
+  return kernel_.signal_variance * std::exp(-0.5 * r2);
 }
 
 double GpModel::Mean(const Eigen::VectorXd& x) const {
   double mean = 0.0;
-  for (int j = 0; j < num_points(); ++j) {
-    mean += alpha_(j) * Kernel(inputs_.row(j).transpose(), x);
-  }
+  for (int j = 0; j < num_points(); ++j) mean += alpha_(j) * KernelToPoint(j, x);
   return mean;
 }
 
@@ -112,7 +115,7 @@ double GpModel::MeanAndGradient(const Eigen::VectorXd& x, Eigen::VectorXd* gradi
   gradient->setZero(d);
   double mean = 0.0;
   for (int j = 0; j < num_points(); ++j) {
-    const double weighted = alpha_(j) * Kernel(inputs_.row(j).transpose(), x);
+    const double weighted = alpha_(j) * KernelToPoint(j, x);
     mean += weighted;
     for (int i = 0; i < d; ++i) (*gradient)(i) -= weighted * (x(i) - inputs_(j, i)) * inverse_squared_lengths_(i);
   }
@@ -122,12 +125,7 @@ double GpModel::MeanAndGradient(const Eigen::VectorXd& x, Eigen::VectorXd* gradi
 void GpModel::CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const {
   const int d = dimension();
   for (int j = 0; j < num_points(); ++j) {
-    double r2 = 0.0;
-    for (int i = 0; i < d; ++i) {
-      const double diff = x(i) - inputs_(j, i);
-      r2 += diff * diff * inverse_squared_lengths_(i);
-    }
-    const double k = kernel_.signal_variance * std::exp(-0.5 * r2);
+    const double k = KernelToPoint(j, x);
     (*w)(j, first) = k;
     // ∂k(X_j, x)/∂x_i = -k (x_i - X_ji)/ℓ_i²
     for (int i = 0; i < d; ++i) (*w)(j, first + 1 + i) = -k * (x(i) - inputs_(j, i)) * inverse_squared_lengths_(i);

@@ -61,7 +61,6 @@ class GpModel {
   const Eigen::MatrixXd& inputs() const { return inputs_; }
   const Eigen::VectorXd& targets() const { return targets_; }
 
-  double Kernel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) const;
   // Predictive mean μ(x) (O(N d)).
   double Mean(const Eigen::VectorXd& x) const;
   // μ(x) and ∇μ(x) (O(N d)).
@@ -85,6 +84,8 @@ class GpModel {
 
  private:
   GpModel(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel);
+  // k(X_j, x), computed in place (Mean() runs once per horizon step per SCP iteration).
+  double KernelToPoint(int j, const Eigen::VectorXd& x) const;
   // Column j of `w` gets [k(X, x), ∂k(X, x)/∂x_1, ..., ∂k(X, x)/∂x_d] for x = `x`,
   // starting at column `first`.
   void CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const;

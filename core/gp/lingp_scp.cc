@@ -185,8 +185,8 @@ void LinGpScp::BuildSubproblem(double rho) {
 
   for (int n = 0; n < H; ++n) {
     const LinGp& lin = nominal_lin_[n];
-    const Eigen::VectorXd g = lin.mean.tail(d);
-    const Eigen::VectorXd x_star = nominal_x_.row(n).transpose();
+    const auto g = lin.mean.tail(d);                    // ∇μ at the nominal regressor
+    const auto x_star = nominal_x_.row(n).transpose();  // the nominal regressor
     Eigen::MatrixXd& A = problem_.A[n];
     Eigen::MatrixXd& B = problem_.B[n];
     Eigen::VectorXd& c = problem_.state_offset[n];

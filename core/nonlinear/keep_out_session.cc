@@ -18,10 +18,9 @@ void ShiftRowsUp(Eigen::MatrixXd* m) {
 
 }  // namespace
 
-KeepOutSession::KeepOutSession(Problem plant, KeepOut keep_out, std::unique_ptr<SequentialSolver> solver,
+KeepOutSession::KeepOutSession(KeepOut keep_out, std::unique_ptr<SequentialSolver> solver,
                                std::unique_ptr<Session> free_planner, int max_iterations)
-    : plant_(std::move(plant)),
-      keep_out_(std::move(keep_out)),
+    : keep_out_(std::move(keep_out)),
       max_iterations_(max_iterations),
       solver_(std::move(solver)),
       free_planner_(std::move(free_planner)) {
@@ -36,16 +35,14 @@ absl::StatusOr<std::unique_ptr<KeepOutSession>> KeepOutSession::Create(Problem p
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<Linearisation> linearisation, MakeKeepOutLinearisation(plant, keep_out));
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<SequentialSolver> solver,
                           SequentialSolver::Create(std::move(linearisation), solver_options, options));
-  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<Session> free_planner, Session::Create(plant, solver_options));
-  return std::unique_ptr<KeepOutSession>(
-      new KeepOutSession(std::move(plant), std::move(keep_out), std::move(solver), std::move(free_planner),
-                         solver_options.max_iterations));
+  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<Session> free_planner, Session::Create(std::move(plant), solver_options));
+  return std::unique_ptr<KeepOutSession>(new KeepOutSession(std::move(keep_out), std::move(solver),
+                                                            std::move(free_planner), solver_options.max_iterations));
 }
 
 absl::Status KeepOutSession::PlanWithoutRegions(const SolveLimits& limits) {
   SolveLimits cold = limits;
   cold.warm_start = false;
-  NUPMPC_RETURN_IF_ERROR(free_planner_->SetInitialState(plant_.initial_mean));
   NUPMPC_ASSIGN_OR_RETURN(const SolveSummary summary, free_planner_->Solve(cold, &guess_));
   free_planner_->ReleaseWorkspace();
   if (!summary.IsUsable()) {
@@ -57,9 +54,9 @@ absl::Status KeepOutSession::PlanWithoutRegions(const SolveLimits& limits) {
 }
 
 absl::Status KeepOutSession::SetInitialState(const Eigen::VectorXd& x0) {
-  NUPMPC_RETURN_IF_ERROR(solver_->SetInitialState(x0));  // checks x0 for both
-  plant_.initial_mean = x0;
-  return absl::OkStatus();
+  // Both run CheckInitialState: once the first accepts x0, the planner accepts it too.
+  NUPMPC_RETURN_IF_ERROR(solver_->SetInitialState(x0));
+  return free_planner_->SetInitialState(x0);
 }
 
 absl::Status KeepOutSession::Update(const Problem& plant) {
@@ -67,7 +64,6 @@ absl::Status KeepOutSession::Update(const Problem& plant) {
   // Same shape and valid: only an algorithm that cannot be built could refuse it now.
   NUPMPC_RETURN_IF_ERROR(free_planner_->Update(plant));
   free_planner_->ReleaseWorkspace();
-  plant_ = plant;
   return absl::OkStatus();
 }
 
@@ -81,7 +77,7 @@ absl::StatusOr<SolveSummary> KeepOutSession::Solve(const SolveLimits& limits, So
   const bool warm = limits.warm_start && has_plan_;
   if (!warm) NUPMPC_RETURN_IF_ERROR(PlanWithoutRegions(limits));
   // The plan starts at the measured state whatever the previous plan predicted.
-  guess_.states.row(0) = plant_.initial_mean.transpose();
+  guess_.states.row(0) = problem().initial_mean.transpose();
   SolveLimits capped = limits;
   if (capped.max_iterations == 0) capped.max_iterations = max_iterations_;
   NUPMPC_ASSIGN_OR_RETURN(const SequentialSummary sequence, solver_->Solve(guess_, &plan_, capped));
@@ -103,7 +99,7 @@ absl::StatusOr<SolveSummary> KeepOutSession::Solve(const SolveLimits& limits, So
   if (solution != nullptr) {
     solution->inputs = plan_.inputs;
     solution->states = plan_.states;
-    solution->outputs = plan_.outputs.leftCols(plant_.num_outputs);
+    solution->outputs = plan_.outputs.leftCols(problem().num_outputs);
   }
   return summary;
 }

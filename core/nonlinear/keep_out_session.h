@@ -25,7 +25,8 @@ class KeepOutSession final : public MpcSession {
                                                                 SolverOptions solver_options = {},
                                                                 SequentialOptions options = {});
 
-  const Problem& problem() const override { return plant_; }
+  // The plant's problem is the free planner's (it is kept current for cold starts).
+  const Problem& problem() const override { return free_planner_->problem(); }
   Algorithm algorithm() const override { return solver_->algorithm(); }
   const KeepOut& keep_out() const { return keep_out_; }
 
@@ -43,14 +44,13 @@ class KeepOutSession final : public MpcSession {
   absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) override;
 
  private:
-  KeepOutSession(Problem plant, KeepOut keep_out, std::unique_ptr<SequentialSolver> solver,
-                 std::unique_ptr<Session> free_planner, int max_iterations);
+  KeepOutSession(KeepOut keep_out, std::unique_ptr<SequentialSolver> solver, std::unique_ptr<Session> free_planner,
+                 int max_iterations);
   // The cold start: the plan without regions (straight through them). Linearising there
   // keeps the path's shape; linearising at rest (every point at x[0]) cut the plane with
   // tangents facing x[0] and took a hundred linearisations to settle on the test scene.
   absl::Status PlanWithoutRegions(const SolveLimits& limits);
 
-  Problem plant_;
   KeepOut keep_out_;
   bool all_regions_hard_ = true;
   int max_iterations_;  ///< default cap on passes per Solve(), over all linearisations

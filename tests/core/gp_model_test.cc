@@ -57,7 +57,10 @@ TEST(GpModel, PredictionsMatchDenseFormulas) {
   }
   ky.diagonal().array() += kernel.noise_variance;
   const Eigen::MatrixXd inverse = ky.fullPivLu().inverse();
-  for (const Eigen::Vector2d x : {Eigen::Vector2d(0.3, -0.4), Eigen::Vector2d(1.9, 1.2), Eigen::Vector2d(-3.0, 0.0)}) {
+  Eigen::MatrixXd probes(3, 2);
+  probes << 0.3, -0.4, 1.9, 1.2, -3.0, 0.0;
+  for (int p = 0; p < probes.rows(); ++p) {
+    const Eigen::VectorXd x = probes.row(p).transpose();
     Eigen::VectorXd kx(25);
     for (int i = 0; i < 25; ++i) kx(i) = RefKernel(kernel, d.x.row(i).transpose(), x);
     const double ref_mean = kx.dot(inverse * d.y);
