@@ -4,6 +4,8 @@
 //   nupmpc closed-loop FILE    a receding-horizon run through a Control stream: the
 //                              instance's recorded closed-loop states if it has them,
 //                              else the model simulated locally (optional --noise)
+//   nupmpc fit-gp FILE         GP hyper-parameters by maximum likelihood (FitGpModel);
+//                              FILE is a FitGpModelRequest in proto JSON
 //   nupmpc info                server version, limits, counters
 //   nupmpc sessions            open sessions
 //
@@ -81,6 +83,12 @@ std::vector<double> Simulate(const v1::ProblemSpec& spec, const std::vector<doub
 }
 
 int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool json) {
+  if (problem.spec.has_gp()) {
+    // Simulating needs the plant; a GP spec only has data about it.
+    return Fail(absl::InvalidArgumentError(
+        "closed-loop: a GP spec has no plant model to simulate; drive a GP session from your own loop (Control "
+        "stream or Solve, the past window as Step.state)"));
+  }
   absl::StatusOr<std::unique_ptr<nupmpc::Session>> session = client.OpenSession(problem.spec);
   if (!session.ok()) return Fail(session.status());
   const int L = static_cast<int>(problem.spec.model().num_inputs());
@@ -121,7 +129,8 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
 
 int main(int argc, char** argv) {
   absl::SetProgramUsageMessage(
-      "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | info | sessions");
+      "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
+      "sessions");
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
   std::vector<char*> args = absl::ParseCommandLine(argc, argv);
   if (args.size() < 2) {
@@ -139,7 +148,21 @@ int main(int argc, char** argv) {
     if (command == "closed-loop") return ClosedLoop(client, *problem, json);
     absl::StatusOr<v1::SolveResult> r = client.SolveOnce(problem->spec);
     if (!r.ok()) return Fail(r.status());
-    PrintResult(*r, static_cast<int>(problem->spec.model().num_inputs()), json);
+    // A GP spec (no model) has one input.
+    PrintResult(*r, problem->spec.has_gp() ? 1 : static_cast<int>(problem->spec.model().num_inputs()), json);
+    return 0;
+  }
+  if (command == "fit-gp") {
+    if (args.size() < 3) return Fail(absl::InvalidArgumentError("fit-gp: FILE missing"));
+    absl::StatusOr<v1::FitGpModelRequest> request = nupmpc::LoadJsonMessage<v1::FitGpModelRequest>(args[2]);
+    if (!request.ok()) return Fail(request.status());
+    absl::StatusOr<v1::FitGpModelResponse> fit = client.FitGpModel(*request);
+    if (!fit.ok()) return Fail(fit.status());
+    std::string text;
+    google::protobuf::util::JsonPrintOptions options;
+    options.add_whitespace = !json;
+    (void)google::protobuf::util::MessageToJsonString(*fit, &text, options);
+    std::printf("%s\n", text.c_str());
     return 0;
   }
   if (command == "info") {

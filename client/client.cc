@@ -94,6 +94,10 @@ absl::StatusOr<v1::SolveResult> Client::Solve(const std::string& session_id, con
   return std::move(*response->mutable_result());
 }
 
+absl::StatusOr<v1::FitGpModelResponse> Client::FitGpModel(const v1::FitGpModelRequest& request) {
+  return Unary(&v1::MpcService::Stub::FitGpModel, request);
+}
+
 absl::StatusOr<v1::GetServerInfoResponse> Client::GetServerInfo() {
   return Unary(&v1::MpcService::Stub::GetServerInfo, v1::GetServerInfoRequest());
 }

@@ -42,6 +42,7 @@ class Client {
   absl::StatusOr<v1::CreateSessionResponse> CreateSession(const v1::ProblemSpec& spec);
   absl::StatusOr<v1::SolveResult> Solve(const std::string& session_id, const v1::Step& step);
   absl::StatusOr<v1::GetServerInfoResponse> GetServerInfo();
+  absl::StatusOr<v1::FitGpModelResponse> FitGpModel(const v1::FitGpModelRequest& request);
   absl::StatusOr<v1::SessionInfo> GetSession(const std::string& session_id);
   absl::StatusOr<std::vector<v1::SessionInfo>> ListSessions();
   absl::Status CloseSession(const std::string& session_id);

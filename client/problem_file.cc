@@ -10,13 +10,19 @@
 
 namespace nupmpc {
 
-absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path) {
+absl::StatusOr<std::string> ReadTextFile(const std::string& path) {
   std::ifstream in(path);
   if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
   std::stringstream text;
   text << in.rdbuf();
+  return text.str();
+}
+
+absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path) {
+  absl::StatusOr<std::string> text = ReadTextFile(path);
+  if (!text.ok()) return text.status();
   ProblemFile out;
-  if (text.str().find("\"dims\"") != std::string::npos) {  // the benchmark format
+  if (text->find("\"dims\"") != std::string::npos) {  // the benchmark format
     absl::StatusOr<bench::BenchmarkInstance> instance = bench::LoadBenchmarkInstance(path);
     if (!instance.ok()) return instance.status();
     absl::StatusOr<v1::ProblemSpec> spec = server::SpecFromProblem(instance->problem);
@@ -27,7 +33,7 @@ absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path) {
     }
     return out;
   }
-  const auto status = google::protobuf::util::JsonStringToMessage(text.str(), &out.spec);
+  const auto status = google::protobuf::util::JsonStringToMessage(*text, &out.spec);
   if (!status.ok()) return absl::InvalidArgumentError(absl::StrCat(path, ": not a ProblemSpec: ", status.ToString()));
   return out;
 }

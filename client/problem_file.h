@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+#include "google/protobuf/util/json_util.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc {
@@ -21,6 +23,23 @@ struct ProblemFile {
 };
 
 absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path);
+
+// The file's text (NOT_FOUND when it cannot be read).
+absl::StatusOr<std::string> ReadTextFile(const std::string& path);
+
+// A proto message in proto JSON (e.g. a FitGpModelRequest); INVALID_ARGUMENT naming the file.
+template <typename Message>
+absl::StatusOr<Message> LoadJsonMessage(const std::string& path) {
+  absl::StatusOr<std::string> text = ReadTextFile(path);
+  if (!text.ok()) return text.status();
+  Message out;
+  const auto status = google::protobuf::util::JsonStringToMessage(*text, &out);
+  if (!status.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": not a ", Message::descriptor()->name(), ": ", status.ToString()));
+  }
+  return out;
+}
 
 }  // namespace nupmpc
 

@@ -52,6 +52,9 @@ struct Solution {
   Eigen::MatrixXd inputs;
   Eigen::MatrixXd states;
   Eigen::MatrixXd outputs;
+  // Predictive standard deviations of the outputs, (N+1)×K, where the model has them
+  // (GP sessions); empty for the linear models, whose predictions are exact.
+  Eigen::MatrixXd output_stddev;
 };
 
 }  // namespace nupmpc::core

@@ -3,6 +3,7 @@
 #include <functional>
 
 #include "server/control_stream.h"
+#include "server/gp_conversion.h"
 #include "server/process_memory.h"
 #include "server/step_solver.h"
 #include "server/version.h"
@@ -147,6 +148,16 @@ grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerCont
   response->set_draining(state_->draining.load());
   response->set_resident_memory_bytes(ResidentMemoryBytes());
   return FinishNow(context, grpc::Status::OK);
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::FitGpModel(grpc::CallbackServerContext* context,
+                                                     const v1::FitGpModelRequest* request,
+                                                     v1::FitGpModelResponse* response) {
+  // O(P³) per iteration: on the pool like a solve, never in the reaction.
+  ServerState* state = state_;
+  return PooledUnary::Start(state, context, /*is_solve=*/false, [state, request, response](const CallContext&) {
+    return server::FitGpModel(*request, state->options.size_limits, response);
+  });
 }
 
 }  // namespace nupmpc::server

@@ -32,6 +32,8 @@ class MpcServiceImpl final : public v1::MpcService::CallbackService {
   grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context,
                                           const v1::GetServerInfoRequest* request,
                                           v1::GetServerInfoResponse* response) override;
+  grpc::ServerUnaryReactor* FitGpModel(grpc::CallbackServerContext* context, const v1::FitGpModelRequest* request,
+                                       v1::FitGpModelResponse* response) override;
 
  private:
   ServerState* state_;

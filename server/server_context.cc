@@ -22,6 +22,7 @@ void ServerState::FillLimits(v1::ServerLimits* out) const {
   out->set_worker_threads(options.worker_threads);
   out->set_queue_capacity(options.queue_capacity);
   out->set_max_queue_wait_ms(options.max_queue_wait_ms);
+  out->set_max_gp_points(options.size_limits.max_gp_points);
 }
 
 std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context) {

@@ -22,24 +22,6 @@ std::string Path(const std::string& base, const char* member, int index) {
   return absl::StrCat(base, ".", member, "[", index, "]");
 }
 
-absl::StatusOr<Eigen::MatrixXd> MatrixFromProto(const v1::Matrix& m, int rows, int cols, const std::string& path) {
-  if (static_cast<int>(m.rows()) != rows || static_cast<int>(m.cols()) != cols) {
-    return Invalid(path, ": expected ", rows, "x", cols, ", got ", m.rows(), "x", m.cols());
-  }
-  if (m.data_size() != rows * cols) {
-    return Invalid(path, ".data: expected ", rows * cols, " values (rows*cols, row-major), got ", m.data_size());
-  }
-  Eigen::MatrixXd out(rows, cols);
-  for (int i = 0; i < rows; ++i) {
-    for (int j = 0; j < cols; ++j) {
-      const double v = m.data(i * cols + j);
-      if (!std::isfinite(v)) return Invalid(path, ".data[", i * cols + j, "] = ", v, ": must be finite");
-      out(i, j) = v;
-    }
-  }
-  return out;
-}
-
 // Reads a per-step array: empty (default), 1 value (every step) or one per step.
 class PerStep {
  public:
@@ -179,14 +161,32 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
   return absl::OkStatus();
 }
 
+}  // namespace
+
+absl::StatusOr<Eigen::MatrixXd> MatrixFromProto(const v1::Matrix& m, int rows, int cols, const std::string& path) {
+  if (static_cast<int>(m.rows()) != rows || static_cast<int>(m.cols()) != cols) {
+    return Invalid(path, ": expected ", rows, "x", cols, ", got ", m.rows(), "x", m.cols());
+  }
+  if (m.data_size() != rows * cols) {
+    return Invalid(path, ".data: expected ", rows * cols, " values (rows*cols, row-major), got ", m.data_size());
+  }
+  Eigen::MatrixXd out(rows, cols);
+  for (int i = 0; i < rows; ++i) {
+    for (int j = 0; j < cols; ++j) {
+      const double v = m.data(i * cols + j);
+      if (!std::isfinite(v)) return Invalid(path, ".data[", i * cols + j, "] = ", v, ": must be finite");
+      out(i, j) = v;
+    }
+  }
+  return out;
+}
+
 absl::Status CheckLimit(const char* field, long long value, long long limit) {
   if (value > limit) {
     return absl::ResourceExhaustedError(absl::StrCat(field, " = ", value, " exceeds the server limit ", limit));
   }
   return absl::OkStatus();
 }
-
-}  // namespace
 
 absl::Status ComponentPriorsFromProto(const v1::ComponentPrior& component, int steps, const std::string& path,
                                      std::vector<core::ScalarPrior>* out, int stride, int offset) {
@@ -420,6 +420,7 @@ void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, 
   CopyRows(solution.inputs, out->mutable_inputs());
   CopyRows(solution.outputs, out->mutable_outputs());
   CopyRows(solution.states, out->mutable_states());
+  CopyRows(solution.output_stddev, out->mutable_output_stddev());
 }
 
 namespace {

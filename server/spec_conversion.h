@@ -21,7 +21,15 @@ struct SizeLimits {
   // Largest number of doubles a session may hold in its model and priors (memory bound).
   long long max_scalars = 50'000'000;
   int max_iterations = 100000;
+  // Training pairs of a GP model (memory O(P²), fit time O(P³) per iteration).
+  int max_gp_points = 5000;
 };
+
+// A v1::Matrix of the given size with finite entries; INVALID_ARGUMENT naming `path`.
+absl::StatusOr<Eigen::MatrixXd> MatrixFromProto(const v1::Matrix& m, int rows, int cols, const std::string& path);
+
+// RESOURCE_EXHAUSTED naming `field` when value > limit.
+absl::Status CheckLimit(const char* field, long long value, long long limit);
 
 // The problem of a spec, validated (INVALID_ARGUMENT naming the field, RESOURCE_EXHAUSTED
 // for sizes over `limits`).

@@ -1,10 +1,13 @@
 #include "server/step_solver.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
+#include "core/gp/gp_mpc_session.h"
 #include "core/nonlinear/keep_out_session.h"
 #include "core/util/status_macros.h"
+#include "server/gp_conversion.h"
 #include "server/keep_out_conversion.h"
 
 namespace nupmpc::server {
@@ -41,10 +44,41 @@ absl::Status ReadPreviousInput(const v1::Step& step, const InputTransform& trans
                           absl::StatusCode::kFailedPrecondition, out);
 }
 
+// A GP session's step: the reference is the session's output means at steps 1..H (see
+// GpMpcSession), replaced as a whole; checked completely before the session changes.
+absl::Status ApplyGpStep(const v1::Step& step, const Eigen::VectorXd* measured, core::MpcSession& solver) {
+  if (step.has_update()) {
+    return absl::FailedPreconditionError("step.update: GP sessions take a new reference in step.reference");
+  }
+  if (step.reference_size() == 0) {
+    return measured != nullptr ? solver.SetInitialState(*measured) : absl::OkStatus();
+  }
+  core::Problem candidate = solver.problem();
+  const int H = candidate.horizon;
+  if (step.reference_size() != 1 && step.reference_size() != H) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("step.reference: expected 1 or ", H, " values (the horizon), got ", step.reference_size()));
+  }
+  for (int n = 0; n < H; ++n) {
+    const double r = step.reference(step.reference_size() == 1 ? 0 : n);
+    if (!std::isfinite(r)) {
+      return absl::InvalidArgumentError(absl::StrCat("step.reference[", n, "] = ", r, ": must be finite"));
+    }
+    candidate.mutable_output_prior(n + 1, 0).mean = r;
+  }
+  if (measured != nullptr) candidate.initial_mean = *measured;
+  return solver.Update(candidate);
+}
+
 }  // namespace
 
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits) {
   BuiltSession built;
+  if (spec.has_gp()) {
+    NUPMPC_ASSIGN_OR_RETURN(built.solver, GpSessionFromSpec(spec, limits));
+    built.default_time_limit_ms = spec.options().time_limit_ms();
+    return built;
+  }
   NUPMPC_ASSIGN_OR_RETURN(core::Problem base, ProblemFromSpec(spec, limits));
   NUPMPC_ASSIGN_OR_RETURN(core::Problem problem, TransformProblem(spec, std::move(base), &built.transform));
   NUPMPC_ASSIGN_OR_RETURN(const core::SolverOptions options, OptionsFromSpec(spec.options(), limits));
@@ -83,7 +117,13 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   Eigen::VectorXd previous_input;  // u[-1] of this solve (Δu sessions only)
   NUPMPC_RETURN_IF_ERROR(ReadPreviousInput(step, transform, &previous_input));
   const Eigen::VectorXd* measured = step.state_size() > 0 ? &entry.x0 : nullptr;
-  if (step.has_update()) {
+  const bool gp_session = dynamic_cast<const gp::GpMpcSession*>(&solver) != nullptr;
+  if (!gp_session && step.reference_size() > 0) {
+    return absl::InvalidArgumentError("step.reference: only for GP sessions (ProblemSpec.gp); use step.update");
+  }
+  if (gp_session) {
+    NUPMPC_RETURN_IF_ERROR(ApplyGpStep(step, measured, solver));
+  } else if (step.has_update()) {
     // References or bounds change: validate on a copy; Update() keeps the session as it
     // was if it rejects the problem.
     if (transform.active() && step.update().inputs_size() > 0) {

@@ -256,7 +256,8 @@ void LinGpScp::ShiftWarmStart() {
 }
 
 absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, const Eigen::VectorXd& past_inputs,
-                                          const Eigen::VectorXd& reference, ScpPlan* plan) {
+                                          const Eigen::VectorXd& reference, ScpPlan* plan,
+                                          const core::SolveLimits* outer_limits) {
   const int l = p_.layout.output_lags, m = p_.layout.input_lags, H = p_.horizon;
   if (past_outputs.size() != l) {
     return absl::InvalidArgumentError(absl::StrCat("past_outputs: expected ", l, " values, got ", past_outputs.size()));
@@ -270,6 +271,9 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
   }
   if (!past_outputs.allFinite() || !past_inputs.allFinite() || !reference.allFinite()) {
     return absl::InvalidArgumentError("past_outputs/past_inputs/reference: contain a non-finite number");
+  }
+  if (outer_limits != nullptr) {
+    if (absl::Status s = core::Validate(*outer_limits); !s.ok()) return s;
   }
   const auto start = Clock::now();
   past_outputs_ = past_outputs;
@@ -316,7 +320,31 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
   double rho = options_.initial_trust_radius;
   core::SolveLimits limits;
   limits.warm_start = has_warm_;
-  for (int j = 0; j < options_.max_iterations; ++j) {
+  int max_iterations = options_.max_iterations;
+  double time_limit = 0.0;  // seconds for the whole solve; 0: none
+  if (outer_limits != nullptr) {
+    if (outer_limits->max_iterations > 0) max_iterations = std::min(max_iterations, outer_limits->max_iterations);
+    time_limit = outer_limits->time_limit_seconds;
+    limits.cancel = outer_limits->cancel;
+  }
+  // Checked before each SCP iteration; the inner solve gets the time that is left.
+  const auto stop_requested = [&]() {
+    if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) {
+      summary.status = core::SolveStatus::kCancelled;
+      return true;
+    }
+    if (time_limit > 0.0) {
+      const double left = time_limit - SecondsSince(start);
+      if (left <= 0.0) {
+        summary.status = core::SolveStatus::kTimeLimit;
+        return true;
+      }
+      limits.time_limit_seconds = left;
+    }
+    return false;
+  };
+  for (int j = 0; j < max_iterations; ++j) {
+    if (stop_requested()) break;
     BuildSubproblem(rho);
     if (absl::Status updated = session_->Update(problem_); !updated.ok()) {
       return absl::Status(updated.code(), absl::StrCat("SCP iteration ", j, ": ", updated.message()));
@@ -328,6 +356,11 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
     limits.warm_start = true;
     ++summary.iterations;
     summary.inner_passes += inner->iterations;
+    if (inner->status == core::SolveStatus::kCancelled || inner->status == core::SolveStatus::kTimeLimit) {
+      // An unfinished subproblem's plan may violate its hard constraints: keep the nominal.
+      summary.status = inner->status;
+      break;
+    }
     if (!inner->IsUsable()) {
       rho *= options_.beta_fail;
       if (rho < options_.min_trust_radius) break;
@@ -347,8 +380,12 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
     const double predicted_reduction = merit - predicted;
     if (std::abs(predicted_reduction) <= options_.tolerance) {
       summary.converged = true;
+      summary.status = core::SolveStatus::kConverged;
       break;
     }
+    // The subproblem meets its hard boxes to the solver's tolerance (~1e-12): project, so
+    // that every accepted plan satisfies the input and rate limits exactly.
+    ProjectToInputConstraints(&candidate_u_);
     Simulate(candidate_u_, &candidate_x_, &candidate_y_, &candidate_lin_);
     const double candidate_merit = Merit(candidate_u_, candidate_y_, sigmas_of(candidate_lin_), nullptr, nullptr);
     const double ratio = (merit - candidate_merit) / predicted_reduction;

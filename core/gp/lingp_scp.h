@@ -73,6 +73,9 @@ struct ScpPlan {
 
 struct ScpSummary {
   bool converged = false;
+  // How the solve ended in the core's terms: converged, iteration limit (also when the
+  // trust region collapsed without an acceptable step), time limit or cancelled.
+  core::SolveStatus status = core::SolveStatus::kIterationLimit;
   int iterations = 0;        ///< SCP iterations (subproblems solved)
   int accepted = 0;          ///< of which accepted
   int inner_passes = 0;      ///< NUP message-passing passes over all subproblems
@@ -94,8 +97,13 @@ class LinGpScp {
   // u[t-m-1..t-1] (m+1 values, applied); reference: r[t..t+H-1] (H values, or 1).
   // Starts from the warm plan if there is one (ShiftWarmStart() between steps), else
   // from the best of a few constant inputs (ScpOptions.cold_start_levels).
+  // `limits` (optional): max_iterations caps the SCP iterations (below
+  // ScpOptions.max_iterations), the time limit and cancel flag are checked before every
+  // SCP iteration and passed on to the inner solves; a stopped solve returns the best plan
+  // accepted so far (always one that satisfies the input constraints).
   absl::StatusOr<ScpSummary> Solve(const Eigen::VectorXd& past_outputs, const Eigen::VectorXd& past_inputs,
-                                   const Eigen::VectorXd& reference, ScpPlan* plan);
+                                   const Eigen::VectorXd& reference, ScpPlan* plan,
+                                   const core::SolveLimits* limits = nullptr);
   void ShiftWarmStart();
   void ResetWarmStart() { has_warm_ = false; }
 
