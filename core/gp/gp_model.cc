@@ -1,5 +1,6 @@
 #include "core/gp/gp_model.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "Eigen/Eigenvalues"
@@ -95,40 +96,59 @@ absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd 
   return model;
 }
 
-double GpModel::KernelToPoint(int j, const Eigen::VectorXd& x) const {
-  double r2 = 0.0;
+void GpModel::KernelValues(int first, int count, const Eigen::VectorXd& x, KernelBlock* k) const {
+  auto values = k->head(count);
+  values.setZero();  // the scaled squared distance first
   for (int i = 0; i < dimension(); ++i) {
-    const double diff = x(i) - inputs_(j, i);
-    r2 += diff * diff * inverse_squared_lengths_(i);
+    values += (inputs_.col(i).segment(first, count).array() - x(i)).square() * inverse_squared_lengths_(i);
   }
-  return kernel_.signal_variance * std::exp(-0.5 * r2);
+  values = kernel_.signal_variance * (-0.5 * values).exp();
 }
 
 double GpModel::Mean(const Eigen::VectorXd& x) const {
+  KernelBlock k;
   double mean = 0.0;
-  for (int j = 0; j < num_points(); ++j) mean += alpha_(j) * KernelToPoint(j, x);
+  for (int first = 0; first < num_points(); first += kBlock) {
+    const int count = std::min(kBlock, num_points() - first);
+    KernelValues(first, count, x, &k);
+    mean += (alpha_.segment(first, count).array() * k.head(count)).sum();
+  }
   return mean;
 }
 
 double GpModel::MeanAndGradient(const Eigen::VectorXd& x, Eigen::VectorXd* gradient) const {
   const int d = dimension();
   gradient->setZero(d);
+  KernelBlock k;
   double mean = 0.0;
-  for (int j = 0; j < num_points(); ++j) {
-    const double weighted = alpha_(j) * KernelToPoint(j, x);
-    mean += weighted;
-    for (int i = 0; i < d; ++i) (*gradient)(i) -= weighted * (x(i) - inputs_(j, i)) * inverse_squared_lengths_(i);
+  for (int first = 0; first < num_points(); first += kBlock) {
+    const int count = std::min(kBlock, num_points() - first);
+    KernelValues(first, count, x, &k);
+    auto weighted = k.head(count);
+    weighted *= alpha_.segment(first, count).array();
+    mean += weighted.sum();
+    // ∂k(X_j, x)/∂x_i = -k (x_i - X_ji)/ℓ_i²
+    for (int i = 0; i < d; ++i) {
+      (*gradient)(i) -=
+          (weighted * (x(i) - inputs_.col(i).segment(first, count).array())).sum() * inverse_squared_lengths_(i);
+    }
   }
   return mean;
 }
 
-void GpModel::CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const {
+void GpModel::CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first_column) const {
   const int d = dimension();
-  for (int j = 0; j < num_points(); ++j) {
-    const double k = KernelToPoint(j, x);
-    (*w)(j, first) = k;
+  KernelBlock k;
+  for (int first = 0; first < num_points(); first += kBlock) {
+    const int count = std::min(kBlock, num_points() - first);
+    KernelValues(first, count, x, &k);
+    w->col(first_column).segment(first, count) = k.head(count).matrix();
     // ∂k(X_j, x)/∂x_i = -k (x_i - X_ji)/ℓ_i²
-    for (int i = 0; i < d; ++i) (*w)(j, first + 1 + i) = -k * (x(i) - inputs_(j, i)) * inverse_squared_lengths_(i);
+    for (int i = 0; i < d; ++i) {
+      w->col(first_column + 1 + i).segment(first, count) =
+          (-inverse_squared_lengths_(i) * k.head(count) * (x(i) - inputs_.col(i).segment(first, count).array()))
+              .matrix();
+    }
   }
 }
 
@@ -157,8 +177,17 @@ void GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
     lin.mean = means.segment(p * c, c);
     const auto a = projection.middleCols(p * c, c);
     const auto residual = w.middleCols(p * c, c);
-    lin.covariance.noalias() = -(a.transpose() * basis_weights_.asDiagonal() * a);
-    lin.covariance.noalias() -= inverse_noise * (residual.transpose() * residual);
+    // V̂ = prior - aᵀ diag(basis_weights) a - W⊥ᵀW⊥/σ_n², entry by entry: (d+1)² dot
+    // products, no temporaries (a product expression per point allocated).
+    lin.covariance.resize(c, c);
+    for (int i = 0; i < c; ++i) {
+      for (int k = i; k < c; ++k) {
+        const double v = -a.col(i).cwiseProduct(basis_weights_).dot(a.col(k)) -
+                         inverse_noise * residual.col(i).dot(residual.col(k));
+        lin.covariance(i, k) = v;
+        lin.covariance(k, i) = v;
+      }
+    }
     // Prior covariance of [f; ∇f] at one point: diag(σ_f², σ_f²/ℓ²) (k and ∇k are
     // uncorrelated at coincident points); minus what the data explain.
     lin.covariance(0, 0) += kernel_.signal_variance;

@@ -84,8 +84,13 @@ class GpModel {
 
  private:
   GpModel(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel);
-  // k(X_j, x), computed in place (Mean() runs once per horizon step per SCP iteration).
-  double KernelToPoint(int j, const Eigen::VectorXd& x) const;
+  // Kernel values are computed in blocks of training points held on the stack, so that the
+  // squared distances and exp() run vectorised and nothing is allocated (Mean() runs once
+  // per horizon step per SCP iteration).
+  static constexpr int kBlock = 64;
+  using KernelBlock = Eigen::Array<double, kBlock, 1>;
+  // k(X_j, x) for j = first..first+count-1 (count ≤ kBlock) into the head of *k.
+  void KernelValues(int first, int count, const Eigen::VectorXd& x, KernelBlock* k) const;
   // Column j of `w` gets [k(X, x), ∂k(X, x)/∂x_1, ..., ∂k(X, x)/∂x_d] for x = `x`,
   // starting at column `first`.
   void CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const;
