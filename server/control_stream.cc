@@ -167,16 +167,30 @@ void ControlStream::StartSolveLocked() {
   solving_ = true;
   const std::uint64_t sequence = request.sequence();
   const auto queued_at = Clock::now();
-  const absl::Status queued = state_->pool.TrySubmit(
-      [this, request = std::move(request), queued_at]() mutable {
-        SolveOnPool(std::move(request));
-        state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
-      },
-      entry_->last_solve_ms.load(std::memory_order_relaxed));
+  // Through the session's strand: a unary Solve accepted just before this stream attached
+  // runs first without a worker waiting for it.
+  const absl::Status queued = SessionStrand::Submit(
+      entry_->strand, state_->pool,
+      {[this, request = std::move(request), queued_at]() mutable {
+         SolveOnPool(std::move(request));
+         state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+       },
+       [this, sequence](absl::Status refused) { FailQueuedSolve(sequence, refused); },
+       entry_->last_solve_ms.load(std::memory_order_relaxed)});
   if (!queued.ok()) {
     solving_ = false;
     QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(queued)));
   }
+}
+
+void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(refused)));
+    solving_ = false;
+    if (parked_.has_value()) StartSolveLocked();
+  }
+  Pump();
 }
 
 void ControlStream::SolveOnPool(v1::ControlRequest request) {

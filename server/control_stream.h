@@ -46,6 +46,8 @@ class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Con
   void EnqueueStepLocked(v1::ControlRequest request);
   void StartSolveLocked();
   void SolveOnPool(v1::ControlRequest request);
+  // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
+  void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
   void QueueWriteLocked(v1::ControlResponse response);
   // Starts the next write / finishes the stream if nothing is left. Called without mu_.
   void Pump();

@@ -17,9 +17,11 @@ namespace {
 class PooledUnary : public grpc::ServerUnaryReactor {
  public:
   // Runs `work` on the pool (or answers RESOURCE_EXHAUSTED when the queue is full).
-  // `is_solve`: count it in the solve counters and latency histogram.
+  // `is_solve`: count it in the solve counters and latency histogram. With a `session`,
+  // the work goes through the session's strand (one at a time per session).
   static grpc::ServerUnaryReactor* Start(ServerState* state, grpc::CallbackServerContext* context, bool is_solve,
-                                         std::function<absl::Status(const CallContext&)> work) {
+                                         std::function<absl::Status(const CallContext&)> work,
+                                         const SessionEntry* session = nullptr) {
     auto* self = new PooledUnary();
     if (state->draining.load()) {
       self->Finish(state->ToGrpc(absl::UnavailableError("the server is shutting down")));
@@ -28,13 +30,19 @@ class PooledUnary : public grpc::ServerUnaryReactor {
     self->call_.deadline = SteadyDeadline(*context);
     self->call_.cancel = &self->cancelled_;
     const auto queued_at = Clock::now();
-    const absl::Status queued = state->pool.TrySubmit([self, state, is_solve, work = std::move(work), queued_at] {
+    auto run = [self, state, is_solve, work = std::move(work), queued_at] {
       const absl::Status status = work(self->call_);
       if (status.ok() && is_solve) {
         state->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
       }
       self->Finish(state->ToGrpc(status));
-    });
+    };
+    const absl::Status queued =
+        session == nullptr
+            ? state->pool.TrySubmit(std::move(run))
+            : SessionStrand::Submit(session->strand, state->pool,
+                                    {std::move(run), [self, state](absl::Status s) { self->Finish(state->ToGrpc(s)); },
+                                     session->last_solve_ms.load(std::memory_order_relaxed)});
     if (!queued.ok()) self->Finish(state->ToGrpc(queued));
     return self;
   }
@@ -92,10 +100,13 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
     return FinishNow(context, state_->ToGrpc(absl::FailedPreconditionError(
                                   "session_id: a Control stream is attached to this session; send steps there")));
   }
-  return PooledUnary::Start(state_, context, /*is_solve=*/true,
-                            [entry = *std::move(entry), request, response](const CallContext& call) {
-                              return SolveStep(*entry, request->step(), call, response->mutable_result());
-                            });
+  const SessionEntry* session = entry->get();
+  return PooledUnary::Start(
+      state_, context, /*is_solve=*/true,
+      [entry = *std::move(entry), request, response](const CallContext& call) {
+        return SolveStep(*entry, request->step(), call, response->mutable_result());
+      },
+      session);
 }
 
 grpc::ServerUnaryReactor* MpcServiceImpl::SolveOnce(grpc::CallbackServerContext* context,

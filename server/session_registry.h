@@ -13,6 +13,7 @@
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/input_transform.h"
+#include "server/session_strand.h"
 
 namespace nupmpc::server {
 
@@ -33,6 +34,10 @@ struct SessionEntry {
   bool compacted = false;                 ///< guarded by mu: solver scratch released while idle
   core::Solution solution;                ///< guarded by mu; reused buffer
   bool closed = false;                    ///< guarded by mu: removed from the registry
+
+  // Solves of this session go through its strand: one at a time, none holding a worker
+  // while another one runs.
+  const std::shared_ptr<SessionStrand> strand = std::make_shared<SessionStrand>();
 
   std::atomic<bool> attached{false};  ///< a Control stream uses it
   std::atomic<std::uint64_t> solves{0};

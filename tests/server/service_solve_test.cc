@@ -250,3 +250,42 @@ TEST_F(ServiceTest, NewestStateWinsWhenTheClientSendsFasterThanTheServerSolves) 
 
 }  // namespace
 }  // namespace nupmpc::testing
+
+namespace nupmpc::testing {
+namespace {
+
+// Two unary Solves on one slow session occupy one worker, not both: the second waits in
+// the session's strand, so another session's solve runs at once on the second worker.
+TEST_F(ServiceTest, ConcurrentSolvesOnOneSessionLeaveTheOtherWorkerFree) {
+  const v1::ProblemSpec slow_spec = SpecOrDie(LoadInstanceOrDie("random_outbox_M40_K20_L20_N1000_s1").problem);
+  const v1::ProblemSpec fast_spec = SpecOrDie(LoadInstanceOrDie("masses_N30").problem);
+  absl::StatusOr<v1::CreateSessionResponse> slow = client_->CreateSession(slow_spec);
+  absl::StatusOr<v1::CreateSessionResponse> fast = client_->CreateSession(fast_spec);
+  ASSERT_TRUE(slow.ok() && fast.ok());
+  constexpr double kSlowSolveMs = 300.0;  // each slow solve runs into this time limit
+  v1::Step slow_step;
+  slow_step.set_time_limit_ms(kSlowSolveMs);
+  slow_step.set_warm_start(v1::WARM_START_COLD);
+  std::vector<std::thread> slow_callers;
+  std::atomic<int> slow_ok{0};
+  for (int i = 0; i < 2; ++i) {
+    slow_callers.emplace_back([&] {
+      Client caller(target_);
+      if (caller.Solve(slow->session_id(), slow_step).ok()) ++slow_ok;
+    });
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));  // both slow solves are in
+  const auto start = std::chrono::steady_clock::now();
+  absl::StatusOr<v1::SolveResult> quick = client_->Solve(fast->session_id(), v1::Step());
+  const double quick_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  for (std::thread& t : slow_callers) t.join();
+  ASSERT_TRUE(quick.ok()) << quick.status();
+  EXPECT_EQ(slow_ok.load(), 2);
+  // Before the strand, the second slow solve held the other worker waiting for the
+  // session's lock and the quick solve waited about kSlowSolveMs.
+  EXPECT_LT(quick_ms, kSlowSolveMs / 2) << "the quick solve waited behind the slow session";
+}
+
+}  // namespace
+}  // namespace nupmpc::testing

@@ -1,0 +1,62 @@
+#include "server/session_strand.h"
+
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+
+namespace nupmpc::server {
+
+absl::Status SessionStrand::Submit(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task) {
+  {
+    std::lock_guard<std::mutex> lock(strand->mu_);
+    if (strand->busy_) {
+      if (static_cast<int>(strand->waiting_.size()) >= kMaxWaiting) {
+        return absl::ResourceExhaustedError(absl::StrCat(
+            "session_id: ", kMaxWaiting, " solves already wait for this session; send the next one after an answer"));
+      }
+      strand->waiting_.push_back(std::move(task));
+      return absl::OkStatus();
+    }
+    strand->busy_ = true;
+  }
+  const absl::Status started = Start(strand, pool, std::move(task));
+  if (!started.ok()) StartNext(strand, pool);  // tasks may have queued up behind the refused one
+  return started;
+}
+
+absl::Status SessionStrand::Start(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task) {
+  auto run = std::move(task.run);
+  return pool.TrySubmit(
+      [strand, &pool, run = std::move(run)]() mutable {
+        run();
+        run = nullptr;  // release the call's state before the next task starts
+        StartNext(strand, pool);
+      },
+      task.expected_ms);
+}
+
+void SessionStrand::StartNext(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool) {
+  for (;;) {
+    Task next;
+    {
+      std::lock_guard<std::mutex> lock(strand->mu_);
+      if (strand->waiting_.empty()) {
+        strand->busy_ = false;
+        return;
+      }
+      next = std::move(strand->waiting_.front());
+      strand->waiting_.pop_front();
+    }
+    auto fail = std::move(next.fail);
+    const absl::Status started = Start(strand, pool, std::move(next));
+    if (started.ok()) return;
+    fail(started);  // e.g. the pool is full or shutting down: answer it, try the next
+  }
+}
+
+int SessionStrand::waiting() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return static_cast<int>(waiting_.size());
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,49 @@
+#ifndef NUPMPC_SERVER_SESSION_STRAND_H_
+#define NUPMPC_SERVER_SESSION_STRAND_H_
+
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+
+#include "absl/status/status.h"
+#include "server/worker_pool.h"
+
+namespace nupmpc::server {
+
+// One session's work, run one task at a time on the worker pool without a worker ever
+// waiting for the session: while a task of the session is queued or running, later ones
+// wait here and are handed to the pool when it finishes. Two unary Solves on one session
+// thus occupy at most one worker (the session's lock would otherwise hold the second
+// worker idle), and the other sessions keep the rest of the pool.
+class SessionStrand {
+ public:
+  // Solves that may wait for one session; more are refused (RESOURCE_EXHAUSTED).
+  static constexpr int kMaxWaiting = 16;
+
+  struct Task {
+    std::function<void()> run;               ///< runs on a worker, once
+    std::function<void(absl::Status)> fail;  ///< answers the call if the pool refuses it later
+    double expected_ms = -1.0;               ///< for the pool's admission (WorkerPool::TrySubmit)
+  };
+
+  // OK: the task will run (or, if the pool refuses it once it is its turn, fail) exactly
+  // once. Otherwise it was not taken and the caller answers with the status: the pool's
+  // refusal, or RESOURCE_EXHAUSTED when kMaxWaiting tasks already wait for this session.
+  static absl::Status Submit(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task);
+
+  int waiting() const;
+
+ private:
+  // Hands `task` to the pool; when it has run, the next waiting task follows.
+  static absl::Status Start(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task);
+  static void StartNext(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool);
+
+  mutable std::mutex mu_;
+  bool busy_ = false;  ///< a task of this session is in the pool (queued or running)
+  std::deque<Task> waiting_;
+};
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_SESSION_STRAND_H_

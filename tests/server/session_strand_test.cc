@@ -1,0 +1,94 @@
+// A session's strand: its tasks run one at a time and in order, a waiting task holds no
+// worker (another session's work runs meanwhile on the second worker), the wait is
+// bounded, and tasks the pool refuses when it is their turn are answered through `fail`.
+#include "server/session_strand.h"
+
+#include <atomic>
+#include <chrono>
+#include <future>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace nupmpc::server {
+namespace {
+
+using namespace std::chrono_literals;
+
+SessionStrand::Task Task(std::function<void()> run, std::atomic<int>* failures = nullptr) {
+  return {std::move(run), [failures](absl::Status) {
+            if (failures != nullptr) ++*failures;
+          }};
+}
+
+TEST(SessionStrand, WaitingTasksHoldNoWorkerAndRunInOrder) {
+  WorkerPool pool(/*threads=*/2, /*queue_capacity=*/64);
+  auto strand = std::make_shared<SessionStrand>();
+  std::promise<void> first_started, release_first;
+  std::shared_future<void> released = release_first.get_future().share();
+  std::atomic<int> running{0}, most_running{0};
+  std::vector<int> order;
+  std::mutex order_mu;
+  const auto record = [&](int i) {
+    const int now = ++running;
+    most_running = std::max(most_running.load(), now);
+    {
+      std::lock_guard<std::mutex> lock(order_mu);
+      order.push_back(i);
+    }
+    --running;
+  };
+  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
+                                      first_started.set_value();
+                                      record(0);
+                                      released.wait();
+                                    }))
+                  .ok());
+  first_started.get_future().wait();
+  for (int i = 1; i <= 3; ++i) ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&, i] { record(i); })).ok());
+  EXPECT_EQ(strand->waiting(), 3);
+
+  // Another session's work gets the second worker while the first session's task blocks.
+  std::promise<void> other_done;
+  ASSERT_TRUE(pool.TrySubmit([&] { other_done.set_value(); }).ok());
+  EXPECT_EQ(other_done.get_future().wait_for(10s), std::future_status::ready)
+      << "a task waiting for its session held the other worker";
+
+  release_first.set_value();
+  for (int spin = 0; spin < 1000 && strand->waiting() > 0; ++spin) std::this_thread::sleep_for(1ms);
+  pool.Shutdown();
+  EXPECT_EQ(order, (std::vector<int>{0, 1, 2, 3}));
+  EXPECT_EQ(most_running.load(), 1);
+}
+
+TEST(SessionStrand, RefusesBeyondTheWaitBoundAndFailsWhatThePoolRefuses) {
+  WorkerPool pool(/*threads=*/1, /*queue_capacity=*/64);
+  auto strand = std::make_shared<SessionStrand>();
+  std::promise<void> started, release;
+  std::shared_future<void> released = release.get_future().share();
+  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
+                                      started.set_value();
+                                      released.wait();
+                                    }))
+                  .ok());
+  started.get_future().wait();
+  std::atomic<int> ran{0}, failures{0};
+  for (int i = 0; i < SessionStrand::kMaxWaiting; ++i) {
+    ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] { ++ran; }, &failures)).ok());
+  }
+  const absl::Status refused = SessionStrand::Submit(strand, pool, Task([&] { ++ran; }, &failures));
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(refused.message()), ::testing::HasSubstr("session_id"));
+
+  // Shutting down while tasks wait for the session: each is answered exactly once.
+  std::thread stopper([&] { pool.Shutdown(); });
+  std::this_thread::sleep_for(20ms);  // Shutdown() has stopped accepting before the first task ends
+  release.set_value();
+  stopper.join();
+  EXPECT_EQ(ran.load() + failures.load(), SessionStrand::kMaxWaiting);
+  EXPECT_EQ(strand->waiting(), 0);
+}
+
+}  // namespace
+}  // namespace nupmpc::server
