@@ -242,7 +242,7 @@ double Ibffd::ForwardDecidingImpl(Pass pass, PrimalIterate* out) {
         u = CombineWithMessage(factor_[i], m_e, V_e);
         const Decision dec = Decide(prior, prior.slope, msg);
         residual = std::max(residual, std::abs(dec.z - u));
-        polish_region_[i] = dec.region;
+        polish_region_[i] = NextPolishRegion(prior, polish_region_[i], dec.region);
       }
       out->u(l, j) = u;
       x.noalias() += u * b;

@@ -160,7 +160,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
         if (prior.kind != PriorKind::kNone) {
           const Decision d = Decide(prior, prior.slope, msg);
           residual = std::max(residual, std::abs(d.z - z));
-          polish_region_[r] = d.region;
+          polish_region_[r] = NextPolishRegion(prior, polish_region_[r], d.region);
         }
       }
       if (y_dual == 0.0) continue;

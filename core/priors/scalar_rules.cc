@@ -149,6 +149,15 @@ ScalarFactor NupUpdate(const ScalarPrior& p, double s, double x, double posterio
   return {};
 }
 
+Region NextPolishRegion(const ScalarPrior& prior, Region solved, Region decided) {
+  if (prior.kind != PriorKind::kBox) return decided;
+  const bool was_low = solved == Region::kAtLower || solved == Region::kBelow;
+  const bool was_high = solved == Region::kAtUpper || solved == Region::kAbove;
+  const bool now_low = decided == Region::kAtLower || decided == Region::kBelow;
+  const bool now_high = decided == Region::kAtUpper || decided == Region::kAbove;
+  return (was_low && now_high) || (was_high && now_low) ? Region::kInside : decided;
+}
+
 ScalarFactor PieceFactor(const ScalarPrior& p, double s, Region region) {
   switch (region) {
     case Region::kAtLower: return ScalarFactor::Pinned(p.lower);

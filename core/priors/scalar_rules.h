@@ -63,6 +63,14 @@ inline ScalarFactor WithGaussianPart(const ScalarPrior& prior, ScalarFactor nup)
 // the Gaussian part times the linear (or Huber-quadratic) piece. Used by the polish.
 ScalarFactor PieceFactor(const ScalarPrior& prior, double slope, Region region);
 
+// The primal-dual active-set step of the polish: the region a scalar gets for the next
+// polish pass, given the region it was solved in and the one the deciding rule chose at
+// the candidate. A box scalar pinned at one bound whose rule now says the other side is
+// released to its inside first instead of being pinned across the box: jumping straight
+// across made the correction cycle with period two on the masses closed loop (residual =
+// the box width every round). Optimality is still decided by the deciding-rule residual.
+Region NextPolishRegion(const ScalarPrior& prior, Region solved, Region decided);
+
 // IFFBDD (§9.4): canonical factor of the kind's dual NUP at multiplier y_dual with scale γ.
 ScalarFactor DualNupFactor(const ScalarPrior& prior, double y_dual, double gamma);
 // IFFBDD (§9.5): the γ an output needs at the (folded) extrinsic message; γ ← max(γ, this).

@@ -126,5 +126,24 @@ TEST(AdaptiveSlope, RequiredSlopeMakesTheDecisionFeasible) {
   EXPECT_NEAR(Decide(box, s, msg).z, 1.0, 1e-12);
 }
 
+TEST(PolishRegions, ABoxPinnedAtOneBoundIsReleasedBeforeItCrosses) {
+  const ScalarPrior box = ScalarPrior::Box(-0.5, 0.5);
+  EXPECT_EQ(NextPolishRegion(box, Region::kAtLower, Region::kAtUpper), Region::kInside);
+  EXPECT_EQ(NextPolishRegion(box, Region::kAtUpper, Region::kAtLower), Region::kInside);
+  // Soft boxes: the linear pieces beyond the kinks count as their side.
+  const ScalarPrior soft = ScalarPrior::Box(-0.5, 0.5, 3.0);
+  EXPECT_EQ(NextPolishRegion(soft, Region::kBelow, Region::kAbove), Region::kInside);
+  EXPECT_EQ(NextPolishRegion(soft, Region::kAtUpper, Region::kBelow), Region::kInside);
+  // Every other transition is the plain primal-dual active-set step.
+  EXPECT_EQ(NextPolishRegion(box, Region::kAtLower, Region::kInside), Region::kInside);
+  EXPECT_EQ(NextPolishRegion(box, Region::kInside, Region::kAtUpper), Region::kAtUpper);
+  EXPECT_EQ(NextPolishRegion(soft, Region::kAtLower, Region::kBelow), Region::kBelow);
+  // Other kinds have no opposite bound to jump to.
+  const ScalarPrior l1 = ScalarPrior::L1(0.0, 1.0);
+  EXPECT_EQ(NextPolishRegion(l1, Region::kBelow, Region::kAbove), Region::kAbove);
+  const ScalarPrior hinge = ScalarPrior::AtLeast(0.0);
+  EXPECT_EQ(NextPolishRegion(hinge, Region::kAtLower, Region::kInside), Region::kInside);
+}
+
 }  // namespace
 }  // namespace nupmpc::core
