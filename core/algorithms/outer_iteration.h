@@ -60,6 +60,8 @@ class OuterIteration {
   virtual void AcceptPolishRegions() = 0;
   // Whether regions from a previous solve are available (a warm polish is worth trying).
   virtual bool has_regions() const = 0;
+  // How many scalars the active set covers (0 when the algorithm tracks none).
+  virtual int decided_scalars() const { return 0; }
 
   // Idle sessions: frees the message-passing scratch (everything every pass recomputes;
   // the carried state and the graph stay), which is most of a session's memory.
@@ -77,6 +79,7 @@ class ActiveSetIteration : public OuterIteration {
   void AdoptRegionsForPolish() override { polish_region_ = region_; }
   void AcceptPolishRegions() override { region_ = polish_region_; }
   bool has_regions() const override { return has_regions_; }
+  int decided_scalars() const override { return static_cast<int>(region_.size()); }
 
  protected:
   std::vector<Region> region_, polish_region_;  ///< one per decided scalar
