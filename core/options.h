@@ -43,8 +43,11 @@ struct SolverOptions {
   // passes at 1e-3); 0 waits for a set that does not change at all.
   double polish_settled_fraction = 1e-3;
   // Primal-dual active-set corrections tried after a failed polish before the plain
-  // iteration resumes.
+  // iteration resumes, and up to polish_max_rounds while the deciding residual keeps
+  // falling (stiff problems such as ibffd_2d need more, and the plain iteration does not
+  // know what the corrections found: 71 -> 40 passes there).
   int polish_rounds = 4;
+  int polish_max_rounds = 12;
 
   // IAKE: slope used for hard constraints (IRLGE needs a finite penalty; it must exceed
   // the constraint's Lagrange multiplier to be exact, §6.2).

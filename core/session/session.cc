@@ -190,22 +190,29 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   summary.status = SolveStatus::kIterationLimit;
   bool have_finite = false;
 
-  // Tries the active-set polish (up to 1 + polish_rounds passes); true if it was accepted.
+  // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
+  // while the deciding residual keeps falling); true if it was accepted.
   const auto try_polish = [&]() {
-    for (int round = 0; round <= options_.polish_rounds && summary.iterations < max_iterations; ++round) {
+    double best_residual = kInfinity;
+    for (int round = 0; summary.iterations < max_iterations; ++round) {
       const double residual = algorithm_->Polish(&candidate_);
       ++summary.iterations;
-      if (!(residual <= violation_tolerance) || !AllFinite(candidate_)) continue;
-      const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_);
-      if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
-        std::swap(best_, candidate_);
-        algorithm_->AcceptPolishRegions();
-        summary.objective = r.objective;
-        summary.max_violation = r.max_violation;
-        summary.polished = true;
-        summary.status = SolveStatus::kConverged;
-        return true;
+      const bool progress = residual < best_residual;
+      best_residual = std::min(best_residual, residual);
+      if (residual <= violation_tolerance && AllFinite(candidate_)) {
+        const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_);
+        if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
+          std::swap(best_, candidate_);
+          algorithm_->AcceptPolishRegions();
+          summary.objective = r.objective;
+          summary.max_violation = r.max_violation;
+          summary.polished = true;
+          summary.status = SolveStatus::kConverged;
+          return true;
+        }
       }
+      const bool keep_going = round < options_.polish_rounds || (progress && round < options_.polish_max_rounds);
+      if (!keep_going) break;
     }
     return false;
   };

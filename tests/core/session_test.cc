@@ -171,6 +171,12 @@ TEST(BadInput, OptionsAndLimitsAreValidated) {
   options.violation_tolerance = 0.0;
   EXPECT_THAT(Session::Create(SmallProblem(), options),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("violation_tolerance")));
+  options = {};
+  options.polish_max_rounds = options.polish_rounds - 1;
+  EXPECT_THAT(Validate(options), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("polish_max_rounds")));
+  options = {};
+  options.polish_settled_fraction = 1.0;
+  EXPECT_THAT(Validate(options), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("polish_settled_fraction")));
   auto session = Session::Create(SmallProblem());
   ASSERT_TRUE(session.ok());
   SolveLimits limits;
