@@ -62,6 +62,15 @@ void PrintResult(const v1::SolveResult& r, int L, bool json) {
   }
 }
 
+// A response as proto JSON: one line with --format json, indented otherwise.
+void PrintJson(const google::protobuf::Message& message, bool one_line) {
+  std::string text;
+  google::protobuf::util::JsonPrintOptions options;
+  options.add_whitespace = !one_line;
+  (void)google::protobuf::util::MessageToJsonString(message, &text, options);
+  std::printf("%s\n", text.c_str());
+}
+
 int Fail(const absl::Status& s) {
   std::fprintf(stderr, "nupmpc: %s\n", s.ToString().c_str());
   return 1;
@@ -158,21 +167,13 @@ int main(int argc, char** argv) {
     if (!request.ok()) return Fail(request.status());
     absl::StatusOr<v1::FitGpModelResponse> fit = client.FitGpModel(*request);
     if (!fit.ok()) return Fail(fit.status());
-    std::string text;
-    google::protobuf::util::JsonPrintOptions options;
-    options.add_whitespace = !json;
-    (void)google::protobuf::util::MessageToJsonString(*fit, &text, options);
-    std::printf("%s\n", text.c_str());
+    PrintJson(*fit, json);
     return 0;
   }
   if (command == "info") {
     absl::StatusOr<v1::GetServerInfoResponse> info = client.GetServerInfo();
     if (!info.ok()) return Fail(info.status());
-    std::string text;
-    google::protobuf::util::JsonPrintOptions options;
-    options.add_whitespace = !json;
-    (void)google::protobuf::util::MessageToJsonString(*info, &text, options);
-    std::printf("%s\n", text.c_str());
+    PrintJson(*info, json);
     return 0;
   }
   if (command == "sessions") {
