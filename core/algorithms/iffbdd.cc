@@ -51,6 +51,12 @@ Iffbdd::Iffbdd(const Problem& problem) {
   polish_region_.resize(R);
   costate_.setZero(graph_.M);
   scratch_.setZero(graph_.M);
+  step_costate_.setZero(graph_.M, graph_.N + 1);
+  row_dual_.setZero(R);
+  row_step_.resize(R);
+  for (int n = 0; n <= graph_.N; ++n) {
+    for (int r = graph_.row_begin[n]; r < graph_.row_begin[n + 1]; ++r) row_step_[r] = n;
+  }
   Refresh(problem);
   AcquireWorkspace();
   ColdStart();
@@ -88,6 +94,7 @@ void Iffbdd::ColdStart() {
     region_[r] = Region::kInside;
   }
   has_regions_ = false;
+  has_duals_ = false;
 }
 
 void Iffbdd::ShiftWarmStart() {
@@ -97,7 +104,9 @@ void Iffbdd::ShiftWarmStart() {
     nup_[r] = nup_[src];
     gamma_[r] = gamma_[src];
     region_[r] = region_[src];
+    row_dual_(r) = row_dual_(src);
   }
+  for (int n = 0; n < graph_.N; ++n) step_costate_.col(n) = step_costate_.col(n + 1);
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     if (prior.kind == PriorKind::kBox && prior.is_hard()) gamma_[r] = GammaInitial(prior);
@@ -112,13 +121,51 @@ int Iffbdd::Iterate(PrimalIterate* out) {
   return changed;
 }
 
+void Iffbdd::AdoptRegionsForPolish() {
+  ActiveSetIteration::AdoptRegionsForPolish();
+  decide_forward_next_ = false;
+}
+
+void Iffbdd::AdoptCarriedRegionsForPolish() {
+  ActiveSetIteration::AdoptRegionsForPolish();
+  decide_forward_next_ = has_duals_;
+}
+
+ScalarFactor Iffbdd::DecideRowForward(int r, double yhat, double s, const double* v_data) {
+  const FactorGraph& g = graph_;
+  const ScalarPrior& prior = g.row_prior[r];
+  if (s > 0.0) {
+    // m_e = ŷ - vᵀx̃ (§9.3), with x̃ the costate of the rows after r: the later steps'
+    // (entering this step) plus this step's later rows, all from the last backward pass.
+    const int n = row_step_[r];
+    const Eigen::Map<const Eigen::VectorXd> v(v_data, g.M);
+    double costate_dot = v.dot(step_costate_.col(n));
+    for (int later = r + 1; later < g.row_begin[n + 1]; ++later) {
+      if (row_dual_(later) == 0.0) continue;
+      costate_dot += row_dual_(later) * (g.row_unit[later] >= 0 ? v(g.row_unit[later]) : v.dot(g.c(later)));
+    }
+    polish_region_[r] = Decide(prior, prior.slope, Message{yhat - costate_dot, s}).region;
+  }
+  row_factor_[r] = PieceFactor(prior, prior.slope, polish_region_[r]);
+  return row_factor_[r];
+}
+
 double Iffbdd::Polish(PrimalIterate* out) {
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     row_factor_[r] = prior.kind == PriorKind::kNone ? ScalarFactor::GaussianPart(prior)
                                                     : PieceFactor(prior, prior.slope, polish_region_[r]);
   }
-  RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_);
+  if (decide_forward_next_) {
+    // Only the first pass: repeating the forward sweep in later corrections settled a few
+    // more steps in two passes but made others cycle (masses closed loop, up to 11 passes).
+    decide_forward_next_ = false;
+    RunForwardFilterDeciding(
+        graph_, row_factor_.data(),
+        [this](int r, double yhat, double s, const double* v) { return DecideRowForward(r, yhat, s, v); }, &fw_);
+  } else {
+    RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_);
+  }
   return Backward(Pass::kPolish, out);
 }
 
@@ -136,7 +183,9 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   int changed = 0;
   double residual = 0.0;
   for (int n = g.N; n >= 0; --n) {
+    step_costate_.col(n) = xt;
     for (int r = g.row_begin[n + 1] - 1; r >= g.row_begin[n]; --r) {
+      row_dual_(r) = 0.0;
       const ScalarPrior& prior = g.row_prior[r];
       if (prior.kind == PriorKind::kNone && !prior.has_gaussian()) continue;
       const double V_e = fw_.s(r);
@@ -163,6 +212,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
           polish_region_[r] = NextPolishRegion(prior, polish_region_[r], d.region);
         }
       }
+      row_dual_(r) = y_dual;
       if (y_dual == 0.0) continue;
       if (g.row_unit[r] >= 0) {
         xt(g.row_unit[r]) += y_dual;
@@ -185,6 +235,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   scratch_.noalias() = g.m0;
   scratch_.noalias() -= g.V0 * xt;
   out->x0 = scratch_.head(g.base_M);
+  has_duals_ = true;
   return pass == Pass::kIterate ? changed : residual;
 }
 

@@ -29,6 +29,14 @@ class Iffbdd final : public ActiveSetIteration {
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
   double Polish(PrimalIterate* out) override;
+  void AdoptRegionsForPolish() override;
+  // The warm start's first polish pass decides each row's region in the forward filter,
+  // knowing the rows before it in this pass and the carried duals of the rows after it
+  // (DecideRowForward): when a new x[0] moves the active set, rows that depend on earlier
+  // rows' new pins get them in the same pass. Masses closed loop: warm steps finished in
+  // at most two passes 24 % -> 31 %, mean 3.0 -> 2.83 passes. (After cold iterations it
+  // did harm: corridor 41 -> 158 passes; there the duals are the NUP iterate's.)
+  void AdoptCarriedRegionsForPolish() override;
   void ReleaseWorkspace() override;
   void AcquireWorkspace() override;
 
@@ -39,6 +47,9 @@ class Iffbdd final : public ActiveSetIteration {
   double Backward(Pass pass, PrimalIterate* out);
   template <int MS>
   double BackwardImpl(Pass pass, PrimalIterate* out);
+  // The region (and polish factor) of constrained row r from its forward prediction and the
+  // last pass's duals of the rows after it.
+  ScalarFactor DecideRowForward(int row, double yhat, double s, const double* v);
 
   FactorGraph graph_;
   ForwardFilterWorkspace fw_;  ///< scratch, except the input moments loaded by Refresh
@@ -48,6 +59,14 @@ class Iffbdd final : public ActiveSetIteration {
   std::vector<ScalarFactor> row_factor_;    ///< nup_ × Gaussian part, what the filter sees
   std::vector<double> gamma_;               ///< γ per row (§9.5)
   Eigen::VectorXd costate_, scratch_;
+  // The last backward pass's duals, kept for the forward-deciding polish (and shifted with
+  // the warm start): the costate entering each step's rows from the later steps, and each
+  // row's dual ỹ.
+  Eigen::MatrixXd step_costate_;  ///< M × (N+1)
+  Eigen::VectorXd row_dual_;      ///< R
+  std::vector<int> row_step_;     ///< the step n of each row
+  bool has_duals_ = false;
+  bool decide_forward_next_ = false;
 };
 
 }  // namespace nupmpc::core

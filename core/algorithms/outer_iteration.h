@@ -49,6 +49,9 @@ class OuterIteration {
 
   // Active-set polish: freezes the regions seen in the last Iterate() (or the carried ones).
   virtual void AdoptRegionsForPolish() = 0;
+  // The same for the regions carried from the previous solve (the warm start's first
+  // polish), where the algorithm may also use the carried duals.
+  virtual void AdoptCarriedRegionsForPolish() { AdoptRegionsForPolish(); }
   // Solves the problem with every scalar restricted to its polish region (kinks pinned,
   // smooth pieces Gaussian/linear) with one exact message-passing pass, writes that
   // candidate, and returns the deciding-rule residual max |prox(κ; m_e, V_e) - z|: zero

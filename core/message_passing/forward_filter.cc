@@ -24,8 +24,11 @@ struct FilterScratch<Eigen::Dynamic> {
   Eigen::VectorXd& t;
 };
 
-template <int MS>
-void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws) {
+// `factor_of(r, yhat, s, v)` gives the factor of a row with a constraint kind once its
+// prediction is known; rows of kind kNone use row_factor[r].
+template <int MS, typename FactorOf>
+void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, FactorOf&& factor_of, bool keep_edges,
+            ForwardFilterWorkspace* ws) {
   const int M = graph.M, N = graph.N, L = graph.L;
   FilterScratch<MS> s(ws);
   auto& V = s.V;
@@ -37,11 +40,11 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, bool keep_
     // information and would divide by ~0: skip it relative to the state's variance scale.
     const double variance_scale = std::max(V.diagonal().maxCoeff(), 0.0);
     for (int r = graph.row_begin[n]; r < graph.row_begin[n + 1]; ++r) {
-      const ScalarFactor& f = row_factor[r];
-      if (f.empty()) {
+      const bool constrained = graph.row_prior[r].kind != PriorKind::kNone;
+      // IFFBDD needs v, s, ŷ of every constrained row even when its factor is empty.
+      if (!constrained && row_factor[r].empty()) {
         ws->G(r) = ws->g(r) = 0.0;
-        // IFFBDD needs v, s, ŷ of every constrained row even when its factor is empty.
-        if (graph.row_prior[r].kind == PriorKind::kNone) continue;
+        continue;
       }
       const auto c = ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1);
       Eigen::Map<StateVector<MS>> v(ws->v.col(r).data(), M);
@@ -58,7 +61,11 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, bool keep_
       }
       ws->s(r) = sr;
       ws->yhat(r) = yhat;
-      if (f.empty()) continue;
+      const ScalarFactor f = constrained ? factor_of(r, yhat, sr, v.data()) : row_factor[r];
+      if (f.empty()) {
+        ws->G(r) = ws->g(r) = 0.0;
+        continue;
+      }
       double G, g;
       if (f.V == kInfinity) {  // canonical (ξ, w); w = 0 is a pure linear factor
         const double den = 1.0 + f.w * sr;
@@ -151,7 +158,13 @@ void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor
 void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
                       const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws) {
   if (input_factor != nullptr) LoadInputMoments(graph, input_factor, ws);
-  DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, keep_edges, ws); });
+  const auto given = [row_factor](int r, double, double, const double*) { return row_factor[r]; };
+  DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, given, keep_edges, ws); });
+}
+
+void RunForwardFilterDeciding(const FactorGraph& graph, const ScalarFactor* row_factor, RowDecider decide,
+                              ForwardFilterWorkspace* ws) {
+  DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, decide, /*keep_edges=*/false, ws); });
 }
 
 }  // namespace nupmpc::core

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "absl/functional/function_ref.h"
 #include "core/model/factor_graph.h"
 #include "core/priors/scalar_factor.h"
 
@@ -34,6 +35,15 @@ struct ForwardFilterWorkspace {
 // Degenerate rows (prior variance ≈ 0 with a pinned factor, §12.2) are skipped.
 void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
                       const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws);
+
+// As RunForwardFilter (inputs as loaded last), but the factor of every row with a
+// constraint kind is chosen when the filter reaches it, from the row's prediction before
+// its own factor: decide(row, ŷ, s, v) with v = V c (M values). Rows of kind kNone take
+// row_factor[row]. The active-set polish uses it to decide a row's region knowing the rows
+// before it in this same pass (a forward Gauss-Seidel sweep).
+using RowDecider = absl::FunctionRef<ScalarFactor(int row, double yhat, double s, const double* v)>;
+void RunForwardFilterDeciding(const FactorGraph& graph, const ScalarFactor* row_factor, RowDecider decide,
+                              ForwardFilterWorkspace* ws);
 
 // Writes the moment form of the input factors into ws->mU / ws->VU. Separate because
 // IFFBDD's inputs stay fixed across iterations.

@@ -232,7 +232,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   // A warm start carries the previous active set: if it is still right, one exact pass
   // finishes the solve (restarting from the optimum takes one iteration).
   if (warm && polish_enabled && algorithm_->has_regions()) {
-    algorithm_->AdoptRegionsForPolish();
+    algorithm_->AdoptCarriedRegionsForPolish();
     if (try_polish()) return summary;
   }
 
