@@ -39,7 +39,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       break;
     }
     case v1::ControlRequest::kSpec: {
-      absl::StatusOr<BuiltSession> built = BuildSession(first.spec(), state_->options.size_limits);
+      absl::StatusOr<BuiltSession> built = BuildSession(first.spec(), state_->options.size_limits, &state_->gp_models);
       if (!built.ok()) return built.status();
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
           state_->registry.Add(std::move(built->solver), built->default_time_limit_ms,

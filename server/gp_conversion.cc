@@ -132,7 +132,7 @@ gp::SeArdKernel DefaultKernelStart(const gp::NarxData& data) {
 }
 
 absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::ProblemSpec& spec,
-                                                                    const SizeLimits& limits) {
+                                                                    const SizeLimits& limits, GpModelCache* cache) {
   // A GP spec describes nothing else: refuse what would be silently ignored.
   if (spec.has_model()) return Invalid("spec.model: must be empty when spec.gp is set (the GP is the model)");
   if (spec.input_priors_size() > 0) return Invalid("spec.input_priors: must be empty when spec.gp is set (use spec.gp.input_min/max)");
@@ -220,11 +220,23 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
     }
   }
 
-  NUPMPC_ASSIGN_OR_RETURN(const gp::SeArdKernel kernel, KernelFor(g.model(), training, "spec.gp.model"));
-  absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, kernel);
-  if (!model.ok()) return absl::Status(model.status().code(), absl::StrCat("spec.gp.model: ", model.status().message()));
+  const auto make_model = [&]() -> absl::StatusOr<gp::GpModel> {
+    NUPMPC_ASSIGN_OR_RETURN(const gp::SeArdKernel kernel, KernelFor(g.model(), training, "spec.gp.model"));
+    absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, kernel);
+    if (!model.ok()) return absl::Status(model.status().code(), absl::StrCat("spec.gp.model: ", model.status().message()));
+    return model;
+  };
+  std::shared_ptr<const gp::GpModel> model;
+  if (cache != nullptr) {
+    // The GpModel message (lags, data, kernel or none) identifies the model: a fit from the
+    // default start is deterministic.
+    NUPMPC_ASSIGN_OR_RETURN(model, cache->GetOrCreate(g.model().SerializeAsString(), make_model));
+  } else {
+    NUPMPC_ASSIGN_OR_RETURN(gp::GpModel built, make_model());
+    model = std::make_shared<const gp::GpModel>(std::move(built));
+  }
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<gp::GpMpcSession> session,
-                          gp::GpMpcSession::Create(*std::move(model), problem, options, reference));
+                          gp::GpMpcSession::Create(std::move(model), problem, options, reference));
   NUPMPC_RETURN_IF_ERROR(session->SetInitialState(x0));
   return session;
 }

@@ -11,6 +11,7 @@
 #include "core/gp/hyperparameter_fit.h"
 #include "core/gp/narx.h"
 #include "nupmpc/v1/nupmpc.pb.h"
+#include "server/gp_model_cache.h"
 #include "server/spec_conversion.h"
 
 namespace nupmpc::server {
@@ -29,9 +30,11 @@ absl::StatusOr<GpTrainingData> GpTrainingDataFromProto(const v1::GpModel& model,
 gp::SeArdKernel DefaultKernelStart(const gp::NarxData& data);
 
 // The GP session of a spec whose `gp` is set (the rest of the spec must be empty). Fits the
-// kernel first when the spec gives none.
+// kernel first when the spec gives none. With a cache, sessions of the same data and
+// kernel share one factorised model.
 absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::ProblemSpec& spec,
-                                                                    const SizeLimits& limits);
+                                                                    const SizeLimits& limits,
+                                                                    GpModelCache* cache = nullptr);
 
 // FitGpModel: validates, fits, and reports the fit's diagnostics.
 absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits,

@@ -70,7 +70,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
   ServerState* state = state_;
   return PooledUnary::Start(state, context, /*is_solve=*/false,
                             [state, request, response](const CallContext&) -> absl::Status {
-    absl::StatusOr<BuiltSession> built = BuildSession(request->spec(), state->options.size_limits);
+    absl::StatusOr<BuiltSession> built = BuildSession(request->spec(), state->options.size_limits, &state->gp_models);
     if (!built.ok()) return built.status();
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
         state->registry.Add(std::move(built->solver), built->default_time_limit_ms,
@@ -114,7 +114,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::SolveOnce(grpc::CallbackServerContext*
                                                     v1::SolveOnceResponse* response) {
   ServerState* state = state_;
   return PooledUnary::Start(state, context, /*is_solve=*/true, [state, request, response](const CallContext& call) {
-    return server::SolveOnce(request->spec(), state->options.size_limits, call, response->mutable_result());
+    return server::SolveOnce(request->spec(), state->options.size_limits, call, response->mutable_result(),
+                             &state->gp_models);
   });
 }
 

@@ -8,6 +8,7 @@
 #include "absl/status/status.h"
 #include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
+#include "server/gp_model_cache.h"
 #include "server/metrics.h"
 #include "server/session_registry.h"
 #include "server/spec_conversion.h"
@@ -37,6 +38,7 @@ struct ServerState {
   SessionRegistry registry;
   WorkerPool pool;
   Metrics metrics;
+  GpModelCache gp_models;  ///< factorised GP models shared by the sessions that use them
   std::atomic<bool> draining{false};
 
   // An absl::Status as a gRPC status, counted when it is an error.

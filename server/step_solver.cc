@@ -72,10 +72,11 @@ absl::Status ApplyGpStep(const v1::Step& step, const Eigen::VectorXd* measured, 
 
 }  // namespace
 
-absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits) {
+absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits,
+                                          GpModelCache* gp_models) {
   BuiltSession built;
   if (spec.has_gp()) {
-    NUPMPC_ASSIGN_OR_RETURN(built.solver, GpSessionFromSpec(spec, limits));
+    NUPMPC_ASSIGN_OR_RETURN(built.solver, GpSessionFromSpec(spec, limits, gp_models));
     built.default_time_limit_ms = spec.options().time_limit_ms();
     return built;
   }
@@ -171,8 +172,8 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 }
 
 absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limits, const CallContext& call,
-                       v1::SolveResult* out) {
-  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits));
+                       v1::SolveResult* out, GpModelCache* gp_models) {
+  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits, gp_models));
   core::SolveLimits limits;
   NUPMPC_RETURN_IF_ERROR(MakeLimits(built.default_time_limit_ms, nullptr, call, &limits));
   core::Solution solution;

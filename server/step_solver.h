@@ -5,6 +5,7 @@
 #include <optional>
 
 #include "absl/status/status.h"
+#include "server/gp_model_cache.h"
 #include "server/session_registry.h"
 #include "server/spec_conversion.h"
 
@@ -24,7 +25,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 
 // Stateless: builds a session for the spec, solves cold once, fills `out`.
 absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& limits, const CallContext& call,
-                       v1::SolveResult* out);
+                       v1::SolveResult* out, GpModelCache* gp_models = nullptr);
 
 // Converts a spec and builds its core session (shared by CreateSession, SolveOnce and
 // streams that carry a spec).
@@ -33,7 +34,9 @@ struct BuiltSession {
   InputTransform transform;
   double default_time_limit_ms = 0.0;
 };
-absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits);
+// GP specs take their factorised model from `gp_models` when given (shared between sessions).
+absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits,
+                                          GpModelCache* gp_models = nullptr);
 
 }  // namespace nupmpc::server
 

@@ -17,20 +17,20 @@ bool SameExceptMean(const core::ScalarPrior& a, const core::ScalarPrior& b) {
 
 }  // namespace
 
-GpMpcSession::GpMpcSession(std::unique_ptr<GpModel> model, GpMpcProblem problem)
+GpMpcSession::GpMpcSession(std::shared_ptr<const GpModel> model, GpMpcProblem problem)
     : model_(std::move(model)), problem_(std::move(problem)) {}
 
-absl::StatusOr<std::unique_ptr<GpMpcSession>> GpMpcSession::Create(GpModel model, GpMpcProblem problem,
-                                                                    ScpOptions options,
+absl::StatusOr<std::unique_ptr<GpMpcSession>> GpMpcSession::Create(std::shared_ptr<const GpModel> model,
+                                                                    GpMpcProblem problem, ScpOptions options,
                                                                     const Eigen::VectorXd& reference) {
+  if (model == nullptr) return absl::InvalidArgumentError("model: must not be null");
   NUPMPC_RETURN_IF_ERROR(Validate(problem));
   const int H = problem.horizon, l = problem.layout.output_lags, m = problem.layout.input_lags;
   if (reference.size() != H && reference.size() != 1) {
     return absl::InvalidArgumentError(absl::StrCat("reference: expected ", H, " values or 1, got ", reference.size()));
   }
   if (!reference.allFinite()) return absl::InvalidArgumentError("reference: contains a non-finite number");
-  std::unique_ptr<GpMpcSession> session(
-      new GpMpcSession(std::make_unique<GpModel>(std::move(model)), std::move(problem)));
+  std::unique_ptr<GpMpcSession> session(new GpMpcSession(std::move(model), std::move(problem)));
   const GpMpcProblem& p = session->problem_;
   NUPMPC_ASSIGN_OR_RETURN(session->scp_, LinGpScp::Create(session->model_.get(), p, options));
 

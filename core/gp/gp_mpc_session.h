@@ -30,10 +30,12 @@ namespace nupmpc::gp {
 
 class GpMpcSession final : public core::MpcSession {
  public:
-  // `reference`: r[t..t+H-1] (H values, or 1 for a constant one). INVALID_ARGUMENT naming
-  // the field for a bad problem, options or reference.
-  static absl::StatusOr<std::unique_ptr<GpMpcSession>> Create(GpModel model, GpMpcProblem problem,
-                                                              ScpOptions options, const Eigen::VectorXd& reference);
+  // `model` may be shared with other sessions (it is immutable). `reference`: r[t..t+H-1]
+  // (H values, or 1 for a constant one). INVALID_ARGUMENT naming the field for a bad
+  // problem, options or reference.
+  static absl::StatusOr<std::unique_ptr<GpMpcSession>> Create(std::shared_ptr<const GpModel> model,
+                                                              GpMpcProblem problem, ScpOptions options,
+                                                              const Eigen::VectorXd& reference);
 
   const core::Problem& problem() const override { return shape_; }
   // The subproblems run on IFFBDD.
@@ -41,8 +43,8 @@ class GpMpcSession final : public core::MpcSession {
   absl::Status SetInitialState(const Eigen::VectorXd& window) override;
   absl::Status Update(const core::Problem& problem) override;
   void ShiftWarmStart() override { scp_->ShiftWarmStart(); }
-  // Nothing to give back: the factorised GP is the model, not scratch, and the SCP's
-  // per-step buffers are a few horizons long.
+  // Nothing to give back: the factorised GP is the model, not scratch (and may be shared),
+  // and the SCP's per-step buffers are a few horizons long.
   void ReleaseWorkspace() override {}
   // SolveSummary in GP terms: iterations = NUP passes over all subproblems,
   // linearisations = SCP iterations, objective = the tracking cost J of (21) (without the
@@ -54,12 +56,12 @@ class GpMpcSession final : public core::MpcSession {
   const GpMpcProblem& gp_problem() const { return problem_; }
 
  private:
-  GpMpcSession(std::unique_ptr<GpModel> model, GpMpcProblem problem);
+  GpMpcSession(std::shared_ptr<const GpModel> model, GpMpcProblem problem);
   // The reference r[t..t+H-1] as problem() states it.
   void ReadReference(Eigen::VectorXd* reference) const;
   void FillSolution(const ScpPlan& plan, core::Solution* solution) const;
 
-  std::unique_ptr<GpModel> model_;  // on the heap: the SCP keeps a pointer to it
+  std::shared_ptr<const GpModel> model_;  // the SCP keeps a pointer to it
   GpMpcProblem problem_;
   core::Problem shape_;
   std::unique_ptr<LinGpScp> scp_;

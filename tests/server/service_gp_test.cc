@@ -12,6 +12,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/gp_conversion.h"
+#include "server/gp_model_cache.h"
 #include "service_fixture.h"
 
 namespace nupmpc::testing {
@@ -199,6 +200,54 @@ TEST_F(ServiceTest, GpSolvesHonourTheTimeLimit) {
   r = client_->Solve(created->session_id(), step);
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_EQ(r->status(), v1::SOLVE_STATUS_CONVERGED);
+}
+
+TEST(GpModelCache, SessionsOfOneModelShareItWhileAnyHoldsIt) {
+  server::GpModelCache cache;
+  auto data = examples::TanhTrainingData(60, 2);
+  ASSERT_TRUE(data.ok());
+  int builds = 0;
+  const auto make = [&]() -> absl::StatusOr<gp::GpModel> {
+    ++builds;
+    return gp::GpModel::Create(data->regressors, data->targets, FittedKernel());
+  };
+  auto a = cache.GetOrCreate("model a", make);
+  auto b = cache.GetOrCreate("model a", make);
+  auto c = cache.GetOrCreate("model c", make);
+  ASSERT_TRUE(a.ok() && b.ok() && c.ok());
+  EXPECT_EQ(a->get(), b->get());
+  EXPECT_NE(a->get(), c->get());
+  EXPECT_EQ(builds, 2);
+  EXPECT_EQ(cache.live_models(), 2);
+  a->reset();
+  b->reset();
+  EXPECT_EQ(cache.live_models(), 1) << "nobody holds model a any more";
+  ASSERT_TRUE(cache.GetOrCreate("model a", make).ok());
+  EXPECT_EQ(builds, 3) << "a model nobody held is built again";
+  const auto failing = []() -> absl::StatusOr<gp::GpModel> { return absl::InvalidArgumentError("bad data"); };
+  EXPECT_EQ(cache.GetOrCreate("model d", failing).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// Ten sessions on the same data and kernel hold one factorised GP between them: the
+// server's memory grows by about one model, not ten.
+TEST_F(ServiceTest, GpSessionsOfTheSameModelShareItsFactorisation) {
+  const gp::SeArdKernel kernel = FittedKernel();
+  const v1::ProblemSpec spec = TanhSpec(1000, &kernel);  // K and its eigenbasis: about 16 MB while built
+  const auto rss = [&]() {
+    absl::StatusOr<v1::GetServerInfoResponse> info = client_->GetServerInfo();
+    EXPECT_TRUE(info.ok());
+    return static_cast<double>(info->resident_memory_bytes());
+  };
+  const double before = rss();
+  if (before == 0.0) GTEST_SKIP() << "this platform reports no resident memory";
+  absl::StatusOr<v1::CreateSessionResponse> first = client_->CreateSession(spec);
+  ASSERT_TRUE(first.ok()) << first.status();
+  const double one = rss() - before;
+  for (int i = 0; i < 9; ++i) ASSERT_TRUE(client_->CreateSession(spec).ok());
+  const double nine_more = rss() - before - one;
+  EXPECT_GT(one, 4e6) << "the first session holds the 1000-point model (8 MB Cholesky factor)";
+  EXPECT_LT(nine_more, 0.5 * one) << "nine more sessions of the same model took " << nine_more / 1e6
+                                  << " MB; the first took " << one / 1e6 << " MB";
 }
 
 TEST_F(ServiceTest, BadGpSpecsAreRefusedNamingTheField) {
