@@ -190,11 +190,25 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   summary.status = SolveStatus::kIterationLimit;
   bool have_finite = false;
 
+  const auto stop_requested = [&]() {
+    if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) {
+      summary.status = SolveStatus::kCancelled;
+      return true;
+    }
+    if (limits.time_limit_seconds > 0.0 &&
+        std::chrono::duration<double>(Clock::now() - start).count() >= limits.time_limit_seconds) {
+      summary.status = SolveStatus::kTimeLimit;
+      return true;
+    }
+    return false;
+  };
+
   // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
   // while the deciding residual keeps falling); true if it was accepted.
   const auto try_polish = [&]() {
     double best_residual = kInfinity;
     for (int round = 0; summary.iterations < max_iterations; ++round) {
+      if (round > 0 && stop_requested()) return false;  // up to 13 passes: honour the limits
       const double residual = algorithm_->Polish(&candidate_);
       ++summary.iterations;
       const bool progress = residual < best_residual;
@@ -213,18 +227,6 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
       }
       const bool keep_going = round < options_.polish_rounds || (progress && round < options_.polish_max_rounds);
       if (!keep_going) break;
-    }
-    return false;
-  };
-  const auto stop_requested = [&]() {
-    if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) {
-      summary.status = SolveStatus::kCancelled;
-      return true;
-    }
-    if (limits.time_limit_seconds > 0.0 &&
-        std::chrono::duration<double>(Clock::now() - start).count() >= limits.time_limit_seconds) {
-      summary.status = SolveStatus::kTimeLimit;
-      return true;
     }
     return false;
   };
