@@ -61,7 +61,8 @@ absl::StatusOr<gp::SeArdKernel> KernelFor(const v1::GpModel& model, const GpTrai
   if (model.has_kernel()) return KernelFromProto(model.kernel(), training.layout.dimension(), path + ".kernel");
   absl::StatusOr<gp::FitResult> fit =
       gp::FitHyperparameters(training.data.regressors, training.data.targets, DefaultKernelStart(training.data));
-  if (!fit.ok()) return absl::Status(fit.status().code(), absl::StrCat(path, " (fitting the kernel): ", fit.status().message()));
+  if (!fit.ok())
+    return absl::Status(fit.status().code(), absl::StrCat(path, " (fitting the kernel): ", fit.status().message()));
   return fit->kernel;
 }
 
@@ -79,7 +80,8 @@ absl::StatusOr<GpTrainingData> GpTrainingDataFromProto(const v1::GpModel& model,
   const bool logged = model.logged_outputs_size() > 0 || model.logged_inputs_size() > 0;
   const bool pairs = model.has_regressors() || model.targets_size() > 0;
   if (logged == pairs) {
-    return Invalid(path, ": give the training data either as logged_outputs + logged_inputs or as regressors + "
+    return Invalid(path,
+                   ": give the training data either as logged_outputs + logged_inputs or as regressors + "
                    "targets (exactly one of the two)");
   }
   if (logged) {
@@ -92,8 +94,8 @@ absl::StatusOr<GpTrainingData> GpTrainingDataFromProto(const v1::GpModel& model,
     NUPMPC_ASSIGN_OR_RETURN(const Eigen::VectorXd y, FiniteVector(model.logged_outputs(), path + ".logged_outputs"));
     NUPMPC_ASSIGN_OR_RETURN(const Eigen::VectorXd u, FiniteVector(model.logged_inputs(), path + ".logged_inputs"));
     if (y.size() <= out.layout.first_step()) {
-      return Invalid(path, ".logged_outputs: ", y.size(), " samples give no training pair for these lags (need more than ",
-                     out.layout.first_step(), ")");
+      return Invalid(path, ".logged_outputs: ", y.size(),
+                     " samples give no training pair for these lags (need more than ", out.layout.first_step(), ")");
     }
     NUPMPC_ASSIGN_OR_RETURN(out.data, gp::MakeNarxData(out.layout, y, u));
   } else {
@@ -109,8 +111,8 @@ absl::StatusOr<GpTrainingData> GpTrainingDataFromProto(const v1::GpModel& model,
   const long long P = out.data.targets.size();
   NUPMPC_RETURN_IF_ERROR(CheckLimit((path + " (training pairs)").c_str(), P, limits.max_gp_points));
   // The factorised model holds P×P matrices: the same memory bound as a linear model.
-  NUPMPC_RETURN_IF_ERROR(CheckLimit((path + " (training pairs squared, in scalars)").c_str(), P * P,
-                                    limits.max_scalars));
+  NUPMPC_RETURN_IF_ERROR(
+      CheckLimit((path + " (training pairs squared, in scalars)").c_str(), P * P, limits.max_scalars));
   return out;
 }
 
@@ -135,11 +137,15 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
                                                                     const SizeLimits& limits, GpModelCache* cache) {
   // A GP spec describes nothing else: refuse what would be silently ignored.
   if (spec.has_model()) return Invalid("spec.model: must be empty when spec.gp is set (the GP is the model)");
-  if (spec.input_priors_size() > 0) return Invalid("spec.input_priors: must be empty when spec.gp is set (use spec.gp.input_min/max)");
-  if (spec.output_priors_size() > 0) return Invalid("spec.output_priors: must be empty when spec.gp is set (use spec.gp)");
-  if (spec.has_terminal()) return Invalid("spec.terminal: must be empty when spec.gp is set (use spec.gp.terminal_tolerance)");
+  if (spec.input_priors_size() > 0)
+    return Invalid("spec.input_priors: must be empty when spec.gp is set (use spec.gp.input_min/max)");
+  if (spec.output_priors_size() > 0)
+    return Invalid("spec.output_priors: must be empty when spec.gp is set (use spec.gp)");
+  if (spec.has_terminal())
+    return Invalid("spec.terminal: must be empty when spec.gp is set (use spec.gp.terminal_tolerance)");
   if (spec.input_levels_size() > 0) return Invalid("spec.input_levels: cannot be combined with spec.gp");
-  if (spec.has_input_differences()) return Invalid("spec.input_differences: must be empty when spec.gp is set (use spec.gp.rate_min/max)");
+  if (spec.has_input_differences())
+    return Invalid("spec.input_differences: must be empty when spec.gp is set (use spec.gp.rate_min/max)");
   if (spec.has_keep_out()) return Invalid("spec.keep_out: cannot be combined with spec.gp");
   const v1::SolverOptions& o = spec.options();
   if (o.algorithm() != v1::ALGORITHM_UNSPECIFIED || o.max_iterations() != 0 || o.objective_tolerance() != 0.0 ||
@@ -192,8 +198,8 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
     return absl::OkStatus();
   };
   NUPMPC_RETURN_IF_ERROR(optional_positive(s.penalty(), &options.penalty, "penalty"));
-  NUPMPC_RETURN_IF_ERROR(optional_positive(s.initial_trust_radius(), &options.initial_trust_radius,
-                                           "initial_trust_radius"));
+  NUPMPC_RETURN_IF_ERROR(
+      optional_positive(s.initial_trust_radius(), &options.initial_trust_radius, "initial_trust_radius"));
   NUPMPC_RETURN_IF_ERROR(optional_positive(s.tolerance(), &options.tolerance, "tolerance"));
   options.max_trust_radius = std::max(options.max_trust_radius, options.initial_trust_radius);
   options.min_trust_radius = std::min(options.min_trust_radius, options.initial_trust_radius);
@@ -214,7 +220,8 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
     if (spec.initial_state().mean_size() > 0) {
       if (spec.initial_state().mean_size() != window) {
         return Invalid("spec.initial_state.mean: expected ", window,
-                       " values (the past window [y[t-l..t-1], u[t-m-1..t-1]]), got ", spec.initial_state().mean_size());
+                       " values (the past window [y[t-l..t-1], u[t-m-1..t-1]]), got ",
+                       spec.initial_state().mean_size());
       }
       NUPMPC_ASSIGN_OR_RETURN(x0, FiniteVector(spec.initial_state().mean(), "spec.initial_state.mean"));
     }
@@ -223,7 +230,8 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   const auto make_model = [&]() -> absl::StatusOr<gp::GpModel> {
     NUPMPC_ASSIGN_OR_RETURN(const gp::SeArdKernel kernel, KernelFor(g.model(), training, "spec.gp.model"));
     absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, kernel);
-    if (!model.ok()) return absl::Status(model.status().code(), absl::StrCat("spec.gp.model: ", model.status().message()));
+    if (!model.ok())
+      return absl::Status(model.status().code(), absl::StrCat("spec.gp.model: ", model.status().message()));
     return model;
   };
   std::shared_ptr<const gp::GpModel> model;
@@ -247,7 +255,8 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
   NUPMPC_ASSIGN_OR_RETURN(const GpTrainingData training, GpTrainingDataFromProto(request.model(), "model", limits));
   gp::SeArdKernel start = DefaultKernelStart(training.data);
   if (request.model().has_kernel()) {
-    NUPMPC_ASSIGN_OR_RETURN(start, KernelFromProto(request.model().kernel(), training.layout.dimension(), "model.kernel"));
+    NUPMPC_ASSIGN_OR_RETURN(start,
+                            KernelFromProto(request.model().kernel(), training.layout.dimension(), "model.kernel"));
   }
   if (request.max_iterations() > 100000) return Invalid("max_iterations: at most 100000");
   gp::FitOptions options;
@@ -257,7 +266,8 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
       gp::FitHyperparameters(training.data.regressors, training.data.targets, start, options);
   if (!fit.ok()) return absl::Status(fit.status().code(), absl::StrCat("model: ", fit.status().message()));
   absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, fit->kernel);
-  if (!model.ok()) return absl::Status(model.status().code(), absl::StrCat("model (fitted): ", model.status().message()));
+  if (!model.ok())
+    return absl::Status(model.status().code(), absl::StrCat("model (fitted): ", model.status().message()));
   double squared_error = 0.0;
   for (Eigen::Index i = 0; i < training.data.targets.size(); ++i) {
     const double e = training.data.targets(i) - model->Mean(training.data.regressors.row(i).transpose());
@@ -272,7 +282,8 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
   response->set_gradient_norm(fit->gradient_norm);
   response->set_num_points(static_cast<unsigned>(training.data.targets.size()));
   response->set_training_rmse(std::sqrt(squared_error / static_cast<double>(training.data.targets.size())));
-  response->set_fit_ms(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_time).count());
+  response->set_fit_ms(
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_time).count());
   return absl::OkStatus();
 }
 
