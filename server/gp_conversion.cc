@@ -249,8 +249,8 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   return session;
 }
 
-absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits,
-                        v1::FitGpModelResponse* response) {
+absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits, double max_seconds,
+                        const std::atomic<bool>* cancel, v1::FitGpModelResponse* response) {
   if (!request.has_model()) return Invalid("model: required");
   NUPMPC_ASSIGN_OR_RETURN(const GpTrainingData training, GpTrainingDataFromProto(request.model(), "model", limits));
   gp::SeArdKernel start = DefaultKernelStart(training.data);
@@ -261,10 +261,18 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
   if (request.max_iterations() > 100000) return Invalid("max_iterations: at most 100000");
   gp::FitOptions options;
   if (request.max_iterations() > 0) options.max_iterations = static_cast<int>(request.max_iterations());
+  options.max_seconds = max_seconds;
+  options.cancel = cancel;
   const auto start_time = std::chrono::steady_clock::now();
   absl::StatusOr<gp::FitResult> fit =
       gp::FitHyperparameters(training.data.regressors, training.data.targets, start, options);
   if (!fit.ok()) return absl::Status(fit.status().code(), absl::StrCat("model: ", fit.status().message()));
+  if (fit->stopped) {
+    const std::string done = absl::StrCat(" after ", fit->iterations, " L-BFGS iterations on ",
+                                          training.data.targets.size(), " points; fit fewer points or allow more time");
+    if (cancel != nullptr && cancel->load()) return absl::CancelledError(absl::StrCat("the fit was cancelled", done));
+    return absl::DeadlineExceededError(absl::StrCat("the deadline ended the fit", done));
+  }
   absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, fit->kernel);
   if (!model.ok())
     return absl::Status(model.status().code(), absl::StrCat("model (fitted): ", model.status().message()));

@@ -4,6 +4,7 @@
 // proto ⇄ core for data-driven GP-MPC (ProblemSpec.gp, FitGpModel): every error names the
 // proto field path and the rule, sizes over the server's limits are RESOURCE_EXHAUSTED.
 
+#include <atomic>
 #include <memory>
 
 #include "absl/status/statusor.h"
@@ -36,9 +37,12 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
                                                                     const SizeLimits& limits,
                                                                     GpModelCache* cache = nullptr);
 
-// FitGpModel: validates, fits, and reports the fit's diagnostics.
-absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits,
-                        v1::FitGpModelResponse* response);
+// FitGpModel: validates, fits, and reports the fit's diagnostics. The fit stops after
+// `max_seconds` (0: none; the call's deadline) or when `cancel` is raised, and the call
+// then fails with DEADLINE_EXCEEDED or CANCELLED: a worker is never held by a fit nobody
+// waits for.
+absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits, double max_seconds,
+                        const std::atomic<bool>* cancel, v1::FitGpModelResponse* response);
 
 }  // namespace nupmpc::server
 

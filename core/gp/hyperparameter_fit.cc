@@ -7,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "ceres/gradient_problem.h"
 #include "ceres/gradient_problem_solver.h"
+#include "ceres/iteration_callback.h"
 
 namespace nupmpc::gp {
 namespace {
@@ -90,12 +91,30 @@ absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, cons
   return nll;
 }
 
+namespace {
+// Ends the fit after the current iteration once the flag is raised.
+class CancelCallback : public ceres::IterationCallback {
+ public:
+  explicit CancelCallback(const std::atomic<bool>* cancel) : cancel_(cancel) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary&) override {
+    return cancel_ != nullptr && cancel_->load(std::memory_order_relaxed) ? ceres::SOLVER_ABORT
+                                                                          : ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  const std::atomic<bool>* cancel_;
+};
+}  // namespace
+
 absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& initial, const FitOptions& options) {
   const int d = static_cast<int>(inputs.cols());
   if (inputs.rows() < 2) return absl::InvalidArgumentError("inputs: need at least two points to fit");
   if (!inputs.allFinite() || !targets.allFinite()) return absl::InvalidArgumentError("inputs/targets: non-finite");
   if (absl::Status valid = Validate(initial, d); !valid.ok()) return valid;
+  if (!(options.max_seconds >= 0.0)) {
+    return absl::InvalidArgumentError(absl::StrCat("FitOptions.max_seconds = ", options.max_seconds, "; must be >= 0"));
+  }
   const auto start = std::chrono::steady_clock::now();
   FitResult result;
   Eigen::VectorXd theta = ToLog(initial);
@@ -110,8 +129,15 @@ absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, cons
   solver_options.gradient_tolerance = options.gradient_tolerance;
   solver_options.function_tolerance = options.function_tolerance;
   solver_options.logging_type = ceres::SILENT;
+  if (options.max_seconds > 0.0) solver_options.max_solver_time_in_seconds = options.max_seconds;
+  CancelCallback cancel(options.cancel);
+  if (options.cancel != nullptr) solver_options.callbacks.push_back(&cancel);
   ceres::GradientProblemSolver::Summary summary;
   ceres::Solve(solver_options, problem, theta.data(), &summary);
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.stopped = summary.termination_type == ceres::USER_FAILURE ||
+                   (options.max_seconds > 0.0 && summary.termination_type == ceres::NO_CONVERGENCE &&
+                    elapsed >= options.max_seconds);
 
   result.kernel = FromLog(theta.data(), d, options.min_noise_variance);
   Eigen::VectorXd gradient;

@@ -9,6 +9,9 @@
 // by Ceres' L-BFGS (a gradient problem). O(N³) per evaluation: fit on a few hundred
 // points; the model for more data reuses the hyper-parameters.
 
+#include <atomic>
+#include <string>
+
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/gp/gp_model.h"
@@ -21,6 +24,10 @@ struct FitOptions {
   double function_tolerance = 1e-10;
   // Lower bound on σ_n² (keeps K_y well conditioned on noise-free data).
   double min_noise_variance = 1e-8;
+  // Wall time for the whole fit (0: none) and a flag checked after every iteration: a fit
+  // of P points costs O(P³) per iteration, and a service must be able to stop it.
+  double max_seconds = 0.0;
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 struct FitResult {
@@ -29,6 +36,7 @@ struct FitResult {
   double initial_negative_log_likelihood = 0.0;
   int iterations = 0;
   bool converged = false;  ///< Ceres reported convergence (not the iteration cap)
+  bool stopped = false;    ///< max_seconds or the cancel flag ended it (kernel: the start's or the last step's)
   double gradient_norm = 0.0;  ///< max-norm of the gradient in log parameters at the end
   double seconds = 0.0;
   std::string report;      ///< Ceres' one-line summary

@@ -250,6 +250,27 @@ TEST_F(ServiceTest, GpSessionsOfTheSameModelShareItsFactorisation) {
                                   << " MB; the first took " << one / 1e6 << " MB";
 }
 
+// A fit nobody waits for any more does not hold the worker: with one worker, a solve sent
+// right after a fit whose deadline passed is answered long before the fit would end.
+TEST_F(ServiceTest, FitGpModelStopsAtTheDeadline) {
+  server_->Shutdown();
+  server::ServerOptions options = DefaultOptions();
+  options.worker_threads = 1;
+  StartServer(options);
+  v1::FitGpModelRequest request;
+  *request.mutable_model() = LoggedModel(2000, 1);  // O(P³) per iteration
+  Client impatient(target_, std::chrono::milliseconds(300));
+  const auto start = std::chrono::steady_clock::now();
+  absl::StatusOr<v1::FitGpModelResponse> fit = impatient.FitGpModel(request);
+  EXPECT_EQ(fit.status().code(), absl::StatusCode::kDeadlineExceeded) << fit.status();
+  absl::StatusOr<v1::SolveResult> solve = client_->SolveOnce(SpecOrDie(LoadInstanceOrDie("masses_N30").problem));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(solve.ok()) << solve.status();
+  // The fit checks the time between L-BFGS iterations (about a second each here); run to
+  // the end it takes about 25 s on this machine.
+  EXPECT_LT(seconds, 10.0) << "the solve waited for the abandoned fit";
+}
+
 TEST_F(ServiceTest, BadGpSpecsAreRefusedNamingTheField) {
   const gp::SeArdKernel kernel = FittedKernel();
   const v1::ProblemSpec good = TanhSpec(50, &kernel);
