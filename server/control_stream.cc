@@ -39,7 +39,11 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       break;
     }
     case v1::ControlRequest::kSpec: {
-      absl::StatusOr<BuiltSession> built = BuildSession(first.spec(), state_->options.size_limits, &state_->gp_models);
+      CallContext call;  // the stream's deadline and cancellation bound a kernel fit on creation
+      call.deadline = SteadyDeadline(*context_);
+      call.cancel = &cancelled_;
+      absl::StatusOr<BuiltSession> built =
+          BuildSession(first.spec(), state_->options.size_limits, &state_->gp_models, &call);
       if (!built.ok()) return built.status();
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
           state_->registry.Add(std::move(built->solver), built->default_time_limit_ms,

@@ -56,13 +56,24 @@ void KernelToProto(const gp::SeArdKernel& kernel, v1::GpKernel* out) {
 }
 
 // The kernel of a GpModel: its own, or fitted from the default start.
+// DEADLINE_EXCEEDED or CANCELLED for a fit its limits stopped.
+absl::Status StoppedFit(const gp::FitResult& fit, const gp::FitOptions& options, int points) {
+  const std::string done =
+      absl::StrCat(" after ", fit.iterations, " L-BFGS iterations on ", points, " points; fit fewer points or allow more time");
+  if (options.cancel != nullptr && options.cancel->load()) {
+    return absl::CancelledError(absl::StrCat("the fit was cancelled", done));
+  }
+  return absl::DeadlineExceededError(absl::StrCat("the deadline ended the fit", done));
+}
+
 absl::StatusOr<gp::SeArdKernel> KernelFor(const v1::GpModel& model, const GpTrainingData& training,
-                                          const std::string& path) {
+                                          const std::string& path, const gp::FitOptions& fit_options) {
   if (model.has_kernel()) return KernelFromProto(model.kernel(), training.layout.dimension(), path + ".kernel");
-  absl::StatusOr<gp::FitResult> fit =
-      gp::FitHyperparameters(training.data.regressors, training.data.targets, DefaultKernelStart(training.data));
+  absl::StatusOr<gp::FitResult> fit = gp::FitHyperparameters(training.data.regressors, training.data.targets,
+                                                             DefaultKernelStart(training.data), fit_options);
   if (!fit.ok())
     return absl::Status(fit.status().code(), absl::StrCat(path, " (fitting the kernel): ", fit.status().message()));
+  if (fit->stopped) return StoppedFit(*fit, fit_options, static_cast<int>(training.data.targets.size()));
   return fit->kernel;
 }
 
@@ -134,7 +145,8 @@ gp::SeArdKernel DefaultKernelStart(const gp::NarxData& data) {
 }
 
 absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::ProblemSpec& spec,
-                                                                    const SizeLimits& limits, GpModelCache* cache) {
+                                                                    const SizeLimits& limits, GpModelCache* cache,
+                                                                    const gp::FitOptions& fit_options) {
   // A GP spec describes nothing else: refuse what would be silently ignored.
   if (spec.has_model()) return Invalid("spec.model: must be empty when spec.gp is set (the GP is the model)");
   if (spec.input_priors_size() > 0)
@@ -228,7 +240,7 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   }
 
   const auto make_model = [&]() -> absl::StatusOr<gp::GpModel> {
-    NUPMPC_ASSIGN_OR_RETURN(const gp::SeArdKernel kernel, KernelFor(g.model(), training, "spec.gp.model"));
+    NUPMPC_ASSIGN_OR_RETURN(const gp::SeArdKernel kernel, KernelFor(g.model(), training, "spec.gp.model", fit_options));
     absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, kernel);
     if (!model.ok())
       return absl::Status(model.status().code(), absl::StrCat("spec.gp.model: ", model.status().message()));
@@ -267,12 +279,7 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
   absl::StatusOr<gp::FitResult> fit =
       gp::FitHyperparameters(training.data.regressors, training.data.targets, start, options);
   if (!fit.ok()) return absl::Status(fit.status().code(), absl::StrCat("model: ", fit.status().message()));
-  if (fit->stopped) {
-    const std::string done = absl::StrCat(" after ", fit->iterations, " L-BFGS iterations on ",
-                                          training.data.targets.size(), " points; fit fewer points or allow more time");
-    if (cancel != nullptr && cancel->load()) return absl::CancelledError(absl::StrCat("the fit was cancelled", done));
-    return absl::DeadlineExceededError(absl::StrCat("the deadline ended the fit", done));
-  }
+  if (fit->stopped) return StoppedFit(*fit, options, static_cast<int>(training.data.targets.size()));
   absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, fit->kernel);
   if (!model.ok())
     return absl::Status(model.status().code(), absl::StrCat("model (fitted): ", model.status().message()));

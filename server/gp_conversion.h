@@ -31,11 +31,13 @@ absl::StatusOr<GpTrainingData> GpTrainingDataFromProto(const v1::GpModel& model,
 gp::SeArdKernel DefaultKernelStart(const gp::NarxData& data);
 
 // The GP session of a spec whose `gp` is set (the rest of the spec must be empty). Fits the
-// kernel first when the spec gives none. With a cache, sessions of the same data and
-// kernel share one factorised model.
+// kernel first when the spec gives none, within `fit_options`' time and cancel flag
+// (DEADLINE_EXCEEDED / CANCELLED when they stop it). With a cache, sessions of the same
+// data and kernel share one factorised model.
 absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::ProblemSpec& spec,
                                                                     const SizeLimits& limits,
-                                                                    GpModelCache* cache = nullptr);
+                                                                    GpModelCache* cache = nullptr,
+                                                                    const gp::FitOptions& fit_options = {});
 
 // FitGpModel: validates, fits, and reports the fit's diagnostics. The fit stops after
 // `max_seconds` (0: none; the call's deadline) or when `cancel` is raised, and the call

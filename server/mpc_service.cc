@@ -69,8 +69,9 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
                                                         v1::CreateSessionResponse* response) {
   ServerState* state = state_;
   return PooledUnary::Start(state, context, /*is_solve=*/false,
-                            [state, request, response](const CallContext&) -> absl::Status {
-    absl::StatusOr<BuiltSession> built = BuildSession(request->spec(), state->options.size_limits, &state->gp_models);
+                            [state, request, response](const CallContext& call) -> absl::Status {
+    absl::StatusOr<BuiltSession> built =
+        BuildSession(request->spec(), state->options.size_limits, &state->gp_models, &call);
     if (!built.ok()) return built.status();
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
         state->registry.Add(std::move(built->solver), built->default_time_limit_ms,

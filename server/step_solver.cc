@@ -73,10 +73,18 @@ absl::Status ApplyGpStep(const v1::Step& step, const Eigen::VectorXd* measured, 
 }  // namespace
 
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits,
-                                          GpModelCache* gp_models) {
+                                          GpModelCache* gp_models, const CallContext* call) {
   BuiltSession built;
   if (spec.has_gp()) {
-    NUPMPC_ASSIGN_OR_RETURN(built.solver, GpSessionFromSpec(spec, limits, gp_models));
+    gp::FitOptions fit;
+    if (call != nullptr) {
+      fit.cancel = call->cancel;
+      if (call->deadline.has_value()) {
+        fit.max_seconds = std::chrono::duration<double>(*call->deadline - Clock::now()).count();
+        if (fit.max_seconds <= 0.0) return absl::DeadlineExceededError("the deadline passed before the session was built");
+      }
+    }
+    NUPMPC_ASSIGN_OR_RETURN(built.solver, GpSessionFromSpec(spec, limits, gp_models, fit));
     built.default_time_limit_ms = spec.options().time_limit_ms();
     return built;
   }
@@ -173,7 +181,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 
 absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limits, const CallContext& call,
                        v1::SolveResult* out, GpModelCache* gp_models) {
-  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits, gp_models));
+  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits, gp_models, &call));
   core::SolveLimits limits;
   NUPMPC_RETURN_IF_ERROR(MakeLimits(built.default_time_limit_ms, nullptr, call, &limits));
   core::Solution solution;

@@ -34,9 +34,10 @@ struct BuiltSession {
   InputTransform transform;
   double default_time_limit_ms = 0.0;
 };
-// GP specs take their factorised model from `gp_models` when given (shared between sessions).
+// GP specs take their factorised model from `gp_models` when given (shared between sessions);
+// a kernel fit on creation stops at `call`'s deadline or cancellation.
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits,
-                                          GpModelCache* gp_models = nullptr);
+                                          GpModelCache* gp_models = nullptr, const CallContext* call = nullptr);
 
 }  // namespace nupmpc::server
 

@@ -5,6 +5,7 @@
 // kernel is fitted on creation; bad specs and steps are refused naming the field and leave
 // the session as it was.
 #include <cmath>
+#include <functional>
 
 #include "core/examples/scenarios/gp_tanh.h"
 #include "core/gp/hyperparameter_fit.h"
@@ -251,24 +252,28 @@ TEST_F(ServiceTest, GpSessionsOfTheSameModelShareItsFactorisation) {
 }
 
 // A fit nobody waits for any more does not hold the worker: with one worker, a solve sent
-// right after a fit whose deadline passed is answered long before the fit would end.
-TEST_F(ServiceTest, FitGpModelStopsAtTheDeadline) {
+// right after a FitGpModel call or a kernel-fitting CreateSession whose deadline passed is
+// answered long before the fit would end (2000 points: about 25 s run to the end here).
+TEST_F(ServiceTest, KernelFitsStopAtTheDeadline) {
   server_->Shutdown();
   server::ServerOptions options = DefaultOptions();
   options.worker_threads = 1;
   StartServer(options);
+  Client impatient(target_, std::chrono::milliseconds(300));
+  const v1::ProblemSpec quick = SpecOrDie(LoadInstanceOrDie("masses_N30").problem);
+  const auto solve_soon_after = [&](const std::function<absl::Status()>& abandoned) {
+    const auto start = std::chrono::steady_clock::now();
+    EXPECT_EQ(abandoned().code(), absl::StatusCode::kDeadlineExceeded);
+    absl::StatusOr<v1::SolveResult> solve = client_->SolveOnce(quick);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ASSERT_TRUE(solve.ok()) << solve.status();
+    // The fit checks the time between L-BFGS iterations (about a second each here).
+    EXPECT_LT(seconds, 10.0) << "the solve waited for the abandoned fit";
+  };
   v1::FitGpModelRequest request;
   *request.mutable_model() = LoggedModel(2000, 1);  // O(P³) per iteration
-  Client impatient(target_, std::chrono::milliseconds(300));
-  const auto start = std::chrono::steady_clock::now();
-  absl::StatusOr<v1::FitGpModelResponse> fit = impatient.FitGpModel(request);
-  EXPECT_EQ(fit.status().code(), absl::StatusCode::kDeadlineExceeded) << fit.status();
-  absl::StatusOr<v1::SolveResult> solve = client_->SolveOnce(SpecOrDie(LoadInstanceOrDie("masses_N30").problem));
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  ASSERT_TRUE(solve.ok()) << solve.status();
-  // The fit checks the time between L-BFGS iterations (about a second each here); run to
-  // the end it takes about 25 s on this machine.
-  EXPECT_LT(seconds, 10.0) << "the solve waited for the abandoned fit";
+  solve_soon_after([&] { return impatient.FitGpModel(request).status(); });
+  solve_soon_after([&] { return impatient.CreateSession(TanhSpec(2000, nullptr)).status(); });
 }
 
 TEST_F(ServiceTest, BadGpSpecsAreRefusedNamingTheField) {
