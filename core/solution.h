@@ -1,6 +1,7 @@
 #ifndef NUPMPC_CORE_SOLUTION_H_
 #define NUPMPC_CORE_SOLUTION_H_
 
+#include <optional>
 #include <string>
 
 #include "Eigen/Core"
@@ -17,6 +18,10 @@ enum class SolveStatus {
   kCancelled,       ///< the cancel flag was raised
 };
 const char* SolveStatusName(SolveStatus status);
+
+// Whether a solve must stop now: kCancelled when the limits' flag is raised, kTimeLimit
+// when `elapsed_seconds` reached their time limit, else nothing. Checked once per pass.
+std::optional<SolveStatus> LimitReached(const SolveLimits& limits, double elapsed_seconds);
 
 struct SolveSummary {
   SolveStatus status = SolveStatus::kNumericalError;

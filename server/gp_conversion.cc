@@ -55,7 +55,6 @@ void KernelToProto(const gp::SeArdKernel& kernel, v1::GpKernel* out) {
   for (Eigen::Index i = 0; i < kernel.length_scales.size(); ++i) out->add_length_scales(kernel.length_scales(i));
 }
 
-// The kernel of a GpModel: its own, or fitted from the default start.
 // DEADLINE_EXCEEDED or CANCELLED for a fit its limits stopped.
 absl::Status StoppedFit(const gp::FitResult& fit, const gp::FitOptions& options, int points) {
   const std::string done =
@@ -66,6 +65,7 @@ absl::Status StoppedFit(const gp::FitResult& fit, const gp::FitOptions& options,
   return absl::DeadlineExceededError(absl::StrCat("the deadline ended the fit", done));
 }
 
+// The kernel of a GpModel: its own, or fitted from the default start within `fit_options`.
 absl::StatusOr<gp::SeArdKernel> KernelFor(const v1::GpModel& model, const GpTrainingData& training,
                                           const std::string& path, const gp::FitOptions& fit_options) {
   if (model.has_kernel()) return KernelFromProto(model.kernel(), training.layout.dimension(), path + ".kernel");
@@ -261,8 +261,8 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   return session;
 }
 
-absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits, double max_seconds,
-                        const std::atomic<bool>* cancel, v1::FitGpModelResponse* response) {
+absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits,
+                        const gp::FitOptions& fit_limits, v1::FitGpModelResponse* response) {
   if (!request.has_model()) return Invalid("model: required");
   NUPMPC_ASSIGN_OR_RETURN(const GpTrainingData training, GpTrainingDataFromProto(request.model(), "model", limits));
   gp::SeArdKernel start = DefaultKernelStart(training.data);
@@ -271,10 +271,8 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
                             KernelFromProto(request.model().kernel(), training.layout.dimension(), "model.kernel"));
   }
   if (request.max_iterations() > 100000) return Invalid("max_iterations: at most 100000");
-  gp::FitOptions options;
+  gp::FitOptions options = fit_limits;
   if (request.max_iterations() > 0) options.max_iterations = static_cast<int>(request.max_iterations());
-  options.max_seconds = max_seconds;
-  options.cancel = cancel;
   const auto start_time = std::chrono::steady_clock::now();
   absl::StatusOr<gp::FitResult> fit =
       gp::FitHyperparameters(training.data.regressors, training.data.targets, start, options);

@@ -4,7 +4,6 @@
 // proto ⇄ core for data-driven GP-MPC (ProblemSpec.gp, FitGpModel): every error names the
 // proto field path and the rule, sizes over the server's limits are RESOURCE_EXHAUSTED.
 
-#include <atomic>
 #include <memory>
 
 #include "absl/status/statusor.h"
@@ -39,12 +38,11 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
                                                                     GpModelCache* cache = nullptr,
                                                                     const gp::FitOptions& fit_options = {});
 
-// FitGpModel: validates, fits, and reports the fit's diagnostics. The fit stops after
-// `max_seconds` (0: none; the call's deadline) or when `cancel` is raised, and the call
-// then fails with DEADLINE_EXCEEDED or CANCELLED: a worker is never held by a fit nobody
-// waits for.
-absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits, double max_seconds,
-                        const std::atomic<bool>* cancel, v1::FitGpModelResponse* response);
+// FitGpModel: validates, fits, and reports the fit's diagnostics. The fit stops at
+// `fit_limits`' time (the call's deadline) or cancel flag, and the call then fails with
+// DEADLINE_EXCEEDED or CANCELLED: a worker is never held by a fit nobody waits for.
+absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits,
+                        const gp::FitOptions& fit_limits, v1::FitGpModelResponse* response);
 
 }  // namespace nupmpc::server
 

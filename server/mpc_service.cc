@@ -2,6 +2,7 @@
 
 #include <functional>
 
+#include "core/util/status_macros.h"
 #include "server/control_stream.h"
 #include "server/gp_conversion.h"
 #include "server/process_memory.h"
@@ -168,13 +169,10 @@ grpc::ServerUnaryReactor* MpcServiceImpl::FitGpModel(grpc::CallbackServerContext
                                                      v1::FitGpModelResponse* response) {
   // O(P³) per iteration: on the pool like a solve, never in the reaction.
   ServerState* state = state_;
-  return PooledUnary::Start(state, context, /*is_solve=*/false, [state, request, response](const CallContext& call) {
-    double max_seconds = 0.0;  // none without a deadline
-    if (call.deadline.has_value()) {
-      max_seconds = std::chrono::duration<double>(*call.deadline - Clock::now()).count();
-      if (max_seconds <= 0.0) return absl::DeadlineExceededError("the deadline passed before the fit started");
-    }
-    return server::FitGpModel(*request, state->options.size_limits, max_seconds, call.cancel, response);
+  return PooledUnary::Start(state, context, /*is_solve=*/false,
+                            [state, request, response](const CallContext& call) -> absl::Status {
+    NUPMPC_ASSIGN_OR_RETURN(const gp::FitOptions fit_limits, FitLimits(&call));
+    return server::FitGpModel(*request, state->options.size_limits, fit_limits, response);
   });
 }
 

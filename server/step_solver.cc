@@ -72,18 +72,22 @@ absl::Status ApplyGpStep(const v1::Step& step, const Eigen::VectorXd* measured, 
 
 }  // namespace
 
+absl::StatusOr<gp::FitOptions> FitLimits(const CallContext* call) {
+  gp::FitOptions fit;
+  if (call == nullptr) return fit;
+  fit.cancel = call->cancel;
+  if (call->deadline.has_value()) {
+    fit.max_seconds = std::chrono::duration<double>(*call->deadline - Clock::now()).count();
+    if (fit.max_seconds <= 0.0) return absl::DeadlineExceededError("the deadline passed before the fit started");
+  }
+  return fit;
+}
+
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits,
                                           GpModelCache* gp_models, const CallContext* call) {
   BuiltSession built;
   if (spec.has_gp()) {
-    gp::FitOptions fit;
-    if (call != nullptr) {
-      fit.cancel = call->cancel;
-      if (call->deadline.has_value()) {
-        fit.max_seconds = std::chrono::duration<double>(*call->deadline - Clock::now()).count();
-        if (fit.max_seconds <= 0.0) return absl::DeadlineExceededError("the deadline passed before the session was built");
-      }
-    }
+    NUPMPC_ASSIGN_OR_RETURN(const gp::FitOptions fit, FitLimits(call));
     NUPMPC_ASSIGN_OR_RETURN(built.solver, GpSessionFromSpec(spec, limits, gp_models, fit));
     built.default_time_limit_ms = spec.options().time_limit_ms();
     return built;

@@ -5,6 +5,7 @@
 #include <optional>
 
 #include "absl/status/status.h"
+#include "core/gp/hyperparameter_fit.h"
 #include "server/gp_model_cache.h"
 #include "server/session_registry.h"
 #include "server/spec_conversion.h"
@@ -26,6 +27,10 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 // Stateless: builds a session for the spec, solves cold once, fills `out`.
 absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& limits, const CallContext& call,
                        v1::SolveResult* out, GpModelCache* gp_models = nullptr);
+
+// The limits of a kernel fit made for a call: the time to its deadline and its cancel flag
+// (DEADLINE_EXCEEDED when the deadline already passed). No call: no limits.
+absl::StatusOr<gp::FitOptions> FitLimits(const CallContext* call);
 
 // Converts a spec and builds its core session (shared by CreateSession, SolveOnce and
 // streams that carry a spec).

@@ -65,6 +65,8 @@ class GpMpcSession final : public core::MpcSession {
   GpMpcProblem problem_;
   core::Problem shape_;
   std::unique_ptr<LinGpScp> scp_;
+  // shape_'s initial mean and output means in the form LinGpScp::Solve takes, kept so that a
+  // solve copies nothing; written together with shape_ (SetInitialState, Update).
   Eigen::VectorXd past_outputs_, past_inputs_, reference_;
   ScpPlan plan_;
   bool solved_ = false;  ///< a Solve() has run since creation (the carried plan is warm)

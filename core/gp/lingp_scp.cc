@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 
@@ -320,28 +321,17 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
   double rho = options_.initial_trust_radius;
   core::SolveLimits limits;
   limits.warm_start = has_warm_;
-  int max_iterations = options_.max_iterations;
-  double time_limit = 0.0;  // seconds for the whole solve; 0: none
-  if (outer_limits != nullptr) {
-    if (outer_limits->max_iterations > 0) max_iterations = std::min(max_iterations, outer_limits->max_iterations);
-    time_limit = outer_limits->time_limit_seconds;
-    limits.cancel = outer_limits->cancel;
-  }
+  const core::SolveLimits outer = outer_limits != nullptr ? *outer_limits : core::SolveLimits{};
+  const int max_iterations =
+      outer.max_iterations > 0 ? std::min(options_.max_iterations, outer.max_iterations) : options_.max_iterations;
+  limits.cancel = outer.cancel;
   // Checked before each SCP iteration; the inner solve gets the time that is left.
   const auto stop_requested = [&]() {
-    if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) {
-      summary.status = core::SolveStatus::kCancelled;
-      return true;
-    }
-    if (time_limit > 0.0) {
-      const double left = time_limit - SecondsSince(start);
-      if (left <= 0.0) {
-        summary.status = core::SolveStatus::kTimeLimit;
-        return true;
-      }
-      limits.time_limit_seconds = left;
-    }
-    return false;
+    const double elapsed = SecondsSince(start);
+    const std::optional<core::SolveStatus> stop = core::LimitReached(outer, elapsed);
+    if (stop.has_value()) summary.status = *stop;
+    if (outer.time_limit_seconds > 0.0) limits.time_limit_seconds = outer.time_limit_seconds - elapsed;
+    return stop.has_value();
   };
   for (int j = 0; j < max_iterations; ++j) {
     if (stop_requested()) break;

@@ -39,6 +39,12 @@ bool AnyBinaryInput(const Problem& p) {
 
 }  // namespace
 
+std::optional<SolveStatus> LimitReached(const SolveLimits& limits, double elapsed_seconds) {
+  if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) return SolveStatus::kCancelled;
+  if (limits.time_limit_seconds > 0.0 && elapsed_seconds >= limits.time_limit_seconds) return SolveStatus::kTimeLimit;
+  return std::nullopt;
+}
+
 const char* SolveStatusName(SolveStatus status) {
   switch (status) {
     case SolveStatus::kConverged: return "converged";
@@ -191,16 +197,10 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   bool have_finite = false;
 
   const auto stop_requested = [&]() {
-    if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) {
-      summary.status = SolveStatus::kCancelled;
-      return true;
-    }
-    if (limits.time_limit_seconds > 0.0 &&
-        std::chrono::duration<double>(Clock::now() - start).count() >= limits.time_limit_seconds) {
-      summary.status = SolveStatus::kTimeLimit;
-      return true;
-    }
-    return false;
+    const std::optional<SolveStatus> stop =
+        LimitReached(limits, std::chrono::duration<double>(Clock::now() - start).count());
+    if (stop.has_value()) summary.status = *stop;
+    return stop.has_value();
   };
 
   // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
