@@ -54,6 +54,9 @@ absl::Status Validate(const SolverOptions& o) {
   if (absl::Status s = AtLeast("max_iterations", o.max_iterations, 1); !s.ok()) return s;
   if (absl::Status s = AtLeast("polish_after_stable_iterations", o.polish_after_stable_iterations, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("polish_rounds", o.polish_rounds, 0); !s.ok()) return s;
+  if (absl::Status s = AtLeast("discrete_fixing_passes", o.discrete_fixing_passes, 0); !s.ok()) return s;
+  if (absl::Status s = AtLeast("discrete_fixing_blocks", o.discrete_fixing_blocks, 1); !s.ok()) return s;
+  if (absl::Status s = AtLeast("discrete_search_sweeps", o.discrete_search_sweeps, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("polish_max_rounds", o.polish_max_rounds, o.polish_rounds); !s.ok()) return s;
   if (!(o.polish_settled_fraction >= 0.0 && o.polish_settled_fraction < 1.0)) {
     return absl::InvalidArgumentError(absl::StrCat("SolverOptions.polish_settled_fraction = ",

@@ -60,6 +60,24 @@ struct SolverOptions {
   double ibffd_initial_halfspace_slope = 5.0;
   double ibffd_initial_box_slope = 10.0;
 
+  // Binary and M-level inputs: after the iteration loop, the plan is made discrete. With
+  // discrete_fixing_passes = 0 every binary is rounded at once (§7.2). Otherwise the
+  // horizon is cut into discrete_fixing_blocks blocks; from the first block on, the block's
+  // binaries are rounded and pinned and discrete_fixing_passes IAKE passes let the later
+  // inputs make up for the rounding ("fix and re-solve"). Rounding a long plan of an
+  // integrator at once lets small errors of the early inputs grow along the horizon (the
+  // flappy bird misses its slits, the three-level corridor leaves the corridor). These
+  // passes come on top of max_iterations and stop at the solve's time limit or cancel
+  // flag, which then rounds the rest at once.
+  int discrete_fixing_passes = 10;
+  int discrete_fixing_blocks = 30;
+  // Then a local search on the discrete plan: one input one level up or down, or one level
+  // moved between two neighbouring steps (a flap or a switch one step earlier or later, or
+  // a +1/-1 doublet), kept when it lowers the max violation or, at no worse violation, J.
+  // Each try is one O(N) evaluation of the plan; a sweep tries every move once. Up to this
+  // many sweeps, until one finds nothing (0: off).
+  int discrete_search_sweeps = 20;
+
   // Default per-solve iteration cap (SolveLimits may lower it).
   int max_iterations = 5000;
 };

@@ -30,10 +30,11 @@ struct SolveSummary {
   double objective = 0.0;                  ///< J of the returned plan (benchmark convention)
   double max_violation = 0.0;              ///< largest distance of a hard-constrained scalar to its set
   bool polished = false;                   ///< the result was verified by the active-set polish
-  // Binary inputs: the plan is projected to the nearer level after the iterations
-  // (nup-algorithms.md §7.2), and the objective and violation are those of the rounded plan.
-  bool rounded = false;       ///< some input was binary and the plan was rounded
-  double discrete_gap = 0.0;  ///< before rounding: largest distance of a binary (or an M-level sum) to its nearer level
+  // Binary inputs: the plan is made discrete after the iterations (nup-algorithms.md §7.2;
+  // SolverOptions.discrete_*), and the objective and violation are those of the discrete plan.
+  bool rounded = false;       ///< some input was binary and the plan was made discrete
+  double discrete_gap = 0.0;  ///< largest distance of a binary (or an M-level sum) to its nearer level when rounded
+  int discrete_moves = 0;     ///< level changes the discrete local search accepted after rounding
   bool warm_started = false;
   double solve_seconds = 0.0;
   // Nonlinear problems solved by sequential linearisation (KeepOutSession): how many

@@ -415,6 +415,7 @@ void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, 
   out->set_polished(s.polished);
   out->set_rounded(s.rounded);
   out->set_discrete_gap(s.discrete_gap);
+  out->set_discrete_moves(static_cast<uint32_t>(s.discrete_moves));
   out->set_linearisations(static_cast<unsigned>(s.linearisations));
   out->set_keep_out_violation(s.nonlinear_violation);
   CopyRows(solution.inputs, out->mutable_inputs());

@@ -1,6 +1,8 @@
 #include "core/algorithms/iake.h"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 
@@ -25,6 +27,7 @@ Iake::Iake(const Problem& problem, const SolverOptions& options) : options_(opti
   input_factor_.resize(graph_.input_prior.size());
   row_nup_.resize(graph_.num_rows());
   row_factor_.resize(graph_.num_rows());
+  pinned_value_.assign(graph_.input_prior.size(), std::numeric_limits<double>::quiet_NaN());
   Refresh(problem);
   ColdStart();
 }
@@ -80,6 +83,10 @@ void Iake::ColdStart() {
   std::fill(row_nup_.begin(), row_nup_.end(), ScalarFactor{});
 }
 
+void Iake::ReleaseInputPins() {
+  std::fill(pinned_value_.begin(), pinned_value_.end(), std::numeric_limits<double>::quiet_NaN());
+}
+
 void Iake::ShiftWarmStart() {
   const int L = graph_.L, N = graph_.N;
   for (int n = 0; n + 1 < N; ++n) {
@@ -96,7 +103,8 @@ ScalarFactor Iake::Update(const ScalarPrior& prior, double estimate, double post
 
 int Iake::Iterate(PrimalIterate* out) {
   for (std::size_t i = 0; i < input_nup_.size(); ++i) {
-    input_factor_[i] = WithGaussianPart(graph_.input_prior[i], input_nup_[i]);
+    input_factor_[i] = std::isnan(pinned_value_[i]) ? WithGaussianPart(graph_.input_prior[i], input_nup_[i])
+                                                     : ScalarFactor::Pinned(pinned_value_[i]);
   }
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], row_nup_[r]);
   RunForwardFilter(graph_, input_factor_.data(), row_factor_.data(), /*keep_edges=*/true, &fw_);
@@ -106,7 +114,8 @@ int Iake::Iterate(PrimalIterate* out) {
   for (int n = 0; n < graph_.N; ++n) {
     for (int l = 0; l < graph_.L; ++l) {
       const int i = n * graph_.L + l;
-      if (graph_.input_prior[i].kind == PriorKind::kNone) continue;
+      // A pinned scalar keeps the NUP state it had: the pins are released after the solve.
+      if (graph_.input_prior[i].kind == PriorKind::kNone || !std::isnan(pinned_value_[i])) continue;
       input_nup_[i] = Update(graph_.input_prior[i], sm_.mU(l, n), needs_variances_ ? sm_.VU(l, n) : 0.0);
     }
   }

@@ -33,6 +33,8 @@ class Iake final : public OuterIteration {
   void AcceptPolishRegions() override {}
   double Polish(PrimalIterate*) override { return kInfinity; }
   bool has_regions() const override { return false; }
+  void PinInput(int index, double value) override { pinned_value_[index] = value; }
+  void ReleaseInputPins() override;
   void ReleaseWorkspace() override;
   void AcquireWorkspace() override;
 
@@ -49,6 +51,7 @@ class Iake final : public OuterIteration {
   bool workspace_held_ = false;
   std::vector<ScalarFactor> input_nup_, row_nup_;        ///< carried NUP parts
   std::vector<ScalarFactor> input_factor_, row_factor_;  ///< with Gaussian parts
+  std::vector<double> pinned_value_;  ///< per input scalar: NaN, or the value it is pinned to
   double variance_floor_ = 0.0;
   bool needs_variances_ = false;  ///< an EM prior is present: the smoother computes variances
 };

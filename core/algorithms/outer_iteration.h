@@ -66,6 +66,12 @@ class OuterIteration {
   // How many scalars the active set covers (0 when the algorithm tracks none).
   virtual int decided_scalars() const { return 0; }
 
+  // Sequential rounding of binary inputs (SolverOptions.discrete_fixing_passes): pins input
+  // scalar `index` (n·L + l) to `value` in the following passes, and releases all pins.
+  // Only IAKE runs binary priors; the convex algorithms never see a pin request.
+  virtual void PinInput(int /*index*/, double /*value*/) {}
+  virtual void ReleaseInputPins() {}
+
   // Idle sessions: frees the message-passing scratch (everything every pass recomputes;
   // the carried state and the graph stay), which is most of a session's memory.
   virtual void ReleaseWorkspace() = 0;

@@ -141,7 +141,8 @@ ScalarFactor NupUpdate(const ScalarPrior& p, double s, double x, double posterio
     case PriorKind::kLp:
       return {p.lower, std::pow(std::abs(x - p.lower), 2.0 - p.exponent) / (s * p.exponent), 0.0, 0.0};
     case PriorKind::kBinary: {
-      const double da = x - p.lower, db = x - p.upper;
+      const double xc = std::clamp(x, p.lower, p.upper);
+      const double da = xc - p.lower, db = xc - p.upper;
       const double sa = vp + da * da, sb = vp + db * db, sum = sa + sb;  // sum > 0: lower < upper
       return {(p.lower * sb + p.upper * sa) / sum, sa * sb / sum, 0.0, 0.0};
     }

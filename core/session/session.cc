@@ -122,31 +122,162 @@ absl::Status Session::Update(const Problem& problem) {
   return absl::OkStatus();
 }
 
-void Session::RoundDiscreteInputs(SolveSummary* summary) {
+double Session::RoundDiscreteStep(int n, bool pin) {
   const int L = problem_.num_inputs;
   double gap = 0.0;
-  for (int n = 0; n < problem_.horizon; ++n) {
-    for (int l = 0; l < L; ++l) {
-      const ScalarPrior& prior = problem_.input_prior(n, l);
-      if (prior.kind != PriorKind::kBinary) continue;
-      // A run of binaries summed into one M-level input (rounds_with_next) is rounded as
-      // its sum: the nearest level, written as the first k binaries high.
-      int last = l;
-      while (problem_.input_prior(n, last).rounds_with_next) ++last;
-      const double a = prior.lower, b = prior.upper;
-      double sum = 0.0;
-      for (int j = l; j <= last; ++j) sum += (best_.u(j, n) - a) / (b - a);
-      const double high = std::clamp(std::round(sum), 0.0, static_cast<double>(last - l + 1));
-      gap = std::max(gap, std::abs(sum - high) * std::abs(b - a));
-      for (int j = l; j <= last; ++j) best_.u(j, n) = j - l < high ? b : a;
-      l = last;
+  for (int l = 0; l < L; ++l) {
+    const ScalarPrior& prior = problem_.input_prior(n, l);
+    if (prior.kind != PriorKind::kBinary) continue;
+    // A run of binaries summed into one M-level input (rounds_with_next) is rounded as
+    // its sum: the nearest level, written as the first k binaries high.
+    int last = l;
+    while (problem_.input_prior(n, last).rounds_with_next) ++last;
+    const double a = prior.lower, b = prior.upper;
+    double sum = 0.0;
+    for (int j = l; j <= last; ++j) sum += (best_.u(j, n) - a) / (b - a);
+    const double high = std::clamp(std::round(sum), 0.0, static_cast<double>(last - l + 1));
+    gap = std::max(gap, std::abs(sum - high) * std::abs(b - a));
+    for (int j = l; j <= last; ++j) {
+      best_.u(j, n) = j - l < high ? b : a;
+      if (pin) algorithm_->PinInput(n * L + j, best_.u(j, n));
     }
+    l = last;
   }
-  const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
+  return gap;
+}
+
+void Session::MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
+                                 SolveSummary* summary) {
+  const int N = problem_.horizon;
+  double gap = 0.0;
+  int rounded_steps = 0;
+  if (options_.discrete_fixing_passes > 0 && algorithm_->algorithm() == Algorithm::kIake) {
+    const int blocks = std::min(options_.discrete_fixing_blocks, N);
+    bool stopped = false;
+    for (int block = 0; block < blocks && !stopped; ++block) {
+      const int end = static_cast<int>((static_cast<long long>(block) + 1) * N / blocks);
+      for (; rounded_steps < end; ++rounded_steps) gap = std::max(gap, RoundDiscreteStep(rounded_steps, true));
+      if (rounded_steps == N) break;  // nothing left to make up for the rounding
+      for (int pass = 0; pass < options_.discrete_fixing_passes; ++pass) {
+        const std::optional<SolveStatus> stop =
+            LimitReached(limits, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+        if (stop.has_value()) {
+          summary->status = *stop;
+          stopped = true;
+          break;
+        }
+        algorithm_->Iterate(&current_);
+        ++summary->iterations;
+        if (!AllFinite(current_)) break;  // keep the last finite plan; its rounded part stays
+        // The pinned inputs come back exactly as pinned; the rest is the re-solved plan.
+        std::swap(best_, current_);
+      }
+    }
+    algorithm_->ReleaseInputPins();
+  }
+  for (; rounded_steps < N; ++rounded_steps) gap = std::max(gap, RoundDiscreteStep(rounded_steps, false));
+  const ObjectiveEvaluator::Result r = SearchDiscreteNeighbours(limits, start, summary);
   summary->objective = r.objective;
   summary->max_violation = r.max_violation;
   summary->rounded = true;
   summary->discrete_gap = gap;
+}
+
+bool Session::SameGroupAt(int n, int other, int first, int last) const {
+  const ScalarPrior& here = problem_.input_prior(n, first);
+  for (int j = first; j <= last; ++j) {
+    const ScalarPrior& next = problem_.input_prior(other, j);
+    if (next.kind != PriorKind::kBinary || next.lower != here.lower || next.upper != here.upper ||
+        next.rounds_with_next != (j < last)) {
+      return false;
+    }
+  }
+  return true;
+}
+
+int Session::GroupLevel(int n, int first, int last) const {
+  const ScalarPrior& prior = problem_.input_prior(n, first);
+  int level = 0;
+  for (int j = first; j <= last; ++j) level += best_.u(j, n) == prior.upper;
+  return level;
+}
+
+void Session::SetGroupLevel(int n, int first, int last, int level) {
+  const ScalarPrior& prior = problem_.input_prior(n, first);
+  for (int j = first; j <= last; ++j) best_.u(j, n) = j - first < level ? prior.upper : prior.lower;
+}
+
+ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& limits,
+                                                             std::chrono::steady_clock::time_point start,
+                                                             SolveSummary* summary) {
+  ObjectiveEvaluator::Result current = evaluator_.Evaluate(problem_, best_);
+  const double tolerance = options_.violation_tolerance * evaluator_.bound_scale();
+  // Lower violation first (beyond the tolerance), then lower J.
+  const auto better = [tolerance](const ObjectiveEvaluator::Result& trial, const ObjectiveEvaluator::Result& now) {
+    if (!std::isfinite(trial.objective) || !std::isfinite(trial.max_violation)) return false;
+    if (now.max_violation > tolerance || trial.max_violation > tolerance) {
+      return trial.max_violation < now.max_violation - 0.5 * tolerance;
+    }
+    return trial.objective < now.objective - 1e-12 * (1.0 + std::abs(now.objective));
+  };
+  const auto try_move = [&](auto&& apply, auto&& undo) {
+    apply();
+    const ObjectiveEvaluator::Result trial = evaluator_.Evaluate(problem_, best_);
+    if (better(trial, current)) {
+      current = trial;
+      ++summary->discrete_moves;
+      return true;
+    }
+    undo();
+    return false;
+  };
+  const int N = problem_.horizon, L = problem_.num_inputs;
+  for (int sweep = 0; sweep < options_.discrete_search_sweeps; ++sweep) {
+    bool improved = false;
+    for (int n = 0; n < N; ++n) {
+      const std::optional<SolveStatus> stop =
+          LimitReached(limits, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      if (stop.has_value()) {
+        summary->status = *stop;  // the plan is discrete, only less improved
+        return evaluator_.Evaluate(problem_, best_);
+      }
+      for (int first = 0; first < L; ++first) {
+        if (problem_.input_prior(n, first).kind != PriorKind::kBinary) continue;
+        int last = first;
+        while (problem_.input_prior(n, last).rounds_with_next) ++last;
+        const int level = GroupLevel(n, first, last);
+        for (const int step : {-1, 1}) {
+          const int to = level + step;
+          if (to < 0 || to > last - first + 1) continue;
+          if (try_move([&] { SetGroupLevel(n, first, last, to); }, [&] { SetGroupLevel(n, first, last, level); })) {
+            improved = true;
+            break;
+          }
+        }
+        // Move one level between this step and the next one's same group (same binaries):
+        // a flap or a switch one step earlier or later, or a +1/-1 doublet, whose effect on
+        // an integrator's output stays local.
+        if (n + 1 < N && SameGroupAt(n, n + 1, first, last)) {
+          const int here = GroupLevel(n, first, last), next = GroupLevel(n + 1, first, last);
+          const int top = last - first + 1;
+          const auto set_pair = [&](int a, int b) {
+            SetGroupLevel(n, first, last, a);
+            SetGroupLevel(n + 1, first, last, b);
+          };
+          for (const int step : {-1, 1}) {
+            if (here + step < 0 || here + step > top || next - step < 0 || next - step > top) continue;
+            if (try_move([&] { set_pair(here + step, next - step); }, [&] { set_pair(here, next); })) {
+              improved = true;
+              break;
+            }
+          }
+        }
+        first = last;
+      }
+    }
+    if (!improved) break;
+  }
+  return evaluator_.Evaluate(problem_, best_);  // leaves the evaluator's trajectories on best_
 }
 
 void Session::ShiftWarmStart() {
@@ -169,7 +300,7 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   algorithm_->AcquireWorkspace();  // after ReleaseWorkspace(); outside the timed loop's iterations
   const auto start = std::chrono::steady_clock::now();
   SolveSummary summary = RunLoop(limits, warm);
-  if (has_binary_inputs_ && summary.IsUsable()) RoundDiscreteInputs(&summary);
+  if (has_binary_inputs_ && summary.IsUsable()) MakeInputsDiscrete(limits, start, &summary);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.warm_started = warm;
   summary.algorithm = algorithm_->algorithm();

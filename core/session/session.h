@@ -1,6 +1,7 @@
 #ifndef NUPMPC_CORE_SESSION_SESSION_H_
 #define NUPMPC_CORE_SESSION_SESSION_H_
 
+#include <chrono>
 #include <memory>
 
 #include "Eigen/Core"
@@ -53,8 +54,25 @@ class Session final : public MpcSession {
   Session(Problem problem, SolverOptions options);
   absl::Status Rebuild();
   SolveSummary RunLoop(const SolveLimits& limits, bool warm);
-  // Projects binary inputs of the returned plan to their nearer level and re-evaluates it.
-  void RoundDiscreteInputs(SolveSummary* summary);
+  // Makes the binary inputs of the returned plan discrete (SolverOptions.discrete_fixing_*:
+  // at once, or block by block with re-solves in between) and re-evaluates it.
+  void MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
+                          SolveSummary* summary);
+  // Rounds the binaries of step n of best_ to their nearer levels (an M-level run as its
+  // sum), pins them in the algorithm if `pin`, and returns the largest distance moved.
+  double RoundDiscreteStep(int n, bool pin);
+  // The discrete local search (SolverOptions.discrete_search_sweeps) on the rounded best_;
+  // counts its moves in the summary (and a limit that stops it in its status) and returns
+  // the evaluation of the plan it ends with.
+  ObjectiveEvaluator::Result SearchDiscreteNeighbours(const SolveLimits& limits,
+                                                      std::chrono::steady_clock::time_point start,
+                                                      SolveSummary* summary);
+  // Binary group (one binary, or an M-level run) starting at input l of step n: how many
+  // of its binaries are high, and setting that count.
+  int GroupLevel(int n, int first, int last) const;
+  void SetGroupLevel(int n, int first, int last, int level);
+  // Whether step `other` has the same binary group as step n at inputs first..last.
+  bool SameGroupAt(int n, int other, int first, int last) const;
 
   Problem problem_;
   SolverOptions options_;

@@ -41,31 +41,38 @@ TEST_P(CorridorExample, StaysInTheCorridorWithTheVersionsStructure) {
     case CorridorVersion::kRateLimit: EXPECT_GE(run->min_input_change, -0.03 - 1e-9); break;
     case CorridorVersion::kSparseInput: EXPECT_LE(run->nonzero_inputs, 20); break;  // of 175
     case CorridorVersion::kSparseChanges: EXPECT_LE(run->input_switches, 20); break;
+    case CorridorVersion::kThreeLevels: EXPECT_TRUE(AllIn(run->inputs, {-1.0, 0.0, 1.0})); break;
     default: break;
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(ConvexAndSparse, CorridorExample,
+INSTANTIATE_TEST_SUITE_P(AllFiveVersions, CorridorExample,
                          ::testing::Values(CorridorVersion::kL2, CorridorVersion::kRateLimit,
-                                           CorridorVersion::kSparseInput, CorridorVersion::kSparseChanges),
+                                           CorridorVersion::kSparseInput, CorridorVersion::kThreeLevels,
+                                           CorridorVersion::kSparseChanges),
                          [](const auto& info) { return std::string(CorridorVersionName(info.param)); });
 
-// Version 4 lands exactly on the three levels. It does not stay in the corridor yet
-// (violation ≈ 5, see issue 4's note): that property is not claimed here.
-TEST(CorridorExampleThreeLevels, InputsAreExactlyOnTheLevels) {
-  auto run = RunCorridor(CorridorVersion::kThreeLevels);
-  ASSERT_TRUE(run.ok()) << run.status();
-  EXPECT_TRUE(AllIn(run->inputs, {-1.0, 0.0, 1.0}));
-  RecordProperty("corridor_violation", std::to_string(run->max_corridor_violation));
-}
-
-// Flappy bird: the flaps are exactly binary. The slits are not passed yet (see issue 4's
-// note): not claimed here.
-TEST(FlappyBirdExample, FlapsAreExactlyBinary) {
-  auto run = FlyThroughWalls(300, RandomWalls(300, 5, 1), {});
-  ASSERT_TRUE(run.ok()) << run.status();
-  EXPECT_TRUE(AllIn(run->flaps, {0.0, 1.0}));
-  RecordProperty("slit_violation", std::to_string(run->worst_slit_violation));
+// Flappy bird on eight random layouts: the flaps are exactly binary, and at least three
+// layouts pass every slit (measured: 3 of 8; the others miss one slit by 0.02 to 1, see
+// issue 4's note). Each layout is one long plan, as in [KL].
+TEST(FlappyBirdExample, FlapsAreBinaryAndThreeOfEightLayoutsPassEverySlit) {
+  int passed = 0;
+  for (unsigned layout = 1; layout <= 8; ++layout) {
+    auto run = FlyThroughWalls(300, RandomWalls(300, 5, layout), {});
+    ASSERT_TRUE(run.ok()) << run.status();
+    EXPECT_TRUE(AllIn(run->flaps, {0.0, 1.0})) << layout;
+    EXPECT_EQ(run->height.size(), 301);
+    // The reported heights are the rounded flaps' own trajectory.
+    double y = FlappyParameters{}.start_height, v = 0.0;
+    for (int n = 0; n < 300; ++n) {
+      y += FlappyParameters{}.period * v;
+      v += run->flaps(n) / FlappyParameters{}.mass - FlappyParameters{}.period * FlappyParameters{}.gravity;
+      ASSERT_NEAR(run->height(n + 1), y, 1e-9) << layout << " step " << n + 1;
+    }
+    passed += run->worst_slit_violation == 0.0;
+  }
+  RecordProperty("layouts_passing", std::to_string(passed));
+  EXPECT_GE(passed, 3);
 }
 
 }  // namespace

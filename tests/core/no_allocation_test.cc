@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "core/examples/scenarios/dac.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/benchmark_instance.h"
@@ -106,6 +107,25 @@ TEST(NoAllocation, PolishAndShiftDoNotAllocateEither) {
   ASSERT_TRUE(s.ok());
   EXPECT_TRUE(s->polished);
   EXPECT_EQ(g_allocations.load() - after_update, 0);
+}
+
+TEST(NoAllocation, BinaryFixingAndSearchDoNotAllocate) {
+  // Binary inputs end with the fixing passes (pins) and the discrete local search.
+  auto session = Session::Create(examples::DacWindow(60, 0.01, 0, 2.0));
+  ASSERT_TRUE(session.ok());
+  SolveLimits limits;
+  limits.max_iterations = 5;
+  ASSERT_TRUE((*session)->Solve(limits, nullptr).ok());  // warms up lazily built state
+  for (const int iterations : {5, 200}) {
+    limits.max_iterations = iterations;
+    const long before = g_allocations.load();
+    auto s = (*session)->Solve(limits, nullptr);
+    const long allocated = g_allocations.load() - before;
+    ASSERT_TRUE(s.ok());
+    EXPECT_TRUE(s->rounded);
+    EXPECT_GT(s->iterations, iterations);  // the fixing passes ran
+    EXPECT_EQ(allocated, 0) << iterations << " iterations";
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Algorithms, NoAllocationInLoop,

@@ -61,6 +61,7 @@ TEST_F(ServiceTest, NonconvexPriorsReachTheCoreThroughTheApi) {
   EXPECT_EQ(once->algorithm(), v1::ALGORITHM_IAKE);
   EXPECT_TRUE(once->rounded());
   EXPECT_EQ(once->discrete_gap(), summary->discrete_gap);
+  EXPECT_EQ(once->discrete_moves(), static_cast<uint32_t>(summary->discrete_moves));
   EXPECT_EQ(once->objective(), summary->objective);
   for (int n = 0; n < p.horizon; ++n) {
     EXPECT_EQ(std::abs(once->inputs(n * 3)), 1.0) << "binary input at step " << n;

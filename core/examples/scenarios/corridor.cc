@@ -13,7 +13,10 @@ namespace {
 
 using core::ScalarPrior;
 
-constexpr double kThreeLevelCorridorSlope = 10.0;
+// Three levels: a soft corridor with slope 100. The paper's λ_o = 10 left the rounded,
+// fixed and searched plan up to 0.02-0.2 outside (the penalty is too weak to be exact), a
+// hard corridor 0.35 (the binaries cannot follow its pull).
+constexpr double kThreeLevelCorridorSlope = 100.0;
 
 // Model (89) with the corridor as a hard box on y[1..K]; input priors left to the version.
 core::Problem CorridorPlant(double slope) {
@@ -48,9 +51,8 @@ double CorridorTarget(int step) {
   return 4.0 * (ramp(step, 20, 70) - 0.6 * ramp(step, 100, 130));
 }
 
-absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations) {
-  // Hard corridor, except for three levels: there the paper's λ_o = 10 (a hard corridor
-  // overwhelms the binaries' pull and leaves them far from {0, 1}).
+absl::StatusOr<core::Problem> CorridorProblem(CorridorVersion version) {
+  // Hard corridor, except for three levels (kThreeLevelCorridorSlope).
   const core::Problem plant =
       CorridorPlant(version == CorridorVersion::kThreeLevels ? kThreeLevelCorridorSlope : core::kInfinity);
   const int K = kCorridorSteps;
@@ -81,6 +83,13 @@ absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations)
       break;
     }
   }
+  return problem;
+}
+
+absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations) {
+  const int K = kCorridorSteps;
+  const Eigen::VectorXd no_previous_input = Eigen::VectorXd::Zero(1);
+  NUPMPC_ASSIGN_OR_RETURN(const core::Problem problem, CorridorProblem(version));
   NUPMPC_ASSIGN_OR_RETURN(const TimedPlan solved, SolveWithBudget(problem, iterations));
   const core::Solution& plan = solved.plan;
   CorridorRun run;

@@ -43,6 +43,10 @@ struct CorridorRun {
   double seconds = 0.0;
 };
 
+// The NUP problem of a version: model (89) (augmented for Δu, expanded for three levels)
+// with the corridor on output 0.
+absl::StatusOr<core::Problem> CorridorProblem(CorridorVersion version);
+
 absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations = 3000);
 
 }  // namespace nupmpc::examples

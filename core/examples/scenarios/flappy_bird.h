@@ -8,8 +8,9 @@
 //
 // [KL] writes ỹ = y + s with a binary s ∈ {0, d} and a box on ỹ. Our model has no direct
 // input-to-output term, so s is carried by a third state: x = [y, v, s], s[n+1] = w[n]
-// with a second, binary input w[n] ∈ {0, d} wherever step n+1 is a wall step. The box
-// on ỹ = y + s has the paper's slope γ = 100; y also stays in [0, 10] (same slope).
+// with a second, binary input w[n] ∈ {0, d} on the step before a wall; across the wall s
+// is held, so one selector picks the slit for the whole wall. The box on ỹ = y + s has
+// the paper's slope γ = 100; y also stays in [0, 10] (same slope).
 
 #include <vector>
 
@@ -42,11 +43,18 @@ struct FlappyRun {
   double worst_slit_violation = 0.0;  ///< largest distance of y outside both slits, over wall steps
   int iterations = 0;
   double discrete_gap = 0.0;
+  int discrete_moves = 0;  ///< level changes of the discrete local search after rounding
   double seconds = 0.0;
 };
 
+// Largest distance of height[n] outside both slits of the wall at n, over all wall steps.
+double WorstSlitViolation(const std::vector<Wall>& walls, const Eigen::VectorXd& height);
+
 absl::StatusOr<FlappyRun> FlyThroughWalls(int steps, const std::vector<Wall>& walls, const FlappyParameters& params,
                                           int iterations = 2000);
+
+absl::StatusOr<FlappyRun> FlyRecedingHorizon(int steps, const std::vector<Wall>& walls, const FlappyParameters& params,
+                                             int horizon, int passes_per_step);
 
 }  // namespace nupmpc::examples
 
