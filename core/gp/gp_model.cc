@@ -87,13 +87,49 @@ absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd 
     model.basis_ = eigen.eigenvectors().rightCols(kept);
     model.basis_weights_ = (s.tail(kept).array() + model.kernel_.noise_variance).inverse().matrix();
   }
+  const Eigen::MatrixXd pivot_columns = model.FactorPivots(k);
   k.diagonal().array() += model.kernel_.noise_variance;
   model.cholesky_.compute(k);
   if (model.cholesky_.info() != Eigen::Success) {
     return absl::FailedPreconditionError("K + noise_variance·I is not positive definite (raise noise_variance)");
   }
   model.alpha_ = model.cholesky_.solve(model.targets_);
+  if (model.num_pivots() > 0) model.pivot_mean_weights_ = pivot_columns.transpose() * model.alpha_;
   return model;
+}
+
+Eigen::MatrixXd GpModel::FactorPivots(const Eigen::MatrixXd& k) {
+  // Greedy pivoted Cholesky (the largest residual diagonal first) until every residual
+  // diagonal is at the eigenvalue cut.
+  const int n = num_points(), max_pivots = static_cast<int>(kMaxPivotFraction * n);
+  const double cut = kDroppedEigenvalue * kernel_.noise_variance;
+  Eigen::VectorXd residual = k.diagonal();
+  Eigen::MatrixXd factor(n, std::max(max_pivots, 1));
+  std::vector<int> pivots;
+  for (int j = 0;; ++j) {
+    Eigen::Index p = 0;
+    if (residual.maxCoeff(&p) <= cut) break;
+    if (j == max_pivots) return {};  // no fast path: not low-rank enough to pay off
+    factor.col(j) = k.col(p) - factor.leftCols(j) * factor.row(p).head(j).transpose();
+    factor.col(j) /= std::sqrt(residual(p));
+    residual -= factor.col(j).cwiseAbs2();
+    residual(p) = 0.0;  // exactly reproduced from now on
+    pivots.push_back(static_cast<int>(p));
+  }
+  const int m = static_cast<int>(pivots.size());
+  const auto l = factor.leftCols(m);
+  pivot_inputs_.resize(m, dimension());
+  pivot_factor_.resize(m, m);
+  for (int i = 0; i < m; ++i) {
+    pivot_inputs_.row(i) = inputs_.row(pivots[i]);
+    pivot_factor_.row(i) = l.row(pivots[i]);
+  }
+  pivot_factor_ = pivot_factor_.triangularView<Eigen::Lower>();  // above: rounding noise of exact zeros
+  Eigen::MatrixXd gram = l.transpose() * l;
+  gram.diagonal().array() += kernel_.noise_variance;
+  pivot_data_term_ = -kernel_.noise_variance * gram.llt().solve(Eigen::MatrixXd::Identity(m, m));
+  pivot_data_term_.diagonal().array() += 1.0;
+  return l;
 }
 
 void GpModel::KernelValues(int first, int count, const Eigen::VectorXd& x, KernelBlock* k) const {
@@ -152,6 +188,39 @@ void GpModel::CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int
   }
 }
 
+void GpModel::PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g, Eigen::ArrayXd* r2) const {
+  const int d = dimension(), m = num_pivots();
+  g->resize(m, d + 1);
+  r2->setZero(m);
+  for (int i = 0; i < d; ++i) *r2 += (pivot_inputs_.col(i).array() - x(i)).square() * inverse_squared_lengths_(i);
+  g->col(0) = (kernel_.signal_variance * (-0.5 * *r2).exp()).matrix();
+  for (int i = 0; i < d; ++i) {
+    g->col(1 + i) =
+        (-inverse_squared_lengths_(i) * g->col(0).array() * (x(i) - pivot_inputs_.col(i).array())).matrix();
+  }
+}
+
+bool GpModel::LineariseFromPivots(const Eigen::VectorXd& x, LinGp* lin, LinearisationScratch* scratch) const {
+  const int d = dimension(), c = d + 1;
+  Eigen::MatrixXd* g = &scratch->pivot_cross;
+  PivotCrossCovariances(x, g, &scratch->pivot_distance);
+  pivot_factor_.triangularView<Eigen::Lower>().solveInPlace(*g);  // Φ = L_Z⁻¹ G
+  for (int i = 0; i < c; ++i) {
+    const double prior = i == 0 ? kernel_.signal_variance : kernel_.signal_variance * inverse_squared_lengths_(i - 1);
+    if (prior - g->col(i).squaredNorm() > kFastPathPower * prior) return false;
+  }
+  lin->mean.resize(c);
+  lin->mean.noalias() = g->transpose() * pivot_mean_weights_;
+  scratch->pivot_weighted.resize(g->rows(), c);
+  scratch->pivot_weighted.noalias() = pivot_data_term_ * *g;
+  lin->covariance.resize(c, c);
+  lin->covariance.noalias() = -(g->transpose() * scratch->pivot_weighted);
+  lin->covariance(0, 0) += kernel_.signal_variance;
+  for (int i = 0; i < d; ++i) lin->covariance(1 + i, 1 + i) += kernel_.signal_variance * inverse_squared_lengths_(i);
+  lin->covariance(0, 0) = std::max(lin->covariance(0, 0), 0.0);
+  return true;
+}
+
 void GpModel::Predict(const Eigen::VectorXd& x, double* mean, double* variance) const {
   Eigen::MatrixXd w(num_points(), dimension() + 1);
   CrossCovariances(x, &w, 0);
@@ -160,20 +229,32 @@ void GpModel::Predict(const Eigen::VectorXd& x, double* mean, double* variance) 
   *variance = std::max(0.0, kernel_.signal_variance - z.squaredNorm());
 }
 
-void GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
-                        LinearisationScratch* scratch) const {
-  const int d = dimension(), P = static_cast<int>(points.rows()), c = d + 1;
+int GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
+                       LinearisationScratch* scratch) const {
+  const int d = dimension(), c = d + 1;
+  out->resize(points.rows());
+  std::vector<int>& full = scratch->full_path;
+  full.clear();
+  for (int p = 0; p < static_cast<int>(points.rows()); ++p) {
+    if (num_pivots() == 0 ||
+        !LineariseFromPivots(points.row(p).transpose(), &(*out)[p], scratch)) {
+      full.push_back(p);
+    }
+  }
+  const int fast = static_cast<int>(points.rows()) - static_cast<int>(full.size());
+  if (full.empty()) return fast;
+  // The O(N r) path, batched over the remaining points.
+  const int P = static_cast<int>(full.size());
   Eigen::MatrixXd& w = scratch->cross;
   Eigen::MatrixXd& projection = scratch->projection;
   w.resize(num_points(), P * c);
-  for (int p = 0; p < P; ++p) CrossCovariances(points.row(p).transpose(), &w, p * c);
+  for (int p = 0; p < P; ++p) CrossCovariances(points.row(full[p]).transpose(), &w, p * c);
   const Eigen::VectorXd means = w.transpose() * alpha_;  // [μ; ∇μ] per point, stacked
   projection.noalias() = basis_.transpose() * w;        // A = U_rᵀ W
   w.noalias() -= basis_ * projection;                   // W⊥ = W - U_r A
   const double inverse_noise = 1.0 / kernel_.noise_variance;
-  out->resize(P);
   for (int p = 0; p < P; ++p) {
-    LinGp& lin = (*out)[p];
+    LinGp& lin = (*out)[full[p]];
     lin.mean = means.segment(p * c, c);
     const auto a = projection.middleCols(p * c, c);
     const auto residual = w.middleCols(p * c, c);
@@ -194,6 +275,7 @@ void GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
     for (int i = 0; i < d; ++i) lin.covariance(1 + i, 1 + i) += kernel_.signal_variance * inverse_squared_lengths_(i);
     lin.covariance(0, 0) = std::max(lin.covariance(0, 0), 0.0);
   }
+  return fast;
 }
 
 LinGp GpModel::Linearise(const Eigen::VectorXd& x) const {

@@ -34,6 +34,10 @@ absl::Status Validate(const SeArdKernel& kernel, int dimension);
 // const and thread-safe while repeated calls reuse their memory.
 struct LinearisationScratch {
   Eigen::MatrixXd cross, projection;
+  Eigen::MatrixXd pivot_cross;     ///< the fast path's [k, ∇k](Z, x) columns, then Φ: m × (d+1)
+  Eigen::MatrixXd pivot_weighted;  ///< M Φ
+  Eigen::ArrayXd pivot_distance;   ///< scaled squared distances to Z
+  std::vector<int> full_path;   ///< the points that need the O(N r) path
 };
 
 // The linGP at one point: m̂ (size d+1) and V̂ ((d+1)×(d+1), symmetric PSD).
@@ -53,9 +57,14 @@ class GpModel {
 
   // Eigenvalues of K below this fraction of σ_n² are treated as 0 by Linearise().
   static constexpr double kDroppedEigenvalue = 1e-10;
+  // Largest power p(x) / prior variance of a column for which Linearise() takes the fast
+  // path (tested against the O(N r) path and the Cholesky prediction to 1e-10).
+  static constexpr double kFastPathPower = 1e-8;
 
   int num_points() const { return static_cast<int>(inputs_.rows()); }
   int basis_rank() const { return static_cast<int>(basis_.cols()); }
+  // Training points Z of the pivoted low-rank factor behind Linearise()'s fast path (0: none).
+  int num_pivots() const { return static_cast<int>(pivot_inputs_.rows()); }
   int dimension() const { return static_cast<int>(inputs_.cols()); }
   const SeArdKernel& kernel() const { return kernel_; }
   const Eigen::MatrixXd& inputs() const { return inputs_; }
@@ -74,11 +83,20 @@ class GpModel {
   //   Wᵀ(K + σ_n² I)⁻¹W = Aᵀ(S_r + σ_n² I)⁻¹A + W⊥ᵀW⊥ / σ_n²,
   // exact except that the dropped eigenvalues (≤ kDroppedEigenvalue·σ_n², at rounding
   // level) count as 0: an error of at most that factor times the W⊥ term. O(N r) per
-  // column instead of O(N²). `out` is resized to P.
-  void Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out, LinearisationScratch* scratch) const;
-  void Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out) const {
+  // column instead of O(N²).
+  //
+  // Fast path, O(m²) per column and independent of N: a pivoted Cholesky factor
+  // K ≈ L Lᵀ on m pivot points Z (residual diagonal ≤ kDroppedEigenvalue·σ_n², so m ≈ r)
+  // reproduces every kernel function k(X, x) whose own residual ("power") at x is small:
+  // |k(X_j, x) - (L φ(x))_j| ≤ √(R_jj · p(x)), φ(x) = L_Z⁻¹ k(Z, x),
+  // p(x) = k(x, x) - |φ(x)|² (and the same for the gradient columns). Where every column's
+  // power is below kFastPathPower of its prior variance (x inside the training data), the
+  // linGP is m̂ = Φᵀ Lᵀα and V̂ = prior - Φᵀ M Φ with M = Lᵀ(L Lᵀ + σ_n² I)⁻¹ L; elsewhere
+  // the O(N r) path runs. `out` is resized to P. Returns how many points took the fast path.
+  int Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out, LinearisationScratch* scratch) const;
+  int Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out) const {
     LinearisationScratch scratch;
-    Linearise(points, out, &scratch);
+    return Linearise(points, out, &scratch);
   }
   LinGp Linearise(const Eigen::VectorXd& x) const;
 
@@ -94,6 +112,15 @@ class GpModel {
   // Column j of `w` gets [k(X, x), ∂k(X, x)/∂x_1, ..., ∂k(X, x)/∂x_d] for x = `x`,
   // starting at column `first`.
   void CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const;
+  // The same against the pivot points Z into the m × (d+1) matrix *g.
+  void PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g, Eigen::ArrayXd* r2) const;
+  // The pivoted factor of K (Create()): sets Z, L_Z and M and returns L (N × m), or leaves
+  // no fast path and returns an empty matrix when it needs more than kMaxPivotFraction·N
+  // pivots (then the O(N r) path is as cheap).
+  Eigen::MatrixXd FactorPivots(const Eigen::MatrixXd& k);
+  // The fast path at one point; false (nothing written) when a column's power is too large.
+  bool LineariseFromPivots(const Eigen::VectorXd& x, LinGp* lin, LinearisationScratch* scratch) const;
+  static constexpr double kMaxPivotFraction = 0.25;
 
   Eigen::MatrixXd inputs_;
   Eigen::VectorXd targets_;
@@ -103,6 +130,10 @@ class GpModel {
   Eigen::VectorXd alpha_;                    ///< (K + σ_n² I)⁻¹ Y
   Eigen::MatrixXd basis_;                    ///< U_r: K's eigenvectors with eigenvalue > the cut
   Eigen::VectorXd basis_weights_;            ///< 1/(s_i + σ_n²) for those
+  Eigen::MatrixXd pivot_inputs_;             ///< Z: m × d
+  Eigen::MatrixXd pivot_factor_;             ///< L_Z: the factor's rows at Z, lower triangular m × m
+  Eigen::VectorXd pivot_mean_weights_;       ///< Lᵀ α
+  Eigen::MatrixXd pivot_data_term_;          ///< M = Lᵀ (L Lᵀ + σ_n² I)⁻¹ L = I - σ_n² (LᵀL + σ_n² I)⁻¹
 
 };
 

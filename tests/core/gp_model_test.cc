@@ -4,6 +4,7 @@
 // differences; the hyper-parameter fit recovers the parameters of data drawn from a
 // known GP; NARX data layout.
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include "Eigen/Eigenvalues"
@@ -142,6 +143,60 @@ TEST(GpModel, LowRankLinearisationMatchesTheCholeskyPrediction) {
     EXPECT_NEAR(lin[p].mean(0), mean, 1e-12);
     EXPECT_NEAR(lin[p].covariance(0, 0), variance, 1e-10 * kernel.signal_variance) << "point " << p;
   }
+}
+
+// The fast path (pivot points, O(m²) per column) against a dense reference of the whole
+// linGP, m̂ = Wᵀ K_y⁻¹ Y and V̂ = prior - Wᵀ K_y⁻¹ W with W written out from the kernel's
+// derivatives, at points inside the data (fast path) and outside it (the power check sends
+// them to the O(N r) path).
+TEST(GpModel, PivotFastPathMatchesTheDenseLinGpInsideAndFallsBackOutside) {
+  const Data d = SmoothData(1000, 7);
+  SeArdKernel kernel = TestKernel();
+  kernel.noise_variance = 1e-3;
+  auto model = GpModel::Create(d.x, d.y, kernel);
+  ASSERT_TRUE(model.ok());
+  EXPECT_GT(model->num_pivots(), 0);
+  EXPECT_LT(model->num_pivots(), 250);
+  const int n = 1000;
+  Eigen::MatrixXd ky(n, n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) ky(i, j) = RefKernel(kernel, d.x.row(i).transpose(), d.x.row(j).transpose());
+  }
+  ky.diagonal().array() += kernel.noise_variance;
+  const Eigen::LLT<Eigen::MatrixXd> ky_llt(ky);
+  const Eigen::VectorXd alpha = ky_llt.solve(d.y);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> inside(-1.8, 1.8), outside(2.6, 4.0);
+  int fast_inside = 0, fast_outside = 0;
+  constexpr int kProbes = 60;
+  for (int probe = 0; probe < 2 * kProbes; ++probe) {
+    const bool in = probe < kProbes;
+    const Eigen::Vector2d x = in ? Eigen::Vector2d(inside(rng), inside(rng))
+                                 : Eigen::Vector2d(outside(rng), (probe % 2 ? 1 : -1) * outside(rng));
+    Eigen::MatrixXd w(n, 3);  // [k, ∂k/∂x_1, ∂k/∂x_2](X_j, x)
+    for (int j = 0; j < n; ++j) {
+      const double k = RefKernel(kernel, d.x.row(j).transpose(), x);
+      w(j, 0) = k;
+      for (int i = 0; i < 2; ++i) w(j, 1 + i) = -k * (x(i) - d.x(j, i)) / std::pow(kernel.length_scales(i), 2);
+    }
+    Eigen::Matrix3d prior = Eigen::Matrix3d::Zero();
+    prior(0, 0) = kernel.signal_variance;
+    for (int i = 0; i < 2; ++i) prior(1 + i, 1 + i) = kernel.signal_variance / std::pow(kernel.length_scales(i), 2);
+    const Eigen::Vector3d mean = w.transpose() * alpha;
+    const Eigen::Matrix3d covariance = prior - w.transpose() * ky_llt.solve(w);
+    std::vector<LinGp> lin;
+    const int fast = model->Linearise(Eigen::MatrixXd(x.transpose()), &lin);
+    (in ? fast_inside : fast_outside) += fast;
+    EXPECT_LT((lin[0].mean - mean).cwiseAbs().maxCoeff(), 1e-9) << "probe " << probe << " fast " << fast;
+    EXPECT_LT((lin[0].covariance - covariance).cwiseAbs().maxCoeff(), 1e-9 * prior.maxCoeff())
+        << "probe " << probe << " fast " << fast;
+  }
+  EXPECT_GE(fast_inside, kProbes * 9 / 10);  // the fast path is the common case inside
+  EXPECT_LT(fast_outside, kProbes);          // and not taken everywhere outside
+  RecordProperty("fast_inside", fast_inside);
+  RecordProperty("fast_outside", fast_outside);
+  std::printf("pivots %d of %d points; fast path at %d/%d points inside, %d/%d outside\n", model->num_pivots(), n,
+              fast_inside, kProbes, fast_outside, kProbes);
 }
 
 TEST(GpModel, BadInputIsRefusedNamingTheField) {
