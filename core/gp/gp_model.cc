@@ -101,7 +101,7 @@ absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd 
 Eigen::MatrixXd GpModel::FactorPivots(const Eigen::MatrixXd& k) {
   // Greedy pivoted Cholesky (the largest residual diagonal first) until every residual
   // diagonal is at the eigenvalue cut.
-  const int n = num_points(), max_pivots = static_cast<int>(kMaxPivotFraction * n);
+  const int n = num_points(), max_pivots = std::min(kMaxPivots, static_cast<int>(kMaxPivotFraction * n));
   const double cut = kDroppedEigenvalue * kernel_.noise_variance;
   Eigen::VectorXd residual = k.diagonal();
   Eigen::MatrixXd factor(n, std::max(max_pivots, 1));
@@ -142,6 +142,18 @@ void GpModel::KernelValues(int first, int count, const Eigen::VectorXd& x, Kerne
 }
 
 double GpModel::Mean(const Eigen::VectorXd& x) const {
+  if (num_pivots() > 0) {
+    PivotVector phi(num_pivots());
+    phi.setZero();  // the scaled squared distances first
+    for (int i = 0; i < dimension(); ++i) {
+      phi.array() += (pivot_inputs_.col(i).array() - x(i)).square() * inverse_squared_lengths_(i);
+    }
+    phi = (kernel_.signal_variance * (-0.5 * phi.array()).exp()).matrix();
+    pivot_factor_.triangularView<Eigen::Lower>().solveInPlace(phi);  // φ = L_Z⁻¹ k(Z, x)
+    if (kernel_.signal_variance - phi.squaredNorm() <= kFastPathPower * kernel_.signal_variance) {
+      return phi.dot(pivot_mean_weights_);
+    }
+  }
   KernelBlock k;
   double mean = 0.0;
   for (int first = 0; first < num_points(); first += kBlock) {

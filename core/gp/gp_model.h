@@ -70,7 +70,8 @@ class GpModel {
   const Eigen::MatrixXd& inputs() const { return inputs_; }
   const Eigen::VectorXd& targets() const { return targets_; }
 
-  // Predictive mean μ(x) (O(N d)).
+  // Predictive mean μ(x): k(Z, x)ᵀ L_Z⁻ᵀ Lᵀα in O(m²) where the power check of Linearise()
+  // passes, else O(N d).
   double Mean(const Eigen::VectorXd& x) const;
   // μ(x) and ∇μ(x) (O(N d)).
   double MeanAndGradient(const Eigen::VectorXd& x, Eigen::VectorXd* gradient) const;
@@ -121,6 +122,8 @@ class GpModel {
   // The fast path at one point; false (nothing written) when a column's power is too large.
   bool LineariseFromPivots(const Eigen::VectorXd& x, LinGp* lin, LinearisationScratch* scratch) const;
   static constexpr double kMaxPivotFraction = 0.25;
+  static constexpr int kMaxPivots = 512;  ///< so that Mean()'s pivot vector lives on the stack
+  using PivotVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxPivots, 1>;
 
   Eigen::MatrixXd inputs_;
   Eigen::VectorXd targets_;

@@ -145,8 +145,8 @@ TEST(GpModel, LowRankLinearisationMatchesTheCholeskyPrediction) {
   }
 }
 
-// The fast path (pivot points, O(m²) per column) against a dense reference of the whole
-// linGP, m̂ = Wᵀ K_y⁻¹ Y and V̂ = prior - Wᵀ K_y⁻¹ W with W written out from the kernel's
+// The fast path (pivot points, O(m²) per column; Mean() too) against a dense reference of
+// the whole linGP, m̂ = Wᵀ K_y⁻¹ Y and V̂ = prior - Wᵀ K_y⁻¹ W with W written out from the kernel's
 // derivatives, at points inside the data (fast path) and outside it (the power check sends
 // them to the O(N r) path).
 TEST(GpModel, PivotFastPathMatchesTheDenseLinGpInsideAndFallsBackOutside) {
@@ -188,6 +188,7 @@ TEST(GpModel, PivotFastPathMatchesTheDenseLinGpInsideAndFallsBackOutside) {
     const int fast = model->Linearise(Eigen::MatrixXd(x.transpose()), &lin);
     (in ? fast_inside : fast_outside) += fast;
     EXPECT_LT((lin[0].mean - mean).cwiseAbs().maxCoeff(), 1e-9) << "probe " << probe << " fast " << fast;
+    EXPECT_NEAR(model->Mean(x), mean(0), 1e-9) << "probe " << probe;
     EXPECT_LT((lin[0].covariance - covariance).cwiseAbs().maxCoeff(), 1e-9 * prior.maxCoeff())
         << "probe " << probe << " fast " << fast;
   }
