@@ -58,7 +58,7 @@ class GpModel {
   // Eigenvalues of K below this fraction of σ_n² are treated as 0 by Linearise().
   static constexpr double kDroppedEigenvalue = 1e-10;
   // Largest power p(x) / prior variance of a column for which Linearise() takes the fast
-  // path (tested against the O(N r) path and the Cholesky prediction to 1e-10).
+  // path (tested against a dense linGP to 1e-9, inside and outside the training data).
   static constexpr double kFastPathPower = 1e-8;
 
   int num_points() const { return static_cast<int>(inputs_.rows()); }
