@@ -144,15 +144,9 @@ void GpModel::KernelValues(int first, int count, const Eigen::VectorXd& x, Kerne
 double GpModel::Mean(const Eigen::VectorXd& x) const {
   if (num_pivots() > 0) {
     PivotVector phi(num_pivots());
-    phi.setZero();  // the scaled squared distances first
-    for (int i = 0; i < dimension(); ++i) {
-      phi.array() += (pivot_inputs_.col(i).array() - x(i)).square() * inverse_squared_lengths_(i);
-    }
-    phi = (kernel_.signal_variance * (-0.5 * phi.array()).exp()).matrix();
+    PivotKernelValues(x, phi);
     pivot_factor_.triangularView<Eigen::Lower>().solveInPlace(phi);  // φ = L_Z⁻¹ k(Z, x)
-    if (kernel_.signal_variance - phi.squaredNorm() <= kFastPathPower * kernel_.signal_variance) {
-      return phi.dot(pivot_mean_weights_);
-    }
+    if (WellReproduced(kernel_.signal_variance, phi.squaredNorm())) return phi.dot(pivot_mean_weights_);
   }
   KernelBlock k;
   double mean = 0.0;
@@ -200,12 +194,18 @@ void GpModel::CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int
   }
 }
 
-void GpModel::PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g, Eigen::ArrayXd* r2) const {
-  const int d = dimension(), m = num_pivots();
-  g->resize(m, d + 1);
-  r2->setZero(m);
-  for (int i = 0; i < d; ++i) *r2 += (pivot_inputs_.col(i).array() - x(i)).square() * inverse_squared_lengths_(i);
-  g->col(0) = (kernel_.signal_variance * (-0.5 * *r2).exp()).matrix();
+void GpModel::PivotKernelValues(const Eigen::VectorXd& x, Eigen::Ref<Eigen::VectorXd> k) const {
+  k.setZero();  // the scaled squared distances first
+  for (int i = 0; i < dimension(); ++i) {
+    k.array() += (pivot_inputs_.col(i).array() - x(i)).square() * inverse_squared_lengths_(i);
+  }
+  k = (kernel_.signal_variance * (-0.5 * k.array()).exp()).matrix();
+}
+
+void GpModel::PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g) const {
+  const int d = dimension();
+  g->resize(num_pivots(), d + 1);
+  PivotKernelValues(x, g->col(0));
   for (int i = 0; i < d; ++i) {
     g->col(1 + i) =
         (-inverse_squared_lengths_(i) * g->col(0).array() * (x(i) - pivot_inputs_.col(i).array())).matrix();
@@ -215,11 +215,11 @@ void GpModel::PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g
 bool GpModel::LineariseFromPivots(const Eigen::VectorXd& x, LinGp* lin, LinearisationScratch* scratch) const {
   const int d = dimension(), c = d + 1;
   Eigen::MatrixXd* g = &scratch->pivot_cross;
-  PivotCrossCovariances(x, g, &scratch->pivot_distance);
+  PivotCrossCovariances(x, g);
   pivot_factor_.triangularView<Eigen::Lower>().solveInPlace(*g);  // Φ = L_Z⁻¹ G
   for (int i = 0; i < c; ++i) {
     const double prior = i == 0 ? kernel_.signal_variance : kernel_.signal_variance * inverse_squared_lengths_(i - 1);
-    if (prior - g->col(i).squaredNorm() > kFastPathPower * prior) return false;
+    if (!WellReproduced(prior, g->col(i).squaredNorm())) return false;
   }
   lin->mean.resize(c);
   lin->mean.noalias() = g->transpose() * pivot_mean_weights_;

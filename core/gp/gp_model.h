@@ -36,7 +36,6 @@ struct LinearisationScratch {
   Eigen::MatrixXd cross, projection;
   Eigen::MatrixXd pivot_cross;     ///< the fast path's [k, ∇k](Z, x) columns, then Φ: m × (d+1)
   Eigen::MatrixXd pivot_weighted;  ///< M Φ
-  Eigen::ArrayXd pivot_distance;   ///< scaled squared distances to Z
   std::vector<int> full_path;   ///< the points that need the O(N r) path
 };
 
@@ -113,8 +112,13 @@ class GpModel {
   // Column j of `w` gets [k(X, x), ∂k(X, x)/∂x_1, ..., ∂k(X, x)/∂x_d] for x = `x`,
   // starting at column `first`.
   void CrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* w, int first) const;
-  // The same against the pivot points Z into the m × (d+1) matrix *g.
-  void PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g, Eigen::ArrayXd* r2) const;
+  // k(Z, x) into the m values of `k`.
+  void PivotKernelValues(const Eigen::VectorXd& x, Eigen::Ref<Eigen::VectorXd> k) const;
+  // [k, ∇k](Z, x) against the pivot points Z into the m × (d+1) matrix *g.
+  void PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g) const;
+  // The fast path's power check for one column: its prior variance minus the part the
+  // pivots capture (|Φ_i|²) is at most kFastPathPower of the prior.
+  static bool WellReproduced(double prior, double captured) { return prior - captured <= kFastPathPower * prior; }
   // The pivoted factor of K (Create()): sets Z, L_Z and M and returns L (N × m), or leaves
   // no fast path and returns an empty matrix when it needs more than kMaxPivotFraction·N
   // pivots (then the O(N r) path is as cheap).

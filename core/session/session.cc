@@ -45,6 +45,18 @@ std::optional<SolveStatus> LimitReached(const SolveLimits& limits, double elapse
   return std::nullopt;
 }
 
+namespace {
+
+// LimitReached since `start`; a reached limit becomes the summary's status.
+bool StopRequested(const SolveLimits& limits, std::chrono::steady_clock::time_point start, SolveSummary* summary) {
+  const std::optional<SolveStatus> stop =
+      LimitReached(limits, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  if (stop.has_value()) summary->status = *stop;
+  return stop.has_value();
+}
+
+}  // namespace
+
 const char* SolveStatusName(SolveStatus status) {
   switch (status) {
     case SolveStatus::kConverged: return "converged";
@@ -123,25 +135,20 @@ absl::Status Session::Update(const Problem& problem) {
 }
 
 double Session::RoundDiscreteStep(int n, bool pin) {
-  const int L = problem_.num_inputs;
   double gap = 0.0;
-  for (int l = 0; l < L; ++l) {
-    const ScalarPrior& prior = problem_.input_prior(n, l);
+  for (int first = 0; first < problem_.num_inputs; ++first) {
+    const ScalarPrior& prior = problem_.input_prior(n, first);
     if (prior.kind != PriorKind::kBinary) continue;
-    // A run of binaries summed into one M-level input (rounds_with_next) is rounded as
-    // its sum: the nearest level, written as the first k binaries high.
-    int last = l;
-    while (problem_.input_prior(n, last).rounds_with_next) ++last;
+    // An M-level group is rounded as its sum: the nearest level.
+    const int last = GroupEnd(n, first);
     const double a = prior.lower, b = prior.upper;
     double sum = 0.0;
-    for (int j = l; j <= last; ++j) sum += (best_.u(j, n) - a) / (b - a);
-    const double high = std::clamp(std::round(sum), 0.0, static_cast<double>(last - l + 1));
+    for (int j = first; j <= last; ++j) sum += (best_.u(j, n) - a) / (b - a);
+    const double high = std::clamp(std::round(sum), 0.0, static_cast<double>(last - first + 1));
     gap = std::max(gap, std::abs(sum - high) * std::abs(b - a));
-    for (int j = l; j <= last; ++j) {
-      best_.u(j, n) = j - l < high ? b : a;
-      if (pin) algorithm_->PinInput(n * L + j, best_.u(j, n));
-    }
-    l = last;
+    SetGroupLevel(n, first, last, static_cast<int>(high));
+    for (int j = first; pin && j <= last; ++j) algorithm_->PinInput(n * problem_.num_inputs + j, best_.u(j, n));
+    first = last;
   }
   return gap;
 }
@@ -159,10 +166,7 @@ void Session::MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_
       for (; rounded_steps < end; ++rounded_steps) gap = std::max(gap, RoundDiscreteStep(rounded_steps, true));
       if (rounded_steps == N) break;  // nothing left to make up for the rounding
       for (int pass = 0; pass < options_.discrete_fixing_passes; ++pass) {
-        const std::optional<SolveStatus> stop =
-            LimitReached(limits, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-        if (stop.has_value()) {
-          summary->status = *stop;
+        if (StopRequested(limits, start, summary)) {
           stopped = true;
           break;
         }
@@ -181,6 +185,12 @@ void Session::MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_
   summary->max_violation = r.max_violation;
   summary->rounded = true;
   summary->discrete_gap = gap;
+}
+
+int Session::GroupEnd(int n, int first) const {
+  int last = first;
+  while (problem_.input_prior(n, last).rounds_with_next) ++last;
+  return last;
 }
 
 bool Session::SameGroupAt(int n, int other, int first, int last) const {
@@ -235,16 +245,10 @@ ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& 
   for (int sweep = 0; sweep < options_.discrete_search_sweeps; ++sweep) {
     bool improved = false;
     for (int n = 0; n < N; ++n) {
-      const std::optional<SolveStatus> stop =
-          LimitReached(limits, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-      if (stop.has_value()) {
-        summary->status = *stop;  // the plan is discrete, only less improved
-        return evaluator_.Evaluate(problem_, best_);
-      }
+      if (StopRequested(limits, start, summary)) return current;  // discrete, only less improved
       for (int first = 0; first < L; ++first) {
         if (problem_.input_prior(n, first).kind != PriorKind::kBinary) continue;
-        int last = first;
-        while (problem_.input_prior(n, last).rounds_with_next) ++last;
+        const int last = GroupEnd(n, first);
         const int level = GroupLevel(n, first, last);
         for (const int step : {-1, 1}) {
           const int to = level + step;
@@ -277,7 +281,7 @@ ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& 
     }
     if (!improved) break;
   }
-  return evaluator_.Evaluate(problem_, best_);  // leaves the evaluator's trajectories on best_
+  return current;  // best_'s evaluation (Solve() re-evaluates it for the returned trajectories)
 }
 
 void Session::ShiftWarmStart() {
@@ -327,12 +331,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   summary.status = SolveStatus::kIterationLimit;
   bool have_finite = false;
 
-  const auto stop_requested = [&]() {
-    const std::optional<SolveStatus> stop =
-        LimitReached(limits, std::chrono::duration<double>(Clock::now() - start).count());
-    if (stop.has_value()) summary.status = *stop;
-    return stop.has_value();
-  };
+  const auto stop_requested = [&]() { return StopRequested(limits, start, &summary); };
 
   // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
   // while the deciding residual keeps falling); true if it was accepted.

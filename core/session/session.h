@@ -71,6 +71,9 @@ class Session final : public MpcSession {
   // of its binaries are high, and setting that count.
   int GroupLevel(int n, int first, int last) const;
   void SetGroupLevel(int n, int first, int last, int level);
+  // The last input of the binary group that starts at input `first` of step n (an M-level
+  // run of binaries marked rounds_with_next, or the binary itself).
+  int GroupEnd(int n, int first) const;
   // Whether step `other` has the same binary group as step n at inputs first..last.
   bool SameGroupAt(int n, int other, int first, int last) const;
 

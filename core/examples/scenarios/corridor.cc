@@ -18,6 +18,10 @@ using core::ScalarPrior;
 // hard corridor 0.35 (the binaries cannot follow its pull).
 constexpr double kThreeLevelCorridorSlope = 100.0;
 
+// u[-1] = 0 for the Δu versions; the three levels {-1, 0, 1} of version 4.
+Eigen::VectorXd NoPreviousInput() { return Eigen::VectorXd::Zero(1); }
+std::vector<core::InputLevels> ThreeLevels() { return {{.count = 3, .lowest = -1.0, .spacing = 1.0}}; }
+
 // Model (89) with the corridor as a hard box on y[1..K]; input priors left to the version.
 core::Problem CorridorPlant(double slope) {
   core::Problem p = core::Problem::TimeInvariant(3, 1, 1, kCorridorSteps);
@@ -56,7 +60,7 @@ absl::StatusOr<core::Problem> CorridorProblem(CorridorVersion version) {
   const core::Problem plant =
       CorridorPlant(version == CorridorVersion::kThreeLevels ? kThreeLevelCorridorSlope : core::kInfinity);
   const int K = kCorridorSteps;
-  const Eigen::VectorXd no_previous_input = Eigen::VectorXd::Zero(1);
+  const Eigen::VectorXd no_previous_input = NoPreviousInput();
   core::Problem problem = plant;
   switch (version) {
     case CorridorVersion::kL2:
@@ -79,7 +83,7 @@ absl::StatusOr<core::Problem> CorridorProblem(CorridorVersion version) {
       break;
     }
     case CorridorVersion::kThreeLevels: {
-      NUPMPC_ASSIGN_OR_RETURN(problem, core::ExpandMultiLevelInputs(plant, {{.count = 3, .lowest = -1.0, .spacing = 1.0}}));
+      NUPMPC_ASSIGN_OR_RETURN(problem, core::ExpandMultiLevelInputs(plant, ThreeLevels()));
       break;
     }
   }
@@ -88,7 +92,6 @@ absl::StatusOr<core::Problem> CorridorProblem(CorridorVersion version) {
 
 absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations) {
   const int K = kCorridorSteps;
-  const Eigen::VectorXd no_previous_input = Eigen::VectorXd::Zero(1);
   NUPMPC_ASSIGN_OR_RETURN(const core::Problem problem, CorridorProblem(version));
   NUPMPC_ASSIGN_OR_RETURN(const TimedPlan solved, SolveWithBudget(problem, iterations));
   const core::Solution& plan = solved.plan;
@@ -99,10 +102,10 @@ absl::StatusOr<CorridorRun> RunCorridor(CorridorVersion version, int iterations)
   switch (version) {
     case CorridorVersion::kRateLimit:
     case CorridorVersion::kSparseChanges:
-      run.inputs = core::InputsFromDifferences(plan.inputs, no_previous_input).col(0);
+      run.inputs = core::InputsFromDifferences(plan.inputs, NoPreviousInput()).col(0);
       break;
     case CorridorVersion::kThreeLevels:
-      run.inputs = core::InputsFromLevels(plan.inputs, {{.count = 3, .lowest = -1.0, .spacing = 1.0}}).col(0);
+      run.inputs = core::InputsFromLevels(plan.inputs, ThreeLevels()).col(0);
       break;
     default:
       run.inputs = plan.inputs.col(0);
