@@ -31,7 +31,14 @@ absl::Status Ibffd::CheckApplicable(const Problem& p) {
   return absl::OkStatus();
 }
 
-Ibffd::Ibffd(const Problem& problem, const SolverOptions& options) : options_(options) {
+Ibffd::Ibffd(const Problem& problem, const SolverOptions& options) : Ibffd(problem, options, false) {}
+
+std::unique_ptr<Ibffd> Ibffd::ForInputSubproblem(const Problem& problem, const SolverOptions& options) {
+  return std::unique_ptr<Ibffd>(new Ibffd(problem, options, /*check_outputs=*/true));
+}
+
+Ibffd::Ibffd(const Problem& problem, const SolverOptions& options, bool check_outputs)
+    : options_(options), check_outputs_(check_outputs) {
   graph_ = BuildFactorGraph(problem, /*augment_inputs=*/false);
   const int M = graph_.M, N = graph_.N, L = graph_.L, NL = N * L;
   nup_.resize(NL);
@@ -39,6 +46,7 @@ Ibffd::Ibffd(const Problem& problem, const SolverOptions& options) : options_(op
   slope_.resize(NL);
   region_.resize(NL);
   polish_region_.resize(NL);
+  policy_region_.assign(NL, Region::kInside);
   AcquireWorkspace();
   W_.setZero(M, M);
   AtW_.setZero(M, M);
@@ -57,12 +65,24 @@ Ibffd::Ibffd(const Problem& problem, const SolverOptions& options) : options_(op
 void Ibffd::ReleaseWorkspace() {
   W_step_.resize(0, 0);
   xi_step_.resize(0, 0);
+  x_pred_.resize(0, 0);
+  policy_released_ = policy_released_ || has_policy_;
+  has_policy_ = false;
 }
 
 void Ibffd::AcquireWorkspace() {
   if (xi_step_.size() > 0) return;
   W_step_.setZero(graph_.M, graph_.M * (graph_.N + 1));
   xi_step_.setZero(graph_.M, graph_.N + 1);
+  x_pred_.setZero(graph_.M, graph_.N + 1);
+  if (policy_released_) {
+    // The same filter over the same regions, shifted as often as the dropped one was.
+    LoadPieceFactors(policy_region_);
+    BackwardFilter(factor_);
+    ShiftPolicy(policy_shifts_);
+    has_policy_ = true;
+    policy_released_ = false;
+  }
 }
 
 void Ibffd::Refresh(const Problem& problem) { RefreshFactorGraph(problem, &graph_); }
@@ -84,6 +104,8 @@ void Ibffd::ColdStart() {
     region_[i] = Region::kInside;
   }
   has_regions_ = false;
+  has_policy_ = false;
+  policy_released_ = false;
 }
 
 void Ibffd::ShiftWarmStart() {
@@ -95,6 +117,30 @@ void Ibffd::ShiftWarmStart() {
       region_[n * L + l] = region_[(n + 1) * L + l];
     }
   }
+  if (has_policy_) ShiftPolicy(1);
+  if (has_policy_ || policy_released_) ++policy_shifts_;
+}
+
+void Ibffd::ShiftPolicy(int steps) {
+  // The policy moves with its regions: the message at x[n] becomes the one at
+  // x[min(n + steps, N-1)] (the last step repeats its own, as its regions do); the
+  // terminal message stays. Ascending n reads only entries not yet overwritten.
+  const int M = graph_.M, N = graph_.N;
+  for (int n = 0; n + 1 < N; ++n) {
+    const int source = std::min(n + steps, N - 1);
+    W_step_.middleCols(n * M, M) = W_step_.middleCols(source * M, M);
+    xi_step_.col(n) = xi_step_.col(source);
+  }
+}
+
+void Ibffd::AdoptRegionsForPolish() {
+  ActiveSetIteration::AdoptRegionsForPolish();
+  predict_next_ = false;
+}
+
+void Ibffd::AdoptCarriedRegionsForPolish() {
+  ActiveSetIteration::AdoptRegionsForPolish();
+  predict_next_ = has_policy_;
 }
 
 namespace {
@@ -133,7 +179,7 @@ using VectorView = Eigen::Map<StateVector<MS>>;
 }  // namespace
 
 template <int MS>
-void Ibffd::BackwardFilterImpl(const std::vector<ScalarFactor>& input_factor) {
+void Ibffd::BackwardFilterImpl(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted) {
   const FactorGraph& g = graph_;
   const int M = g.M, L = g.L;
   MatrixView<MS> W(W_.data(), M, M), AtW(AtW_.data(), M, M);
@@ -154,7 +200,28 @@ void Ibffd::BackwardFilterImpl(const std::vector<ScalarFactor>& input_factor) {
     if (n == 0) break;
     const int j = n - 1;
     const auto B = ConstView<MS, Eigen::Dynamic>(g.B(j).data(), M, L);
-    for (int l = L - 1; l >= 0; --l) MarginalizeInput<MS>(input_factor[j * L + l], B.col(l), W, xi, z);
+    if (predicted != nullptr) {
+      // State entering step j's inputs as the prediction sweep found it.
+      VectorView<MS> base(rhs_.data(), M), entering(x_.data(), M);
+      base.noalias() = ConstView<MS, MS>(g.A(j).data(), M, M) * VectorView<MS>(x_pred_.col(j).data(), M);
+      base += ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
+      for (int l = L - 1; l >= 0; --l) {
+        const int i = j * L + l;
+        const ScalarPrior& prior = g.input_prior[i];
+        if (prior.kind != PriorKind::kNone) {
+          entering = base;
+          for (int k = 0; k < l; ++k) entering.noalias() += predicted->u(k, j) * B.col(k);
+          z.noalias() = W * B.col(l);
+          const double V_e = 1.0 / (B.col(l).dot(z) + kInfluenceEpsilon);
+          const double m_e = V_e * (B.col(l).dot(xi) - z.dot(entering));
+          polish_region_[i] = Decide(prior, prior.slope, Message{m_e, V_e}).region;
+          input_factor[i] = PieceFactor(prior, prior.slope, polish_region_[i]);
+        }
+        MarginalizeInput<MS>(input_factor[i], B.col(l), W, xi, z);
+      }
+    } else {
+      for (int l = L - 1; l >= 0; --l) MarginalizeInput<MS>(input_factor[j * L + l], B.col(l), W, xi, z);
+    }
     // ξ ← Aᵀ(ξ - W cx);  W ← Aᵀ W A
     const auto A = ConstView<MS, MS>(g.A(j).data(), M, M);
     z.noalias() = W * ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
@@ -167,8 +234,8 @@ void Ibffd::BackwardFilterImpl(const std::vector<ScalarFactor>& input_factor) {
   }
 }
 
-void Ibffd::BackwardFilter(const std::vector<ScalarFactor>& input_factor) {
-  DispatchStateSize(graph_.M, [&]<int MS>() { BackwardFilterImpl<MS>(input_factor); });
+void Ibffd::BackwardFilter(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted) {
+  DispatchStateSize(graph_.M, [&]<int MS>() { BackwardFilterImpl<MS>(input_factor, predicted); });
 }
 
 double Ibffd::ForwardDeciding(Pass pass, PrimalIterate* out) {
@@ -195,7 +262,16 @@ double Ibffd::ForwardDecidingImpl(Pass pass, PrimalIterate* out) {
   out->x0 = x_;
   int changed = 0;
   double residual = 0.0;
+  outputs_outside_ = false;
+  const auto check_outputs = [&](int n) {
+    if (pass != Pass::kPolish || !check_outputs_ || (n == 0 && g.x0_fixed)) return;  // y[0] is data then
+    const double outside = OutputsOutside(n, x);
+    outputs_outside_ |= outside > 0.0;
+    residual = std::max(residual, outside);
+  };
   for (int j = 0; j < g.N; ++j) {
+    check_outputs(j);
+    if (pass == Pass::kPredict) x_pred_.col(j) = x_;
     z.noalias() = ConstView<MS, MS>(g.A(j).data(), M, M) * x;
     x = z;
     x += ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
@@ -239,32 +315,68 @@ double Ibffd::ForwardDecidingImpl(Pass pass, PrimalIterate* out) {
         nup_[i] = NupUpdate(prior, slope_[i], dec.z);
         u = dec.z;
       } else {
-        u = CombineWithMessage(factor_[i], m_e, V_e);
+        // Both sweeps go on with the decided input (Gauss-Seidel); the polish measures how
+        // far it is from what the polish factors solve.
         const Decision dec = Decide(prior, prior.slope, msg);
-        residual = std::max(residual, std::abs(dec.z - u));
-        polish_region_[i] = NextPolishRegion(prior, polish_region_[i], dec.region);
+        u = dec.z;
+        if (pass == Pass::kPolish) {
+          residual = std::max(residual, std::abs(dec.z - CombineWithMessage(factor_[i], m_e, V_e)));
+          polish_region_[i] = NextPolishRegion(prior, polish_region_[i], dec.region);
+        }
       }
       out->u(l, j) = u;
       x.noalias() += u * b;
     }
   }
+  check_outputs(g.N);
+  if (pass == Pass::kPredict) x_pred_.col(g.N) = x_;
   return pass == Pass::kIterate ? changed : residual;
+}
+
+template <typename XT>
+double Ibffd::OutputsOutside(int n, const XT& x) const {
+  const FactorGraph& g = graph_;
+  double outside = 0.0;
+  for (int r = g.row_begin[n]; r < g.row_begin[n + 1]; ++r) {
+    const ScalarPrior& prior = g.row_prior[r];
+    if (prior.kind == PriorKind::kNone) continue;
+    const double y = g.c(r).dot(x) + g.row_d[r];
+    if (prior.kind != PriorKind::kAtMost) outside = std::max(outside, prior.lower - y);
+    if (prior.kind != PriorKind::kAtLeast) outside = std::max(outside, y - prior.upper);
+  }
+  return outside;
 }
 
 int Ibffd::Iterate(PrimalIterate* out) {
   for (std::size_t i = 0; i < nup_.size(); ++i) factor_[i] = WithGaussianPart(graph_.input_prior[i], nup_[i]);
   BackwardFilter(factor_);
+  has_policy_ = false;  // the NUP iterate's messages are no policy of an active set
   const int changed = static_cast<int>(ForwardDeciding(Pass::kIterate, out));
   has_regions_ = true;
   return changed;
 }
 
-double Ibffd::Polish(PrimalIterate* out) {
+void Ibffd::LoadPieceFactors(const std::vector<Region>& regions) {
   for (std::size_t i = 0; i < factor_.size(); ++i) {
     const ScalarPrior& prior = graph_.input_prior[i];
-    factor_[i] = PieceFactor(prior, prior.slope, polish_region_[i]);
+    factor_[i] = PieceFactor(prior, prior.slope, regions[i]);
   }
-  BackwardFilter(factor_);
+}
+
+double Ibffd::Polish(PrimalIterate* out) {
+  LoadPieceFactors(polish_region_);
+  if (predict_next_) {
+    // Warm start (class comment): predict the active set with the carried policy, then
+    // decide each input again in the backward filter from the predicted states.
+    predict_next_ = false;
+    ForwardDeciding(Pass::kPredict, out);
+    BackwardFilter(factor_, out);
+  } else {
+    BackwardFilter(factor_);
+  }
+  policy_region_ = polish_region_;  // what the filter integrated (before this pass's proposals)
+  policy_shifts_ = 0;
+  has_policy_ = true;
   return ForwardDeciding(Pass::kPolish, out);
 }
 

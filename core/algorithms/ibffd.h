@@ -1,6 +1,7 @@
 #ifndef NUPMPC_CORE_ALGORITHMS_IBFFD_H_
 #define NUPMPC_CORE_ALGORITHMS_IBFFD_H_
 
+#include <memory>
 #include <vector>
 
 #include "Eigen/LU"
@@ -18,10 +19,30 @@ namespace nupmpc::core {
 //
 // Memory: the backward message (W, ξ) at each state x[n] (N·M² doubles); the per-input
 // messages inside a step are recomputed in the forward pass (§8.5 alternative).
+//
+// Warm start: the backward messages of the last pass are the optimal affine policy of the
+// last solve's active set (u = prox of the extrinsic message at the state reached). They
+// do not depend on x[0], and shifted by one step they are exact except near the tail, so
+// they are carried too (not only the NUP state §10 lists). The first polish pass of a
+// warm solve predicts the new active set with them before it solves: (1) a forward sweep
+// from the new x[0] that decides every input with the carried policy (cheap: no M³ work),
+// (2) the backward filter, deciding each input from the state predicted in (1) as it
+// reaches it, (3) the usual forward pass with the decided regions. masses_N30 closed loop
+// (output bounds dropped, IBFFD): warm steps finished in one pass 2 % -> 57 %, median 3
+// -> 1 passes. Every polish pass propagates the decided input (Gauss-Seidel) rather than
+// the polish factor's, so each region decision sees the earlier decisions of the pass:
+// warm steps in at most two passes 24 % -> 42 % without the prediction.
 class Ibffd final : public ActiveSetIteration {
  public:
   static absl::Status CheckApplicable(const Problem& problem);
   Ibffd(const Problem& problem, const SolverOptions& options);
+  // IFFBDD's warm-start polish for problems whose outputs carry constraints (Iffbdd):
+  // the problem without its output constraints (outputs act through their Gaussian parts
+  // only). A polish pass then also reports, in its residual, how far any constrained
+  // output lies outside its kinks, so a residual within tolerance means the candidate
+  // solves the full problem: the output constraints are inactive with zero multipliers.
+  // Output kinds must be box or half-space (or none).
+  static std::unique_ptr<Ibffd> ForInputSubproblem(const Problem& problem, const SolverOptions& options);
 
   Algorithm algorithm() const override { return Algorithm::kIbffd; }
   void Refresh(const Problem& problem) override;
@@ -30,27 +51,67 @@ class Ibffd final : public ActiveSetIteration {
   void ShiftWarmStart() override;
   int Iterate(PrimalIterate* out) override;
   double Polish(PrimalIterate* out) override;
+  void AdoptRegionsForPolish() override;
+  void AdoptCarriedRegionsForPolish() override;
   void ReleaseWorkspace() override;
   void AcquireWorkspace() override;
 
+  // For Iffbdd: the carried region of input scalar i (n·L + l), and the region the last
+  // polish pass proposes for it.
+  void SetCarriedRegion(int i, Region region) { region_[i] = region; }
+  Region carried_region(int i) const { return region_[i]; }
+  Region polish_region(int i) const { return polish_region_[i]; }
+  // Whether the last polish pass found a constrained output outside its kinks
+  // (ForInputSubproblem only): the input sub-problem is then the wrong problem.
+  bool outputs_outside() const { return outputs_outside_; }
+
  private:
-  enum class Pass { kIterate, kPolish };
-  void BackwardFilter(const std::vector<ScalarFactor>& input_factor);
+  enum class Pass {
+    kIterate,  ///< NUP iteration: decide with the adapted slopes, update the NUP factors
+    kPredict,  ///< warm start (1): decide with the carried policy, record the states
+    kPolish,   ///< active-set polish: decide, report the residual, propose regions
+  };
+  Ibffd(const Problem& problem, const SolverOptions& options, bool check_outputs);
+  // factor_[i] = the piece of input i's prior in regions[i].
+  void LoadPieceFactors(const std::vector<Region>& regions);
+  // Backward filter over input_factor. With `decide`, every input with a constraint is
+  // decided when the filter reaches it, from the state the prediction sweep recorded
+  // (x_pred_, and `predicted` for the inputs of the same step), and its factor and polish
+  // region are replaced by the decided piece before it is integrated out.
+  void BackwardFilter(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted = nullptr);
   double ForwardDeciding(Pass pass, PrimalIterate* out);
   template <int MS>
-  void BackwardFilterImpl(const std::vector<ScalarFactor>& input_factor);
+  void BackwardFilterImpl(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted);
   template <int MS>
   double ForwardDecidingImpl(Pass pass, PrimalIterate* out);
+  // Largest distance of a constrained output row of step n outside its kinks at state x.
+  template <typename XT>
+  double OutputsOutside(int n, const XT& x) const;
   double InitialSlope(const ScalarPrior& prior) const;
 
   SolverOptions options_;
   FactorGraph graph_;
+  bool check_outputs_ = false;
+  bool outputs_outside_ = false;
   std::vector<ScalarFactor> nup_;        ///< NUP part per input (the carried state)
   std::vector<ScalarFactor> factor_;     ///< what the backward filter sees
   std::vector<double> slope_;            ///< adapted slope per input
-  // Scratch of every pass (released while idle).
+  // Scratch of every pass (released while idle); W_step_/xi_step_ double as the carried
+  // policy while has_policy_.
   Eigen::MatrixXd W_step_;   ///< M × M(N+1): backward message at x[n] (before step n-1's inputs)
   Eigen::MatrixXd xi_step_;  ///< M × (N+1)
+  Eigen::MatrixXd x_pred_;   ///< M × (N+1): states of the warm start's prediction sweep
+  bool has_policy_ = false;
+  // The regions the policy's backward filter integrated, and how often it was shifted
+  // since. ReleaseWorkspace drops the policy; AcquireWorkspace recomputes it from these:
+  // the same messages while the problem's data is unchanged (a released session continues
+  // bit-identically, tested); after new references or bounds, a prediction from the new
+  // data (the same optimum, possibly another number of passes).
+  std::vector<Region> policy_region_;
+  int policy_shifts_ = 0;
+  bool policy_released_ = false;
+  void ShiftPolicy(int steps);
+  bool predict_next_ = false;
   Eigen::MatrixXd W_, AtW_, S_;
   Eigen::VectorXd xi_, z_, x_, rhs_;
   Eigen::MatrixXd D_;        ///< M × M·L: per-input messages inside one step (forward pass)

@@ -38,10 +38,22 @@ absl::Status Iffbdd::CheckApplicable(const Problem& p) {
   return absl::OkStatus();
 }
 
-Iffbdd::Iffbdd(const Problem& problem) {
+Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) {
   bool inputs_constrained = false;
   for (const ScalarPrior& prior : problem.input_priors) inputs_constrained |= prior.kind != PriorKind::kNone;
   graph_ = BuildFactorGraph(problem, inputs_constrained);
+  // Without input constraints the sub-problem would be unconstrained: nothing to predict,
+  // and active outputs (random_outbox) would make every attempt a wasted pass.
+  const bool outputs_are_bounds = std::all_of(problem.output_priors.begin(), problem.output_priors.end(),
+                                              [](const ScalarPrior& p) { return p.kind != PriorKind::kL1; });
+  if (inputs_constrained && outputs_are_bounds && options.polish_after_stable_iterations > 0) {
+    input_polish_ = Ibffd::ForInputSubproblem(problem, options);
+    input_row_.assign(static_cast<std::size_t>(graph_.N) * graph_.L, -1);
+    for (int r = 0; r < graph_.num_rows(); ++r) {
+      const RowOrigin& o = graph_.row_origin[r];
+      if (o.type == RowOrigin::Type::kInput) input_row_[o.step * graph_.L + o.index] = r;
+    }
+  }
   const int R = graph_.num_rows();
   input_factor_.resize(graph_.input_prior.size());
   nup_.resize(R);
@@ -65,9 +77,11 @@ Iffbdd::Iffbdd(const Problem& problem) {
 void Iffbdd::ReleaseWorkspace() {
   fw_ = ForwardFilterWorkspace();
   workspace_held_ = false;
+  if (input_polish_) input_polish_->ReleaseWorkspace();
 }
 
 void Iffbdd::AcquireWorkspace() {
+  if (input_polish_) input_polish_->AcquireWorkspace();
   if (workspace_held_) return;
   fw_.Resize(graph_, /*keep_edges=*/false);
   LoadInputMoments(graph_, input_factor_.data(), &fw_);
@@ -76,6 +90,7 @@ void Iffbdd::AcquireWorkspace() {
 
 void Iffbdd::Refresh(const Problem& problem) {
   RefreshFactorGraph(problem, &graph_);
+  if (input_polish_) input_polish_->Refresh(problem);
   for (std::size_t i = 0; i < input_factor_.size(); ++i) {
     input_factor_[i] = ScalarFactor::GaussianPart(graph_.input_prior[i]);
   }
@@ -95,6 +110,7 @@ void Iffbdd::ColdStart() {
   }
   has_regions_ = false;
   has_duals_ = false;
+  if (input_polish_) input_polish_->ColdStart();
 }
 
 void Iffbdd::ShiftWarmStart() {
@@ -107,6 +123,7 @@ void Iffbdd::ShiftWarmStart() {
     row_dual_(r) = row_dual_(src);
   }
   for (int n = 0; n < graph_.N; ++n) step_costate_.col(n) = step_costate_.col(n + 1);
+  if (input_polish_) input_polish_->ShiftWarmStart();
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     if (prior.kind == PriorKind::kBox && prior.is_hard()) gamma_[r] = GammaInitial(prior);
@@ -124,11 +141,38 @@ int Iffbdd::Iterate(PrimalIterate* out) {
 void Iffbdd::AdoptRegionsForPolish() {
   ActiveSetIteration::AdoptRegionsForPolish();
   decide_forward_next_ = false;
+  polishing_inputs_ = false;
 }
 
 void Iffbdd::AdoptCarriedRegionsForPolish() {
   ActiveSetIteration::AdoptRegionsForPolish();
   decide_forward_next_ = has_duals_;
+  polishing_inputs_ = false;
+  if (!input_polish_) return;
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    if (graph_.row_origin[r].type == RowOrigin::Type::kOutput && graph_.row_prior[r].kind != PriorKind::kNone &&
+        region_[r] != Region::kInside) {
+      return;  // an output constraint was active: the sub-problem would be the wrong one
+    }
+  }
+  for (std::size_t i = 0; i < input_row_.size(); ++i) input_polish_->SetCarriedRegion(static_cast<int>(i), region_[input_row_[i]]);
+  input_polish_->AdoptCarriedRegionsForPolish();
+  polishing_inputs_ = true;
+}
+
+void Iffbdd::AcceptPolishRegions() {
+  if (!polishing_inputs_) {
+    ActiveSetIteration::AcceptPolishRegions();
+    // The sub-problem's carried policy belongs to an older active set now.
+    if (input_polish_) input_polish_->ColdStart();
+    return;
+  }
+  input_polish_->AcceptPolishRegions();
+  for (int r = 0; r < graph_.num_rows(); ++r) region_[r] = Region::kInside;  // outputs inactive
+  for (std::size_t i = 0; i < input_row_.size(); ++i) region_[input_row_[i]] = input_polish_->carried_region(static_cast<int>(i));
+  // This algorithm's duals are the last own pass's, not the accepted solution's.
+  has_duals_ = false;
+  polishing_inputs_ = false;
 }
 
 ScalarFactor Iffbdd::DecideRowForward(int r, double yhat, double s, const double* v_data) {
@@ -151,6 +195,18 @@ ScalarFactor Iffbdd::DecideRowForward(int r, double yhat, double s, const double
 }
 
 double Iffbdd::Polish(PrimalIterate* out) {
+  if (polishing_inputs_ && input_polish_->outputs_outside()) {
+    // The last pass (not accepted) left an output outside its bounds: an output constraint
+    // became active. Go on with this algorithm's own polish from the input regions the
+    // sub-problem proposed; outputs start inside and the pass proposes the violated ones.
+    polishing_inputs_ = false;
+    decide_forward_next_ = false;
+    for (int r = 0; r < graph_.num_rows(); ++r) polish_region_[r] = Region::kInside;
+    for (std::size_t i = 0; i < input_row_.size(); ++i) {
+      polish_region_[input_row_[i]] = input_polish_->polish_region(static_cast<int>(i));
+    }
+  }
+  if (polishing_inputs_) return input_polish_->Polish(out);
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     row_factor_[r] = prior.kind == PriorKind::kNone ? ScalarFactor::GaussianPart(prior)

@@ -39,7 +39,7 @@ absl::StatusOr<std::unique_ptr<OuterIteration>> MakeOuterIteration(const Problem
   switch (a) {
     case Algorithm::kIake: return std::unique_ptr<OuterIteration>(new Iake(p, options));
     case Algorithm::kIbffd: return std::unique_ptr<OuterIteration>(new Ibffd(p, options));
-    case Algorithm::kIffbdd: return std::unique_ptr<OuterIteration>(new Iffbdd(p));
+    case Algorithm::kIffbdd: return std::unique_ptr<OuterIteration>(new Iffbdd(p, options));
     case Algorithm::kAuto: break;
   }
   return absl::InternalError("SelectAlgorithm returned kAuto");

@@ -77,7 +77,7 @@ TEST_P(GaussianRecursions, SmootherEqualsDensePosterior) {
 TEST_P(GaussianRecursions, OneIffbddPassEqualsDenseMean) {
   const Problem p = MakeProblem();
   const DensePosterior dense = testing::SolveDense(p);
-  Iffbdd iffbdd(p);
+  Iffbdd iffbdd(p, SolverOptions{});
   PrimalIterate it;
   it.Resize(p.num_states, p.num_inputs, p.horizon);
   iffbdd.Iterate(&it);

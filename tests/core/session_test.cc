@@ -31,7 +31,10 @@ double Median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
-TEST(WarmStart, ClosedLoopReachesEveryStepOptimumInFewIterations) {
+// The masses_N30 closed loop (T = 100, x1 per step from the file) warm and cold on
+// `problem`: every warm step reaches the reference J*, and warm solves need at most a third
+// of the cold median (the bar).
+void ExpectClosedLoopWarmStartPays(const Problem& problem, const SolverOptions& options) {
   const bench::BenchmarkInstance inst = LoadOrDie("masses_N30");
   auto refs = bench::LoadReferences(kDir + "/reference.json");
   ASSERT_TRUE(refs.ok());
@@ -40,8 +43,8 @@ TEST(WarmStart, ClosedLoopReachesEveryStepOptimumInFewIterations) {
   const auto& x1 = inst.closed_loop->x1;
   ASSERT_EQ(x1.size(), ref.closed_loop_J_star.size());
 
-  auto warm = Session::Create(inst.problem);
-  auto cold = Session::Create(inst.problem);
+  auto warm = Session::Create(problem, options);
+  auto cold = Session::Create(problem, options);
   ASSERT_TRUE(warm.ok() && cold.ok());
   std::vector<double> warm_iterations, cold_iterations;
   SolveLimits cold_limits;
@@ -62,13 +65,69 @@ TEST(WarmStart, ClosedLoopReachesEveryStepOptimumInFewIterations) {
     cold_iterations.push_back(c->iterations);
   }
   const double warm_median = Median(warm_iterations), cold_median = Median(cold_iterations);
-  RecordProperty("warm_median_iterations", std::to_string(warm_median));
-  RecordProperty("cold_median_iterations", std::to_string(cold_median));
-  std::printf("closed loop: median iterations warm %.1f, cold %.1f\n", warm_median, cold_median);
-  EXPECT_LT(warm_median, cold_median);
+  ::testing::Test::RecordProperty("warm_median_iterations", std::to_string(warm_median));
+  ::testing::Test::RecordProperty("cold_median_iterations", std::to_string(cold_median));
+  std::printf("closed loop (%s): median iterations warm %.1f, cold %.1f\n", AlgorithmName((*warm)->algorithm()),
+              warm_median, cold_median);
+  // Measured: warm median 1 (the carried IBFFD policy predicts the moved active set), cold 6.
+  EXPECT_LE(3 * warm_median, cold_median);
   // No warm step is worse than a typical cold one (the active-set correction used to cycle
   // on some steps: 14 passes before boxes were released instead of pinned across).
   EXPECT_LE(*std::max_element(warm_iterations.begin(), warm_iterations.end()), cold_median);
+}
+
+TEST(WarmStart, ClosedLoopReachesEveryStepOptimumInFewIterations) {
+  // IFFBDD (outputs are bounded too); its warm polish runs on the input sub-problem.
+  const bench::BenchmarkInstance inst = LoadOrDie("masses_N30");
+  ExpectClosedLoopWarmStartPays(inst.problem, SolverOptions{});
+}
+
+TEST(WarmStart, IbffdClosedLoopWithoutOutputBoundsPredictsTheActiveSet) {
+  // The output bounds |x| <= 4 are never active on this loop: without them the reference
+  // optima still hold, and IBFFD runs (its own carried policy).
+  bench::BenchmarkInstance inst = LoadOrDie("masses_N30");
+  for (ScalarPrior& prior : inst.problem.output_priors) prior = ScalarPrior::Gaussian(prior.mean, prior.variance);
+  SolverOptions options;
+  options.algorithm = Algorithm::kIbffd;
+  ExpectClosedLoopWarmStartPays(inst.problem, options);
+}
+
+TEST(WarmStart, AnOutputBoundBecomingActiveHandsTheWarmPolishBackToIffbdd) {
+  // The first solve leaves every output bound inactive, so the next warm polish starts on
+  // the input sub-problem. Then the position bounds tighten from 4 to 2.6, which makes one
+  // of them active: the sub-problem cannot see it, and the warm solve must still end at the
+  // cold optimum of the tightened problem.
+  const bench::BenchmarkInstance inst = LoadOrDie("masses_N30");
+  constexpr double kTight = 2.6;
+  Problem tight = inst.problem;
+  for (int n = 0; n <= tight.horizon; ++n) {
+    for (int k = 0; k < 6; ++k) {  // positions
+      ScalarPrior& prior = tight.mutable_output_prior(n, k);
+      if (prior.kind != PriorKind::kBox) continue;
+      prior.lower = -kTight;
+      prior.upper = kTight;
+    }
+  }
+  const auto positions_at_bound = [](const Solution& s, double bound) {  // y[N] carries no bound here
+    return (s.outputs.topRows(s.outputs.rows() - 1).leftCols(6).array().abs() >= bound - 1e-9).count();
+  };
+  auto warm = Session::Create(inst.problem);
+  auto cold = Session::Create(tight);
+  ASSERT_TRUE(warm.ok() && cold.ok());
+  Solution first, warm_plan, cold_plan;
+  ASSERT_TRUE((*warm)->Solve(&first).ok());
+  ASSERT_EQ(positions_at_bound(first, 4.0), 0) << "the first solve must leave the output bounds inactive";
+  ASSERT_THAT((*warm)->Update(tight), testing::IsOk());
+  auto w = (*warm)->Solve(&warm_plan);
+  auto c = (*cold)->Solve(&cold_plan);
+  ASSERT_TRUE(w.ok() && c.ok());
+  ASSERT_EQ(c->status, SolveStatus::kConverged) << c->Describe();
+  ASSERT_GT(positions_at_bound(cold_plan, kTight), 0) << "the tightened bound must be active";
+  EXPECT_EQ(w->status, SolveStatus::kConverged) << w->Describe();
+  EXPECT_TRUE(w->warm_started);
+  EXPECT_NEAR(w->objective, c->objective, 1e-9 * std::abs(c->objective));
+  EXPECT_LE(w->max_violation, 1e-9 * 4.0);
+  EXPECT_LE((warm_plan.inputs - cold_plan.inputs).cwiseAbs().maxCoeff(), 1e-6);
 }
 
 TEST(WarmStart, RestartFromTheOptimumTakesOneIteration) {

@@ -139,8 +139,8 @@ TEST_F(ServiceTest, MassesClosedLoopThroughAControlStreamReachesEveryReferenceSt
     ASSERT_TRUE(cold.ok()) << cold.status();
     if (t > 0) cold_iterations.push_back(cold->iterations());
   }
-  // The issue asks for a third; measured: median 3 warm vs 6 cold (see the issue note).
-  EXPECT_LE(2 * Median(warm_iterations), Median(cold_iterations));
+  // At most a third of SolveOnce's median (the issue's bar). Measured: 1 warm vs 6 cold.
+  EXPECT_LE(3 * Median(warm_iterations), Median(cold_iterations));
   EXPECT_THAT((*session)->Close(), ::testing::Property(&absl::Status::ok, true));
 }
 
