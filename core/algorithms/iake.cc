@@ -22,7 +22,7 @@ absl::Status Iake::CheckApplicable(const Problem& p) {
 
 Iake::Iake(const Problem& problem, const SolverOptions& options) : options_(options) {
   graph_ = BuildFactorGraph(problem, /*augment_inputs=*/false);
-  AcquireWorkspace();
+  AcquireWorkspace(problem);
   input_nup_.resize(graph_.input_prior.size());
   input_factor_.resize(graph_.input_prior.size());
   row_nup_.resize(graph_.num_rows());
@@ -38,7 +38,7 @@ void Iake::ReleaseWorkspace() {
   workspace_held_ = false;
 }
 
-void Iake::AcquireWorkspace() {
+void Iake::AcquireWorkspace(const Problem& /*problem*/) {
   if (workspace_held_) return;
   fw_.Resize(graph_, /*keep_edges=*/true);
   sm_.Resize(graph_);

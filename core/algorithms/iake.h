@@ -36,7 +36,7 @@ class Iake final : public OuterIteration {
   void PinInput(int index, double value) override { pinned_value_[index] = value; }
   void ReleaseInputPins() override;
   void ReleaseWorkspace() override;
-  void AcquireWorkspace() override;
+  void AcquireWorkspace(const Problem& problem) override;
 
  private:
   double EffectiveSlope(const ScalarPrior& prior) const {

@@ -47,7 +47,7 @@ Ibffd::Ibffd(const Problem& problem, const SolverOptions& options, bool check_ou
   region_.resize(NL);
   polish_region_.resize(NL);
   policy_region_.assign(NL, Region::kInside);
-  AcquireWorkspace();
+  AcquireWorkspace(problem);
   W_.setZero(M, M);
   AtW_.setZero(M, M);
   S_.setZero(M, M);
@@ -70,19 +70,35 @@ void Ibffd::ReleaseWorkspace() {
   has_policy_ = false;
 }
 
-void Ibffd::AcquireWorkspace() {
+void Ibffd::AcquireWorkspace(const Problem& /*problem*/) {
   if (xi_step_.size() > 0) return;
   W_step_.setZero(graph_.M, graph_.M * (graph_.N + 1));
   xi_step_.setZero(graph_.M, graph_.N + 1);
   x_pred_.setZero(graph_.M, graph_.N + 1);
-  if (policy_released_) {
-    // The same filter over the same regions, shifted as often as the dropped one was.
-    LoadPieceFactors(policy_region_);
-    BackwardFilter(factor_);
-    ShiftPolicy(policy_shifts_);
-    has_policy_ = true;
-    policy_released_ = false;
-  }
+  if (policy_released_) RecomputePolicy();
+}
+
+void Ibffd::RecomputePolicy() {
+  // The same filter over the same regions, shifted as often as the dropped one was.
+  LoadPieceFactors(policy_region_);
+  BackwardFilter(factor_);
+  ShiftPolicy(policy_shifts_);
+  has_policy_ = true;
+  policy_released_ = false;
+}
+
+Ibffd::PolicyMemory Ibffd::TakePolicyMemory() {
+  PolicyMemory memory{std::move(policy_region_), policy_shifts_, has_policy_ || policy_released_};
+  policy_region_.assign(memory.regions.size(), Region::kInside);
+  has_policy_ = policy_released_ = false;
+  return memory;
+}
+
+void Ibffd::RestorePolicy(PolicyMemory memory) {
+  if (!memory.valid || memory.regions.size() != policy_region_.size()) return;
+  policy_region_ = std::move(memory.regions);
+  policy_shifts_ = memory.shifts;
+  RecomputePolicy();
 }
 
 void Ibffd::Refresh(const Problem& problem) { RefreshFactorGraph(problem, &graph_); }

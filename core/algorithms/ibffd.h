@@ -54,13 +54,23 @@ class Ibffd final : public ActiveSetIteration {
   void AdoptRegionsForPolish() override;
   void AdoptCarriedRegionsForPolish() override;
   void ReleaseWorkspace() override;
-  void AcquireWorkspace() override;
+  void AcquireWorkspace(const Problem& problem) override;
 
   // For Iffbdd: the carried region of input scalar i (n·L + l), and the region the last
   // polish pass proposes for it.
   void SetCarriedRegion(int i, Region region) { region_[i] = region; }
   Region carried_region(int i) const { return region_[i]; }
   Region polish_region(int i) const { return polish_region_[i]; }
+  // What of the carried policy survives this object (Iffbdd drops its input polish while
+  // idle and rebuilds it): the regions its filter integrated and the shifts since.
+  struct PolicyMemory {
+    std::vector<Region> regions;
+    int shifts = 0;
+    bool valid = false;
+  };
+  PolicyMemory TakePolicyMemory();
+  // On a freshly built object of the same problem: recomputes that policy (allocates).
+  void RestorePolicy(PolicyMemory memory);
   // Whether the last polish pass found a constrained output outside its kinks
   // (ForInputSubproblem only): the input sub-problem is then the wrong problem.
   bool outputs_outside() const { return outputs_outside_; }
@@ -111,6 +121,8 @@ class Ibffd final : public ActiveSetIteration {
   int policy_shifts_ = 0;
   bool policy_released_ = false;
   void ShiftPolicy(int steps);
+  // The backward filter over policy_region_, shifted policy_shifts_ times.
+  void RecomputePolicy();
   bool predict_next_ = false;
   Eigen::MatrixXd W_, AtW_, S_;
   Eigen::VectorXd xi_, z_, x_, rhs_;

@@ -38,7 +38,7 @@ absl::Status Iffbdd::CheckApplicable(const Problem& p) {
   return absl::OkStatus();
 }
 
-Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) {
+Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(options) {
   bool inputs_constrained = false;
   for (const ScalarPrior& prior : problem.input_priors) inputs_constrained |= prior.kind != PriorKind::kNone;
   graph_ = BuildFactorGraph(problem, inputs_constrained);
@@ -46,7 +46,8 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) {
   // and active outputs (random_outbox) would make every attempt a wasted pass.
   const bool outputs_are_bounds = std::all_of(problem.output_priors.begin(), problem.output_priors.end(),
                                               [](const ScalarPrior& p) { return p.kind != PriorKind::kL1; });
-  if (inputs_constrained && outputs_are_bounds && options.polish_after_stable_iterations > 0) {
+  uses_input_polish_ = inputs_constrained && outputs_are_bounds && options.polish_after_stable_iterations > 0;
+  if (uses_input_polish_) {
     input_polish_ = Ibffd::ForInputSubproblem(problem, options);
     input_row_.assign(static_cast<std::size_t>(graph_.N) * graph_.L, -1);
     for (int r = 0; r < graph_.num_rows(); ++r) {
@@ -70,18 +71,25 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) {
     for (int r = graph_.row_begin[n]; r < graph_.row_begin[n + 1]; ++r) row_step_[r] = n;
   }
   Refresh(problem);
-  AcquireWorkspace();
+  AcquireWorkspace(problem);
   ColdStart();
 }
 
 void Iffbdd::ReleaseWorkspace() {
   fw_ = ForwardFilterWorkspace();
   workspace_held_ = false;
-  if (input_polish_) input_polish_->ReleaseWorkspace();
+  if (input_polish_) {
+    released_policy_ = input_polish_->TakePolicyMemory();
+    input_polish_.reset();
+  }
 }
 
-void Iffbdd::AcquireWorkspace() {
-  if (input_polish_) input_polish_->AcquireWorkspace();
+void Iffbdd::AcquireWorkspace(const Problem& problem) {
+  if (uses_input_polish_ && !input_polish_) {
+    input_polish_ = Ibffd::ForInputSubproblem(problem, options_);
+    input_polish_->RestorePolicy(std::move(released_policy_));
+    released_policy_ = {};
+  }
   if (workspace_held_) return;
   fw_.Resize(graph_, /*keep_edges=*/false);
   LoadInputMoments(graph_, input_factor_.data(), &fw_);
@@ -111,6 +119,7 @@ void Iffbdd::ColdStart() {
   has_regions_ = false;
   has_duals_ = false;
   if (input_polish_) input_polish_->ColdStart();
+  released_policy_.valid = false;
 }
 
 void Iffbdd::ShiftWarmStart() {
@@ -124,6 +133,7 @@ void Iffbdd::ShiftWarmStart() {
   }
   for (int n = 0; n < graph_.N; ++n) step_costate_.col(n) = step_costate_.col(n + 1);
   if (input_polish_) input_polish_->ShiftWarmStart();
+  if (released_policy_.valid) ++released_policy_.shifts;
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     if (prior.kind == PriorKind::kBox && prior.is_hard()) gamma_[r] = GammaInitial(prior);

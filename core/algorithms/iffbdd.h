@@ -52,7 +52,7 @@ class Iffbdd final : public ActiveSetIteration {
   void AdoptCarriedRegionsForPolish() override;
   void AcceptPolishRegions() override;
   void ReleaseWorkspace() override;
-  void AcquireWorkspace() override;
+  void AcquireWorkspace(const Problem& problem) override;
 
  private:
   enum class Pass { kIterate, kPolish };
@@ -81,9 +81,14 @@ class Iffbdd final : public ActiveSetIteration {
   std::vector<int> row_step_;     ///< the step n of each row
   bool has_duals_ = false;
   bool decide_forward_next_ = false;
-  // The warm polish on the input sub-problem (null when no input is constrained or an
-  // output prior is not a box or half-space), and whether the current polish runs there.
+  // The warm polish on the input sub-problem (used when some input is constrained and every
+  // output prior is a box or half-space), and whether the current polish runs there. It is
+  // scratch: ReleaseWorkspace destroys it (idle masses_N30 sessions: 270 -> 180 KiB RSS) and
+  // keeps only its policy's memory; AcquireWorkspace rebuilds it from the problem.
+  SolverOptions options_;
+  bool uses_input_polish_ = false;
   std::unique_ptr<Ibffd> input_polish_;
+  Ibffd::PolicyMemory released_policy_;
   bool polishing_inputs_ = false;
   std::vector<int> input_row_;  ///< the augmented row of input scalar n·L + l
 };

@@ -75,9 +75,10 @@ class OuterIteration {
   // Idle sessions: frees the message-passing scratch (everything every pass recomputes;
   // the carried state and the graph stay), which is most of a session's memory.
   virtual void ReleaseWorkspace() = 0;
-  // Gets it back (allocates; a no-op when held). The driver calls it before the iteration
-  // loop; Iterate() and Polish() need it.
-  virtual void AcquireWorkspace() = 0;
+  // Gets it back (allocates; a no-op when held) for `problem`, the session's current
+  // problem (an algorithm may rebuild released parts from it). The driver calls it before
+  // the iteration loop; Iterate() and Polish() need it.
+  virtual void AcquireWorkspace(const Problem& problem) = 0;
 };
 
 // The active-set bookkeeping shared by the algorithms that decide every scalar with an

@@ -301,7 +301,7 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   NUPMPC_RETURN_IF_ERROR(Validate(limits));
   const bool warm = limits.warm_start && has_warm_state_;
   if (!warm) algorithm_->ColdStart();
-  algorithm_->AcquireWorkspace();  // after ReleaseWorkspace(); outside the timed loop's iterations
+  algorithm_->AcquireWorkspace(problem_);  // after ReleaseWorkspace(); outside the timed loop's iterations
   const auto start = std::chrono::steady_clock::now();
   SolveSummary summary = RunLoop(limits, warm);
   if (has_binary_inputs_ && summary.IsUsable()) MakeInputsDiscrete(limits, start, &summary);
