@@ -151,23 +151,32 @@ int Iffbdd::Iterate(PrimalIterate* out) {
 void Iffbdd::AdoptRegionsForPolish() {
   ActiveSetIteration::AdoptRegionsForPolish();
   decide_forward_next_ = false;
-  polishing_inputs_ = false;
+  polishing_inputs_ = StartInputPolish(/*carried=*/false);
 }
 
 void Iffbdd::AdoptCarriedRegionsForPolish() {
   ActiveSetIteration::AdoptRegionsForPolish();
   decide_forward_next_ = has_duals_;
-  polishing_inputs_ = false;
-  if (!input_polish_) return;
+  polishing_inputs_ = StartInputPolish(/*carried=*/true);
+}
+
+bool Iffbdd::StartInputPolish(bool carried) {
+  if (!input_polish_) return false;
   for (int r = 0; r < graph_.num_rows(); ++r) {
     if (graph_.row_origin[r].type == RowOrigin::Type::kOutput && graph_.row_prior[r].kind != PriorKind::kNone &&
         region_[r] != Region::kInside) {
-      return;  // an output constraint was active: the sub-problem would be the wrong one
+      return false;  // an output constraint is active: the sub-problem would be the wrong one
     }
   }
-  for (std::size_t i = 0; i < input_row_.size(); ++i) input_polish_->SetCarriedRegion(static_cast<int>(i), region_[input_row_[i]]);
-  input_polish_->AdoptCarriedRegionsForPolish();
-  polishing_inputs_ = true;
+  for (std::size_t i = 0; i < input_row_.size(); ++i) {
+    input_polish_->SetCarriedRegion(static_cast<int>(i), region_[input_row_[i]]);
+  }
+  if (carried) {
+    input_polish_->AdoptCarriedRegionsForPolish();
+  } else {
+    input_polish_->AdoptRegionsForPolish();
+  }
+  return true;
 }
 
 void Iffbdd::AcceptPolishRegions() {

@@ -61,6 +61,9 @@ class Iffbdd final : public ActiveSetIteration {
   double Backward(Pass pass, PrimalIterate* out);
   template <int MS>
   double BackwardImpl(Pass pass, PrimalIterate* out);
+  // Whether the polish that starts now runs on the input sub-problem (every output
+  // constraint inside in region_); if so, hands it region_'s input regions.
+  bool StartInputPolish(bool carried);
   // The region (and polish factor) of constrained row r from its forward prediction and the
   // last pass's duals of the rows after it.
   ScalarFactor DecideRowForward(int row, double yhat, double s, const double* v);
