@@ -23,6 +23,7 @@
 #include "client/client.h"
 #include "client/problem_file.h"
 #include "loadtest/core_baseline.h"
+#include "loadtest/transport_floor.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
 #include "loadtest/loadtest_report.h"
@@ -39,6 +40,7 @@ ABSL_FLAG(double, duration_s, 5.0, "measured seconds per level");
 ABSL_FLAG(double, warmup_s, 0.5, "unmeasured seconds before each level");
 ABSL_FLAG(uint64_t, requests, 0, "stop a level once this many solves were answered (0: by time)");
 ABSL_FLAG(int, baseline_rounds, 20, "passes of the core-alone baseline over the closed-loop states");
+ABSL_FLAG(int, transport_calls, 2000, "health checks that measure gRPC's own round trip");
 ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
 ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
 ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
@@ -118,7 +120,10 @@ int main(int argc, char** argv) {
   if (!baseline.ok()) return Fail("core baseline", baseline.status());
   const double capacity_per_s = info->limits().worker_threads() / (baseline->median_ms * 1e-3);
 
-  lt::RunHeader header{name, target, *info, *baseline, capacity_per_s};
+  absl::StatusOr<lt::TransportFloor> transport = lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls));
+  if (!transport.ok()) return Fail("transport floor", transport.status());
+
+  lt::RunHeader header{name, target, *info, *baseline, *transport, capacity_per_s};
   if (!json) lt::PrintHeader(header);
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed"};
   std::vector<lt::LevelReport> reports;

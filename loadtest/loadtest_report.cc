@@ -29,6 +29,9 @@ void PrintHeader(const RunHeader& h) {
               "capacity %u workers / median = %.0f solves/s\n",
               h.baseline.median_ms, h.baseline.p99_ms, h.baseline.mean_iterations, h.baseline.solves,
               h.server.limits().worker_threads(), h.capacity_per_s);
+  std::printf("transport alone (grpc.health.v1 Check, answered inside gRPC): p50 %.0f \xc2\xb5s, p99 %.0f \xc2\xb5s "
+              "over %d calls\n",
+              h.transport.p50_us, h.transport.p99_us, h.transport.calls);
   std::printf("(load generator and server share this machine's cores; latency is request sent, or open-loop "
               "arrival scheduled, to answer received; svc: from the hand-over to gRPC)\n");
   std::printf("%5s %-6s %10s %10s %8s %8s %8s %8s %8s %8s %6s %10s %10s %9s  %s\n", "C", "mode", "offered/s",
@@ -58,6 +61,7 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                           {"mean_iterations", h.baseline.mean_iterations},
                           {"solves", h.baseline.solves},
                           {"capacity_per_s", h.capacity_per_s}};
+  out["transport"] = {{"p50_us", h.transport.p50_us}, {"p99_us", h.transport.p99_us}, {"calls", h.transport.calls}};
   out["levels"] = nlohmann::json::array();
   for (const LevelReport& l : levels) {
     nlohmann::json level = {{"concurrency", l.config.concurrency},

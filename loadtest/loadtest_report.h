@@ -2,7 +2,8 @@
 #define NUPMPC_LOADTEST_LOADTEST_REPORT_H_
 
 // nupmpc-loadtest's output: a table for people, one JSON document for scripts. Every
-// level is set against the core-alone baseline measured in the same run.
+// level is set against the core-alone baseline and gRPC's own round trip, both measured
+// in the same run.
 
 #include <string>
 #include <vector>
@@ -10,6 +11,7 @@
 #include "loadtest/core_baseline.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
+#include "loadtest/transport_floor.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::loadtest {
@@ -19,6 +21,7 @@ struct RunHeader {
   std::string target;
   v1::GetServerInfoResponse server;
   CoreBaseline baseline;
+  TransportFloor transport;
   double capacity_per_s = 0.0;  ///< worker threads / core median solve time
 };
 

@@ -11,6 +11,7 @@
 #include "loadtest/core_baseline.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
+#include "loadtest/transport_floor.h"
 #include "server/session_registry.h"
 #include "server/step_solver.h"
 #include "service_fixture.h"
@@ -54,6 +55,28 @@ TEST_F(LoadTest, ClosedLoopLevelAnswersEveryRequestWithoutErrors) {
   EXPECT_NEAR(r->solves_per_s, r->tally.latency_ms.size() / r->measured_s, 1e-9);
   // The sequence warm-starts: on average far fewer iterations than cold solves (10).
   EXPECT_LT(r->mean_iterations, 8.0);
+}
+
+TEST_F(LoadTest, TransportFloorIsMeasuredOnTheServersHealthService) {
+  absl::StatusOr<loadtest::TransportFloor> floor = loadtest::MeasureTransportFloor(target_, 50);
+  ASSERT_TRUE(floor.ok()) << floor.status();
+  EXPECT_EQ(floor->calls, 50);
+  EXPECT_GT(floor->p50_us, 0.0);
+  EXPECT_LE(floor->p50_us, floor->p99_us);
+  // A health check does less than a Control step that solves: at concurrency 1 the step's
+  // median round trip is not below the transport's.
+  const Workload w = MassesWorkload();
+  loadtest::LevelConfig config;
+  config.concurrency = 1;
+  config.duration_s = 0.4;
+  config.warmup_s = 0.1;
+  absl::StatusOr<loadtest::LevelReport> r =
+      loadtest::RunLevel(target_, {&w.spec, &w.states, /*closed_loop=*/true}, config);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_GE(r->p50_ms * 1e3, 0.5 * floor->p50_us);
+  // Nothing is listening here: a clear error, no hang.
+  absl::StatusOr<loadtest::TransportFloor> none = loadtest::MeasureTransportFloor("127.0.0.1:1", 1);
+  EXPECT_EQ(none.status().code(), absl::StatusCode::kUnavailable);
 }
 
 TEST_F(LoadTest, OpenLoopArrivalsAreAnsweredOrSupersededNeverLost) {
