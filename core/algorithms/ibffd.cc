@@ -141,6 +141,7 @@ void Ibffd::ShiftPolicy(int steps) {
   // The policy moves with its regions: the message at x[n] becomes the one at
   // x[min(n + steps, N-1)] (the last step repeats its own, as its regions do); the
   // terminal message stays. Ascending n reads only entries not yet overwritten.
+  if (steps <= 0) return;
   const int M = graph_.M, N = graph_.N;
   for (int n = 0; n + 1 < N; ++n) {
     const int source = std::min(n + steps, N - 1);

@@ -42,8 +42,9 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(
   bool inputs_constrained = false;
   for (const ScalarPrior& prior : problem.input_priors) inputs_constrained |= prior.kind != PriorKind::kNone;
   graph_ = BuildFactorGraph(problem, inputs_constrained);
-  // Without input constraints the sub-problem would be unconstrained: nothing to predict,
-  // and active outputs (random_outbox) would make every attempt a wasted pass.
+  // The input sub-problem (AdoptCarriedRegionsForPolish) needs output kinds whose inside
+  // costs nothing (bounds, not L1). Without input constraints it would be unconstrained:
+  // nothing to predict, and active outputs (random_outbox) would waste its attempts.
   const bool outputs_are_bounds = std::all_of(problem.output_priors.begin(), problem.output_priors.end(),
                                               [](const ScalarPrior& p) { return p.kind != PriorKind::kL1; });
   uses_input_polish_ = inputs_constrained && outputs_are_bounds && options.polish_after_stable_iterations > 0;
