@@ -81,7 +81,7 @@ void Ibffd::AcquireWorkspace(const Problem& /*problem*/) {
 void Ibffd::RecomputePolicy() {
   // The same filter over the same regions, shifted as often as the dropped one was.
   LoadPieceFactors(policy_region_);
-  BackwardFilter(factor_);
+  BackwardFilter(Sweep::kFull);
   ShiftPolicy(policy_shifts_);
   has_policy_ = true;
   policy_released_ = false;
@@ -196,9 +196,10 @@ using VectorView = Eigen::Map<StateVector<MS>>;
 }  // namespace
 
 template <int MS>
-void Ibffd::BackwardFilterImpl(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted) {
+void Ibffd::BackwardFilterImpl(Sweep sweep, const PrimalIterate* predicted) {
   const FactorGraph& g = graph_;
   const int M = g.M, L = g.L;
+  std::vector<ScalarFactor>& input_factor = factor_;
   MatrixView<MS> W(W_.data(), M, M), AtW(AtW_.data(), M, M);
   VectorView<MS> xi(xi_.data(), M), z(z_.data(), M);
   W.setZero();
@@ -209,15 +210,20 @@ void Ibffd::BackwardFilterImpl(std::vector<ScalarFactor>& input_factor, const Pr
       if (!prior.has_gaussian()) continue;
       const double w = 1.0 / prior.variance, xy = prior.mean / prior.variance;
       const auto c = ConstView<MS, 1>(g.c_pool.data() + static_cast<Eigen::Index>(g.row_c[r]) * M, M, 1);
-      W.noalias() += w * (c * c.transpose());
+      if (sweep != Sweep::kOffsets) W.noalias() += w * (c * c.transpose());
       xi.noalias() += (xy - w * g.row_d[r]) * c;
     }
-    MatrixView<MS>(W_step_.data() + static_cast<Eigen::Index>(n) * M * M, M, M) = W;
+    MatrixView<MS> stored_W(W_step_.data() + static_cast<Eigen::Index>(n) * M * M, M, M);
+    if (sweep == Sweep::kOffsets) {
+      W = stored_W;  // the carried gains, exactly what the full filter held here
+    } else {
+      stored_W = W;
+    }
     VectorView<MS>(xi_step_.col(n).data(), M) = xi;
     if (n == 0) break;
     const int j = n - 1;
     const auto B = ConstView<MS, Eigen::Dynamic>(g.B(j).data(), M, L);
-    if (predicted != nullptr) {
+    if (sweep == Sweep::kDeciding) {
       // State entering step j's inputs as the prediction sweep found it.
       VectorView<MS> base(rhs_.data(), M), entering(x_.data(), M);
       base.noalias() = ConstView<MS, MS>(g.A(j).data(), M, M) * VectorView<MS>(x_pred_.col(j).data(), M);
@@ -245,14 +251,15 @@ void Ibffd::BackwardFilterImpl(std::vector<ScalarFactor>& input_factor, const Pr
     xi -= z;
     z.noalias() = A.transpose() * xi;
     xi = z;
+    if (sweep == Sweep::kOffsets) continue;  // the next step's W is loaded, not computed
     StateProduct<MS>(AtW, A.transpose(), W);
     StateProduct<MS>(W, AtW, A);
     SymmetrizeInPlace(W);
   }
 }
 
-void Ibffd::BackwardFilter(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted) {
-  DispatchStateSize(graph_.M, [&]<int MS>() { BackwardFilterImpl<MS>(input_factor, predicted); });
+void Ibffd::BackwardFilter(Sweep sweep, const PrimalIterate* predicted) {
+  DispatchStateSize(graph_.M, [&]<int MS>() { BackwardFilterImpl<MS>(sweep, predicted); });
 }
 
 double Ibffd::ForwardDeciding(Pass pass, PrimalIterate* out) {
@@ -366,11 +373,22 @@ double Ibffd::OutputsOutside(int n, const XT& x) const {
 
 int Ibffd::Iterate(PrimalIterate* out) {
   for (std::size_t i = 0; i < nup_.size(); ++i) factor_[i] = WithGaussianPart(graph_.input_prior[i], nup_[i]);
-  BackwardFilter(factor_);
+  BackwardFilter(Sweep::kFull);
   has_policy_ = false;  // the NUP iterate's messages are no policy of an active set
   const int changed = static_cast<int>(ForwardDeciding(Pass::kIterate, out));
   has_regions_ = true;
   return changed;
+}
+
+void Ibffd::LoadShiftedPolicyFactors() {
+  const int L = graph_.L, N = graph_.N;
+  for (int n = 0; n < N; ++n) {
+    const int source = std::min(n + policy_shifts_, N - 1);  // ShiftPolicy's rule
+    for (int l = 0; l < L; ++l) {
+      const ScalarPrior& prior = graph_.input_prior[n * L + l];
+      factor_[n * L + l] = PieceFactor(prior, prior.slope, policy_region_[source * L + l]);
+    }
+  }
 }
 
 void Ibffd::LoadPieceFactors(const std::vector<Region>& regions) {
@@ -381,15 +399,19 @@ void Ibffd::LoadPieceFactors(const std::vector<Region>& regions) {
 }
 
 double Ibffd::Polish(PrimalIterate* out) {
-  LoadPieceFactors(polish_region_);
   if (predict_next_) {
-    // Warm start (class comment): predict the active set with the carried policy, then
-    // decide each input again in the backward filter from the predicted states.
+    // Warm start (class comment): the carried policy's offsets from the current references
+    // and bounds, then predict the active set with it, then decide each input again in the
+    // backward filter from the predicted states.
     predict_next_ = false;
+    LoadShiftedPolicyFactors();
+    BackwardFilter(Sweep::kOffsets);
+    LoadPieceFactors(polish_region_);
     ForwardDeciding(Pass::kPredict, out);
-    BackwardFilter(factor_, out);
+    BackwardFilter(Sweep::kDeciding, out);
   } else {
-    BackwardFilter(factor_);
+    LoadPieceFactors(polish_region_);
+    BackwardFilter(Sweep::kFull);
   }
   policy_region_ = polish_region_;  // what the filter integrated (before this pass's proposals)
   policy_shifts_ = 0;

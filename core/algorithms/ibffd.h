@@ -24,8 +24,10 @@ namespace nupmpc::core {
 // last solve's active set (u = prox of the extrinsic message at the state reached). They
 // do not depend on x[0], and shifted by one step they are exact except near the tail, so
 // they are carried too (not only the NUP state §10 lists). The first polish pass of a
-// warm solve predicts the new active set with them before it solves: (1) a forward sweep
-// from the new x[0] that decides every input with the carried policy (cheap: no M³ work),
+// warm solve predicts the new active set with them before it solves: (0) the policy's
+// offsets ξ from the current references and bounds (its gains W depend on neither; no M³
+// work), (1) a forward sweep from the new x[0] that decides every input with the carried
+// policy (cheap: no M³ work),
 // (2) the backward filter, deciding each input from the state predicted in (1) as it
 // reaches it, (3) the usual forward pass with the decided regions. masses_N30 closed loop
 // (output bounds dropped, IBFFD): warm steps finished in one pass 2 % -> 57 %, median 3
@@ -84,14 +86,20 @@ class Ibffd final : public ActiveSetIteration {
   Ibffd(const Problem& problem, const SolverOptions& options, bool check_outputs);
   // factor_[i] = the piece of input i's prior in regions[i].
   void LoadPieceFactors(const std::vector<Region>& regions);
-  // Backward filter over input_factor. With `decide`, every input with a constraint is
-  // decided when the filter reaches it, from the state the prediction sweep recorded
-  // (x_pred_, and `predicted` for the inputs of the same step), and its factor and polish
-  // region are replaced by the decided piece before it is integrated out.
-  void BackwardFilter(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted = nullptr);
+  // factor_ = the pieces the carried policy integrated, at their shifted steps.
+  void LoadShiftedPolicyFactors();
+  enum class Sweep {
+    kFull,      ///< the backward information filter over factor_
+    kDeciding,  ///< the same, deciding every constrained input when the filter reaches it,
+                ///< from the state the prediction sweep recorded (x_pred_, and `predicted`
+                ///< for the inputs of the same step); its factor and polish region become
+                ///< the decided piece before it is integrated out
+    kOffsets,   ///< only ξ, with the stored W (the carried gains): O(N L M²), no M³ work
+  };
+  void BackwardFilter(Sweep sweep, const PrimalIterate* predicted = nullptr);
   double ForwardDeciding(Pass pass, PrimalIterate* out);
   template <int MS>
-  void BackwardFilterImpl(std::vector<ScalarFactor>& input_factor, const PrimalIterate* predicted);
+  void BackwardFilterImpl(Sweep sweep, const PrimalIterate* predicted);
   template <int MS>
   double ForwardDecidingImpl(Pass pass, PrimalIterate* out);
   // Largest distance of a constrained output row of step n outside its kinks at state x.
@@ -114,9 +122,10 @@ class Ibffd final : public ActiveSetIteration {
   bool has_policy_ = false;
   // The regions the policy's backward filter integrated, and how often it was shifted
   // since. ReleaseWorkspace drops the policy; AcquireWorkspace recomputes it from these:
-  // the same messages while the problem's data is unchanged (a released session continues
-  // bit-identically, tested); after new references or bounds, a prediction from the new
-  // data (the same optimum, possibly another number of passes).
+  // the same gains W while weights and matrices are unchanged (references and bounds may
+  // change: every warm solve recomputes the offsets ξ from the current data anyway), so a
+  // released session continues bit-identically (tested). After new weights or matrices the
+  // recomputed gains are the new ones: the same optimum, possibly another number of passes.
   std::vector<Region> policy_region_;
   int policy_shifts_ = 0;
   bool policy_released_ = false;
