@@ -167,7 +167,7 @@ namespace {
 // no 1/V ([fix] of [LL-BFFD] eq. 28).
 template <int MS, typename WT, typename XT, typename BT, typename ZT>
 void MarginalizeInput(const ScalarFactor& f, const BT& b, WT& W, XT& xi, ZT& z) {
-  z.noalias() = W * b;
+  StateProduct<MS>(z, W, b);
   const double q = b.dot(z);
   const double bxi = b.dot(xi);
   double H, h;
@@ -226,7 +226,7 @@ void Ibffd::BackwardFilterImpl(Sweep sweep, const PrimalIterate* predicted) {
     if (sweep == Sweep::kDeciding) {
       // State entering step j's inputs as the prediction sweep found it.
       VectorView<MS> base(rhs_.data(), M), entering(x_.data(), M);
-      base.noalias() = ConstView<MS, MS>(g.A(j).data(), M, M) * VectorView<MS>(x_pred_.col(j).data(), M);
+      StateProduct<MS>(base, ConstView<MS, MS>(g.A(j).data(), M, M), VectorView<MS>(x_pred_.col(j).data(), M));
       base += ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
       for (int l = L - 1; l >= 0; --l) {
         const int i = j * L + l;
@@ -234,7 +234,7 @@ void Ibffd::BackwardFilterImpl(Sweep sweep, const PrimalIterate* predicted) {
         if (prior.kind != PriorKind::kNone) {
           entering = base;
           for (int k = 0; k < l; ++k) entering.noalias() += predicted->u(k, j) * B.col(k);
-          z.noalias() = W * B.col(l);
+          StateProduct<MS>(z, W, B.col(l));
           const double V_e = 1.0 / (B.col(l).dot(z) + kInfluenceEpsilon);
           const double m_e = V_e * (B.col(l).dot(xi) - z.dot(entering));
           polish_region_[i] = Decide(prior, prior.slope, Message{m_e, V_e}).region;
@@ -247,9 +247,9 @@ void Ibffd::BackwardFilterImpl(Sweep sweep, const PrimalIterate* predicted) {
     }
     // ξ ← Aᵀ(ξ - W cx);  W ← Aᵀ W A
     const auto A = ConstView<MS, MS>(g.A(j).data(), M, M);
-    z.noalias() = W * ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
+    StateProduct<MS>(z, W, ConstView<MS, 1>(g.cx.col(j).data(), M, 1));
     xi -= z;
-    z.noalias() = A.transpose() * xi;
+    StateProduct<MS>(z, A.transpose(), xi);
     xi = z;
     if (sweep == Sweep::kOffsets) continue;  // the next step's W is loaded, not computed
     StateProduct<MS>(AtW, A.transpose(), W);
@@ -296,7 +296,7 @@ double Ibffd::ForwardDecidingImpl(Pass pass, PrimalIterate* out) {
   for (int j = 0; j < g.N; ++j) {
     check_outputs(j);
     if (pass == Pass::kPredict) x_pred_.col(j) = x_;
-    z.noalias() = ConstView<MS, MS>(g.A(j).data(), M, M) * x;
+    StateProduct<MS>(z, ConstView<MS, MS>(g.A(j).data(), M, M), x);
     x = z;
     x += ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
     if (L == 0) continue;
@@ -316,7 +316,7 @@ double Ibffd::ForwardDecidingImpl(Pass pass, PrimalIterate* out) {
     for (int l = 0; l < L; ++l) {
       const int i = j * L + l;
       const auto b = B.col(l);
-      z.noalias() = D(l) * b;
+      StateProduct<MS>(z, D(l), b);
       const double V_e = 1.0 / (b.dot(z) + kInfluenceEpsilon);
       const double m_e = V_e * (b.dot(d(l)) - z.dot(x));
       const Message msg{m_e, V_e};

@@ -300,12 +300,12 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
     const int j = n - 1;
     const auto B = ConstView<MS, Eigen::Dynamic>(g.B(j).data(), M, g.L);
     for (int l = 0; l < g.L; ++l) out->u(l, j) = fw_.mU(l, j) - fw_.VU(l, j) * B.col(l).dot(xt);
-    auto next = ConstView<MS, MS>(g.A(j).data(), M, M).transpose() * xt;
+    const auto At = ConstView<MS, MS>(g.A(j).data(), M, M).transpose();
     if constexpr (MS == Eigen::Dynamic) {
-      scratch_.noalias() = next;
+      scratch_.noalias() = At * xt;
       xt = scratch_;
     } else {
-      xt = StateVector<MS>(next);
+      xt = StateVector<MS>(At.lazyProduct(xt));  // coefficient-based: see StateProduct
     }
   }
   scratch_.noalias() = g.m0;

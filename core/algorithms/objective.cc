@@ -38,7 +38,7 @@ void ObjectiveEvaluator::Simulate(const Problem& p, const PrimalIterate& it) {
     if (K > 0) y_.col(n).noalias() = ConstView<Eigen::Dynamic, MS>(p.C_at(n).data(), K, M) * state(n);
     if (n == N) break;
     auto next = state(n + 1);
-    next.noalias() = ConstView<MS, MS>(p.A_at(n).data(), M, M) * state(n);
+    StateProduct<MS>(next, ConstView<MS, MS>(p.A_at(n).data(), M, M), state(n));
     next.noalias() += ConstView<MS, Eigen::Dynamic>(p.B_at(n).data(), M, L) * it.u.col(n);
     if (!p.state_offset.empty()) next += p.state_offset.size() == 1 ? p.state_offset[0] : p.state_offset[n];
   }

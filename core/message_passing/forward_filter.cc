@@ -55,7 +55,7 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, FactorOf&&
         sr = v(unit);
         yhat = m(unit) + graph.row_d[r];
       } else {
-        v.noalias() = V * c;
+        StateProduct<MS>(v, V, c);
         sr = c.dot(v);
         yhat = c.dot(m) + graph.row_d[r];
       }
@@ -97,7 +97,7 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, FactorOf&&
     const auto A = ConstView<MS, MS>(graph.A(n).data(), M, M);
     const auto B = ConstView<MS, Eigen::Dynamic>(graph.B(n).data(), M, L);
     // m ← A m + B mU + cx;  V ← A V Aᵀ + B diag(VU) Bᵀ
-    s.t.noalias() = A * m;
+    StateProduct<MS>(s.t, A, m);
     m.noalias() = s.t;
     m.noalias() += B * ws->mU.col(n);
     m += ConstView<MS, 1>(graph.cx.col(n).data(), M, 1);
