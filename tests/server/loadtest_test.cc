@@ -32,16 +32,21 @@ Workload MassesWorkload() {
   return w;
 }
 
-class LoadTest : public ServiceTest {};
+class LoadTest : public ServiceTest {
+ protected:
+  // A closed-loop level of the masses workload (after 0.1 s of warm-up).
+  absl::StatusOr<loadtest::LevelReport> RunClosedLoop(int concurrency, double duration_s) {
+    loadtest::LevelConfig config;
+    config.concurrency = concurrency;
+    config.duration_s = duration_s;
+    config.warmup_s = 0.1;
+    return loadtest::RunLevel(target_, {&workload_.spec, &workload_.states, /*closed_loop=*/true}, config);
+  }
+  const Workload workload_ = MassesWorkload();
+};
 
 TEST_F(LoadTest, ClosedLoopLevelAnswersEveryRequestWithoutErrors) {
-  const Workload w = MassesWorkload();
-  loadtest::LevelConfig config;
-  config.concurrency = 3;
-  config.duration_s = 0.6;
-  config.warmup_s = 0.1;
-  absl::StatusOr<loadtest::LevelReport> r =
-      loadtest::RunLevel(target_, {&w.spec, &w.states, /*closed_loop=*/true}, config);
+  absl::StatusOr<loadtest::LevelReport> r = RunClosedLoop(3, 0.6);
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_TRUE(r->tally.errors.empty());
   EXPECT_EQ(r->tally.superseded, 0u);  // closed loop never has two requests in flight
@@ -64,14 +69,8 @@ TEST_F(LoadTest, TransportFloorIsMeasuredOnTheServersHealthService) {
   EXPECT_GT(floor->p50_us, 0.0);
   EXPECT_LE(floor->p50_us, floor->p99_us);
   // A health check does less than a Control step that solves: at concurrency 1 the step's
-  // median round trip is not below the transport's.
-  const Workload w = MassesWorkload();
-  loadtest::LevelConfig config;
-  config.concurrency = 1;
-  config.duration_s = 0.4;
-  config.warmup_s = 0.1;
-  absl::StatusOr<loadtest::LevelReport> r =
-      loadtest::RunLevel(target_, {&w.spec, &w.states, /*closed_loop=*/true}, config);
+  // median round trip is not far below the transport's (noise: half of it).
+  absl::StatusOr<loadtest::LevelReport> r = RunClosedLoop(1, 0.4);
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_GE(r->p50_ms * 1e3, 0.5 * floor->p50_us);
   // Nothing is listening here: a clear error, no hang.
