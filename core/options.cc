@@ -37,6 +37,12 @@ absl::Status AtLeast(const char* field, int value, int min) {
   }
   return absl::OkStatus();
 }
+absl::Status Fraction(const char* field, double value) {
+  if (!(value >= 0.0 && value < 1.0)) {
+    return absl::InvalidArgumentError(absl::StrCat("SolverOptions.", field, " = ", value, "; must be in [0, 1)"));
+  }
+  return absl::OkStatus();
+}
 }  // namespace
 
 absl::Status Validate(const SolverOptions& o) {
@@ -58,10 +64,8 @@ absl::Status Validate(const SolverOptions& o) {
   if (absl::Status s = AtLeast("discrete_fixing_blocks", o.discrete_fixing_blocks, 1); !s.ok()) return s;
   if (absl::Status s = AtLeast("discrete_search_sweeps", o.discrete_search_sweeps, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("polish_max_rounds", o.polish_max_rounds, o.polish_rounds); !s.ok()) return s;
-  if (!(o.polish_settled_fraction >= 0.0 && o.polish_settled_fraction < 1.0)) {
-    return absl::InvalidArgumentError(absl::StrCat("SolverOptions.polish_settled_fraction = ",
-                                                   o.polish_settled_fraction, "; must be in [0, 1)"));
-  }
+  if (absl::Status s = Fraction("polish_settled_fraction", o.polish_settled_fraction); !s.ok()) return s;
+  if (absl::Status s = Fraction("input_polish_settled_fraction", o.input_polish_settled_fraction); !s.ok()) return s;
   return absl::OkStatus();
 }
 

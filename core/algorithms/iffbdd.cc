@@ -161,14 +161,19 @@ void Iffbdd::AdoptCarriedRegionsForPolish() {
   polishing_inputs_ = StartInputPolish(/*carried=*/true);
 }
 
-bool Iffbdd::StartInputPolish(bool carried) {
-  if (!input_polish_) return false;
+bool Iffbdd::OutputConstraintsInside() const {
   for (int r = 0; r < graph_.num_rows(); ++r) {
     if (graph_.row_origin[r].type == RowOrigin::Type::kOutput && graph_.row_prior[r].kind != PriorKind::kNone &&
         region_[r] != Region::kInside) {
-      return false;  // an output constraint is active: the sub-problem would be the wrong one
+      return false;
     }
   }
+  return true;
+}
+
+bool Iffbdd::StartInputPolish(bool carried) {
+  // With an active output constraint the sub-problem would be the wrong one.
+  if (!input_polish_ || !OutputConstraintsInside()) return false;
   for (std::size_t i = 0; i < input_row_.size(); ++i) {
     input_polish_->SetCarriedRegion(static_cast<int>(i), region_[input_row_[i]]);
   }

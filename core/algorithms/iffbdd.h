@@ -53,6 +53,7 @@ class Iffbdd final : public ActiveSetIteration {
   // masses_N3000 cold 6 -> 4.
   void AdoptCarriedRegionsForPolish() override;
   void AcceptPolishRegions() override;
+  bool NextPolishSolvesInputsOnly() const override { return input_polish_ && OutputConstraintsInside(); }
   void ReleaseWorkspace() override;
   void AcquireWorkspace(const Problem& problem) override;
 
@@ -66,6 +67,7 @@ class Iffbdd final : public ActiveSetIteration {
   // Whether the polish that starts now runs on the input sub-problem (every output
   // constraint inside in region_); if so, hands it region_'s input regions.
   bool StartInputPolish(bool carried);
+  bool OutputConstraintsInside() const;  ///< in region_
   // The region (and polish factor) of constrained row r from its forward prediction and the
   // last pass's duals of the rows after it.
   ScalarFactor DecideRowForward(int row, double yhat, double s, const double* v);

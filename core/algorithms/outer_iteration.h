@@ -63,6 +63,9 @@ class OuterIteration {
   virtual void AcceptPolishRegions() = 0;
   // Whether regions from a previous solve are available (a warm polish is worth trying).
   virtual bool has_regions() const = 0;
+  // Whether a polish started now would solve an input sub-problem only (Iffbdd): the driver
+  // then starts it at SolverOptions.input_polish_settled_fraction.
+  virtual bool NextPolishSolvesInputsOnly() const { return false; }
   // How many scalars the active set covers (0 when the algorithm tracks none).
   virtual int decided_scalars() const { return 0; }
 

@@ -371,7 +371,11 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   double previous_objective = std::numeric_limits<double>::quiet_NaN();
   int stable = 0;
   int polish_wait = options_.polish_after_stable_iterations;
-  const double settled_changes = options_.polish_settled_fraction * algorithm_->decided_scalars();
+  const auto settled_changes = [&]() {
+    return (algorithm_->NextPolishSolvesInputsOnly() ? options_.input_polish_settled_fraction
+                                                     : options_.polish_settled_fraction) *
+           algorithm_->decided_scalars();
+  };
   while (summary.iterations < max_iterations) {
     if (stop_requested()) break;
     const int changed = algorithm_->Iterate(&current_);
@@ -401,7 +405,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     }
     previous_objective = r.objective;
 
-    stable = changed >= 0 && changed <= settled_changes ? stable + 1 : 0;
+    stable = changed >= 0 && changed <= settled_changes() ? stable + 1 : 0;
     if (polish_enabled && changed >= 0 && stable >= polish_wait) {
       algorithm_->AdoptRegionsForPolish();
       if (try_polish()) break;
