@@ -25,6 +25,14 @@ SeArdKernel TestKernel() {
   return k;
 }
 
+// The test kernel with little noise: on many points K is then numerically low-rank, the
+// setting of the linearisation paths.
+SeArdKernel LowNoiseKernel() {
+  SeArdKernel k = TestKernel();
+  k.noise_variance = 1e-3;
+  return k;
+}
+
 struct Data {
   Eigen::MatrixXd x;
   Eigen::VectorXd y;
@@ -128,8 +136,7 @@ TEST(GpModel, BatchedLinearisationEqualsOneByOne) {
 // factor. On 1200 points the two agree to rounding, with a basis far smaller than N.
 TEST(GpModel, LowRankLinearisationMatchesTheCholeskyPrediction) {
   const Data d = SmoothData(1200, 6);
-  SeArdKernel kernel = TestKernel();
-  kernel.noise_variance = 1e-3;
+  const SeArdKernel kernel = LowNoiseKernel();
   auto model = GpModel::Create(d.x, d.y, kernel);
   ASSERT_TRUE(model.ok());
   EXPECT_LT(model->basis_rank(), 300);
@@ -151,8 +158,7 @@ TEST(GpModel, LowRankLinearisationMatchesTheCholeskyPrediction) {
 // them to the O(N r) path).
 TEST(GpModel, PivotFastPathMatchesTheDenseLinGpInsideAndFallsBackOutside) {
   const Data d = SmoothData(1000, 7);
-  SeArdKernel kernel = TestKernel();
-  kernel.noise_variance = 1e-3;
+  const SeArdKernel kernel = LowNoiseKernel();
   auto model = GpModel::Create(d.x, d.y, kernel);
   ASSERT_TRUE(model.ok());
   EXPECT_GT(model->num_pivots(), 0);
