@@ -10,7 +10,7 @@ if ! /usr/bin/python3 -c "import matplotlib" 2>/dev/null; then
   echo "make_figures.sh: needs Debian's python3-matplotlib (apt-get install python3-matplotlib)" >&2
   exit 1
 fi
-for example in dac corridor flappy-bird obstacle-avoidance; do
+for example in dac corridor flappy-bird obstacle-avoidance race-track; do
   echo "== nupmpc-example-${example}"
   "build/bin/nupmpc-example-${example}" "${out}"
 done

@@ -101,6 +101,25 @@ def obstacles(d):
     fig.savefig(f"{d}/obstacles.png", dpi=120)
 
 
+def race_track(d):
+    """[KL] Fig. 25: the minimal-time race line coloured by speed, and a_tot² along s."""
+    t = read(f"{d}/race_track.csv")
+    fig, (plane, profile) = plt.subplots(1, 2, figsize=(12, 5), gridspec_kw={"width_ratios": [3, 2]})
+    plane.plot(t["centre_x"], t["centre_y"], color="0.8", linewidth=6, label="track (±0.006 around the centre line)")
+    line = plane.scatter(t["x"], t["y"], c=t["speed"], s=4, cmap="viridis")
+    fig.colorbar(line, ax=plane, label="speed v")
+    plane.set_aspect("equal")
+    plane.set_title(f"minimal-time lap: {t['t'][-1]:.3f} s")
+    plane.legend(fontsize=7, loc="lower right")
+    profile.plot(t["s"], t["speed"], label="v")
+    profile.plot(t["s"], [a / 150 for a in t["a_total_sq"]], label="a_tot² / 150")
+    profile.plot(t["s"], [z / 0.006 for z in t["z"]], linewidth=0.8, label="z / 0.006")
+    profile.set_xlabel("s (arc length of the centre line)")
+    profile.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(f"{d}/race_track.png", dpi=120)
+
+
 def gp_closed_loop(d):
     """[Nghiem] §V: closed loops driven by linGP-SCP and by Ipopt (nupmpc-gp-bench --csv)."""
     import glob
@@ -127,6 +146,6 @@ def gp_closed_loop(d):
 
 if __name__ == "__main__":
     directory = sys.argv[1] if len(sys.argv) > 1 else "figures"
-    for plot in (dac, corridor, flappy, obstacles, gp_closed_loop):
+    for plot in (dac, corridor, flappy, obstacles, race_track, gp_closed_loop):
         plot(directory)
         print(f"{plot.__name__}: written to {directory}")

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
@@ -32,19 +34,36 @@ absl::Status CheckDimensions(const NonlinearModel& model, const Problem& problem
   return absl::OkStatus();
 }
 
-absl::Status CheckTrustRegion(const TrustRegion& trust, int M) {
-  if (trust.state_radius.size() == 0) return absl::OkStatus();
-  if (trust.state_radius.size() != M) {
-    return absl::InvalidArgumentError(absl::StrCat("TrustRegion.state_radius: expected size ", M, " (one per state), got ",
-                                                   trust.state_radius.size()));
+// One per-state (or per-input) vector of TrustRegion: empty, or `size` entries, each > 0
+// (+∞ = none).
+absl::Status CheckPerComponent(const Eigen::VectorXd& values, const char* field, int size, const char* component) {
+  if (values.size() == 0) return absl::OkStatus();
+  if (values.size() != size) {
+    return absl::InvalidArgumentError(absl::StrCat("TrustRegion.", field, ": expected size ", size, " (one per ",
+                                                   component, "), got ", values.size()));
   }
-  for (int i = 0; i < M; ++i) {
-    if (!(trust.state_radius(i) > 0.0)) {
-      return absl::InvalidArgumentError(absl::StrCat("TrustRegion.state_radius[", i, "]: must be > 0 (+inf for none), got ",
-                                                     trust.state_radius(i)));
+  for (int i = 0; i < size; ++i) {
+    if (!(values(i) > 0.0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("TrustRegion.", field, "[", i, "]: must be > 0 (+inf for none), got ", values(i)));
     }
   }
   return absl::OkStatus();
+}
+
+absl::Status CheckTrustRegion(const TrustRegion& trust, int M, int L) {
+  NUPMPC_RETURN_IF_ERROR(CheckPerComponent(trust.state_radius, "state_radius", M, "state"));
+  NUPMPC_RETURN_IF_ERROR(CheckPerComponent(trust.state_proximal_stddev, "state_proximal_stddev", M, "state"));
+  return CheckPerComponent(trust.input_proximal_stddev, "input_proximal_stddev", L, "input");
+}
+
+// The components with a finite entry in `values`, with that entry.
+std::vector<std::pair<int, double>> FiniteEntries(const Eigen::VectorXd& values) {
+  std::vector<std::pair<int, double>> entries;
+  for (int i = 0; i < values.size(); ++i) {
+    if (std::isfinite(values(i))) entries.emplace_back(i, values(i));
+  }
+  return entries;
 }
 
 class ModelLinearisation final : public Linearisation {
@@ -52,10 +71,11 @@ class ModelLinearisation final : public Linearisation {
   ModelLinearisation(NonlinearModel model, const Problem& problem, const TrustRegion& trust)
       : model_(std::move(model)), shape_(problem) {
     const int N = problem.horizon, M = model_.num_states, L = model_.num_inputs, K = model_.num_outputs;
-    for (int i = 0; i < trust.state_radius.size(); ++i) {
-      if (std::isfinite(trust.state_radius(i))) trusted_.push_back({i, trust.state_radius(i)});
-    }
-    const int T = static_cast<int>(trusted_.size());
+    // Extra outputs after the model's: one per trusted state, then one per damped state.
+    trusted_ = FiniteEntries(trust.state_radius);
+    damped_ = FiniteEntries(trust.state_proximal_stddev);
+    damped_inputs_ = FiniteEntries(trust.input_proximal_stddev);
+    const int T = static_cast<int>(trusted_.size() + damped_.size());
     shape_.A.assign(N, Eigen::MatrixXd::Zero(M, M));
     shape_.B.assign(N, Eigen::MatrixXd::Zero(M, L));
     shape_.state_offset.assign(N, Eigen::VectorXd::Zero(M));
@@ -65,7 +85,9 @@ class ModelLinearisation final : public Linearisation {
     shape_.output_priors.assign(static_cast<std::size_t>(N + 1) * (K + T), ScalarPrior::Free());
     CopyBase(problem, &shape_);
     for (int n = 1; n <= N; ++n) {  // x[0] is given
-      for (int t = 0; t < T; ++t) shape_.C[n](K + t, trusted_[t].state) = 1.0;
+      int extra = K;
+      for (const auto& [state, radius] : trusted_) shape_.C[n](extra++, state) = 1.0;
+      for (const auto& [state, stddev] : damped_) shape_.C[n](extra++, state) = 1.0;
     }
     x_.resize(M);
     u_.resize(L);
@@ -95,6 +117,8 @@ class ModelLinearisation final : public Linearisation {
     return absl::OkStatus();
   }
 
+  void SetProximalScale(double scale) override { proximal_scale_ = scale; }
+
   void Linearise(const Solution& point, Problem* problem) const override {
     const int N = shape_.horizon;
     for (int n = 0; n <= N; ++n) {
@@ -103,16 +127,28 @@ class ModelLinearisation final : public Linearisation {
         u_ = point.inputs.row(n).transpose();
         model_.transition(n, x_, u_, &next_, &problem->A[n], &problem->B[n]);
         problem->state_offset[n] = next_ - problem->A[n] * x_ - problem->B[n] * u_;
+        for (const auto& [input, unscaled] : damped_inputs_) {
+          // The caller's Gaussian part (if any) times N(u*, σ²): precisions add.
+          const double stddev = proximal_scale_ * unscaled;
+          const ScalarPrior& base = shape_.input_prior(n, input);
+          const double base_precision = base.has_gaussian() ? 1.0 / base.variance : 0.0;
+          const double precision = base_precision + 1.0 / (stddev * stddev);
+          const double mean = (base_precision * base.mean + u_(input) / (stddev * stddev)) / precision;
+          problem->mutable_input_prior(n, input) = base.WithGaussian(mean, 1.0 / precision);
+        }
       }
       auto C = problem->C[n].topRows(model_.num_outputs);
       model_.output(n, x_, &y_, &dhdx_);
       C = dhdx_;
       problem->output_offset[n].head(model_.num_outputs) = y_ - dhdx_ * x_;
       if (n == 0) continue;
-      for (std::size_t t = 0; t < trusted_.size(); ++t) {
-        const double centre = x_(trusted_[t].state), radius = trusted_[t].radius;
-        problem->mutable_output_prior(n, model_.num_outputs + static_cast<int>(t)) =
-            ScalarPrior::Box(centre - radius, centre + radius);
+      int extra = model_.num_outputs;
+      for (const auto& [state, radius] : trusted_) {
+        problem->mutable_output_prior(n, extra++) = ScalarPrior::Box(x_(state) - radius, x_(state) + radius);
+      }
+      for (const auto& [state, unscaled] : damped_) {
+        const double stddev = proximal_scale_ * unscaled;
+        problem->mutable_output_prior(n, extra++) = ScalarPrior::Gaussian(x_(state), stddev * stddev);
       }
     }
   }
@@ -149,12 +185,11 @@ class ModelLinearisation final : public Linearisation {
     }
   }
 
-  struct Trusted {
-    int state;
-    double radius;
-  };
   NonlinearModel model_;
-  std::vector<Trusted> trusted_;  ///< states with a finite trust radius, in output order
+  std::vector<std::pair<int, double>> trusted_;  ///< (state, trust radius), in output order
+  std::vector<std::pair<int, double>> damped_;   ///< (state, proximal σ), in output order
+  std::vector<std::pair<int, double>> damped_inputs_;  ///< (input, proximal σ)
+  double proximal_scale_ = 1.0;  ///< set by the sequential solver's step control
   Problem shape_;
   mutable Eigen::MatrixXd dhdx_;
   mutable Eigen::VectorXd x_, u_, next_, y_;  // scratch: Linearise() allocates nothing
@@ -165,7 +200,7 @@ class ModelLinearisation final : public Linearisation {
 absl::StatusOr<std::unique_ptr<Linearisation>> MakeModelLinearisation(NonlinearModel model, const Problem& problem,
                                                                         TrustRegion trust_region) {
   NUPMPC_RETURN_IF_ERROR(CheckDimensions(model, problem));
-  NUPMPC_RETURN_IF_ERROR(CheckTrustRegion(trust_region, model.num_states));
+  NUPMPC_RETURN_IF_ERROR(CheckTrustRegion(trust_region, model.num_states, model.num_inputs));
   return std::make_unique<ModelLinearisation>(std::move(model), problem, trust_region);
 }
 

@@ -39,8 +39,18 @@ struct NonlinearModel {
 // without bound (a minimal-time problem's dt/ds = 1/v linearised says "drive infinitely
 // fast"); the trust region stops that. A converged plan whose step ended strictly inside
 // every radius is a stationary point of the nonlinear problem, not of the boxed one.
+//
+// A proximal term is the soft form: a Gaussian prior N(x*_i[n], σ_i²) on x_i[n] around the
+// linearisation point (a Levenberg-Marquardt damping of the sequential method). It makes
+// each linearised problem strictly convex in those states and shortens steps where the
+// linear model promises much, and it vanishes at a fixed point (x = x*), so a converged
+// plan is a stationary point of the undamped nonlinear problem.
 struct TrustRegion {
   Eigen::VectorXd state_radius;  ///< size M, > 0; +∞ = no bound on that state; empty = none
+  Eigen::VectorXd state_proximal_stddev;  ///< size M, > 0; +∞ = no term on that state; empty = none
+  // The same on the inputs, multiplied into the Gaussian part of their priors (the product
+  // of N(m, V) and N(u*, σ²) is a Gaussian).
+  Eigen::VectorXd input_proximal_stddev;  ///< size L, > 0; +∞ = no term on that input; empty = none
 };
 
 // `problem` gives the horizon, priors, x[0] and terminal cost; its model fields are

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
@@ -30,6 +31,26 @@ double RelativeStep(const Solution& point, const Solution& plan) {
 
 }  // namespace
 
+bool SequentialSolver::StepControlActive() const {
+  return options_.proximal_shrink > 1.0 && options_.inner_iterations == 0;
+}
+
+// Step control (SequentialOptions.proximal_*): a linearised problem that did not converge
+// within the iteration cap, or whose plan's nonlinear violation (the linear model's error
+// over the step, second order in it) exceeds proximal_model_error times the step, was
+// linearised with too wide a proximal term, unless the plan at least halved the last
+// accepted plan's violation (a point that is itself far from the model must be repaired
+// by a step no proximal width shortens).
+bool SequentialSolver::StepControlRejects(const SequentialSummary& summary, double violation,
+                                          const SolveLimits& limits, double accepted_violation) const {
+  if (!StepControlActive()) return false;
+  if (limits.max_iterations > 0 && summary.inner_iterations >= limits.max_iterations) return false;  // no budget left
+  if (summary.last_inner.status == SolveStatus::kIterationLimit) return true;
+  if (violation <= 0.5 * accepted_violation) return false;
+  const double step = std::max(MaxAbs(plan_.states - point_.states), MaxAbs(plan_.inputs - point_.inputs));
+  return violation > std::max(options_.proximal_violation_floor, options_.proximal_model_error * step);
+}
+
 absl::Status Validate(const SequentialOptions& options) {
   if (options.max_linearisations < 1) {
     return absl::InvalidArgumentError(
@@ -46,6 +67,22 @@ absl::Status Validate(const SequentialOptions& options) {
   if (!(options.damping > 0.0 && options.damping <= 1.0)) {
     return absl::InvalidArgumentError(
         absl::StrCat("SequentialOptions.damping: must be in (0, 1], got ", options.damping));
+  }
+  const auto at_least_one = [](const char* field, double value) {
+    return value >= 1.0 && std::isfinite(value)
+               ? absl::OkStatus()
+               : absl::InvalidArgumentError(absl::StrCat("SequentialOptions.", field, ": must be finite and ≥ 1, got ", value));
+  };
+  NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_growth", options.proximal_growth));
+  NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_max_scale", options.proximal_max_scale));
+  NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_shrink", options.proximal_shrink));
+  if (!(options.proximal_model_error > 0.0) || !std::isfinite(options.proximal_model_error)) {
+    return absl::InvalidArgumentError(absl::StrCat("SequentialOptions.proximal_model_error: must be finite and > 0, got ",
+                                                   options.proximal_model_error));
+  }
+  if (!(options.proximal_violation_floor >= 0.0) || !std::isfinite(options.proximal_violation_floor)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "SequentialOptions.proximal_violation_floor: must be finite and ≥ 0, got ", options.proximal_violation_floor));
   }
   return absl::OkStatus();
 }
@@ -99,6 +136,13 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
   point_ = initial_guess;
   SolveLimits inner = limits;
   SequentialSummary summary;
+  // Every Solve() starts the step control afresh.
+  double proximal_scale = 1.0;
+  linearisation_->SetProximalScale(proximal_scale);
+  // The last plan the step control accepted, and its nonlinear violation (the guess's is
+  // not known: the first plan is accepted unless its inner solve failed).
+  std::optional<Solution> accepted;
+  double accepted_violation = kInfinity;
   for (int k = 0; k < options_.max_linearisations; ++k) {
     // The limits are for the whole sequence: each inner solve gets what is left.
     inner.max_iterations = options_.inner_iterations;
@@ -124,16 +168,36 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
     NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(inner, &plan_));
     ++summary.linearisations;
     summary.inner_iterations += summary.last_inner.iterations;
+    const double violation = StepControlActive() ? linearisation_->NonlinearViolation(plan_) : 0.0;
+    if (StepControlRejects(summary, violation, limits, accepted_violation)) {
+      // The linear model promised too much: keep the point, shorten the step.
+      ++summary.rejected;
+      proximal_scale /= options_.proximal_shrink;
+      linearisation_->SetProximalScale(proximal_scale);
+      continue;
+    }
     if (!summary.last_inner.IsUsable()) break;
+    if (StepControlActive()) {
+      accepted = plan_;
+      accepted_violation = violation;
+    }
     summary.last_step = RelativeStep(point_, plan_);
     const bool inner_done = options_.inner_iterations > 0 || summary.last_inner.status == SolveStatus::kConverged;
+    if (summary.last_inner.status == SolveStatus::kConverged && proximal_scale < options_.proximal_max_scale) {
+      proximal_scale = std::min(proximal_scale * options_.proximal_growth, options_.proximal_max_scale);
+      linearisation_->SetProximalScale(proximal_scale);
+    }
     if (options_.damping < 1.0 && summary.last_step > options_.step_tolerance) {
       point_.states += options_.damping * (plan_.states - point_.states);
       point_.inputs += options_.damping * (plan_.inputs - point_.inputs);
     } else {
       point_ = plan_;
     }
-    if (inner_done && summary.last_step <= options_.step_tolerance) {
+    // Under step control a damped step is small because it is damped: the proximal
+    // terms' pull, step / (scale·σ)², is what must vanish, so the tolerance shrinks with
+    // the square of the scale below its maximum.
+    const double damped = std::min(1.0, proximal_scale / options_.proximal_max_scale);
+    if (inner_done && summary.last_step <= options_.step_tolerance * damped * damped) {
       summary.converged = true;
       break;
     }
@@ -145,6 +209,9 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
   if (summary.linearisations == 0) {
     return absl::DeadlineExceededError("no time or iterations left for a first linearisation");
   }
+  // A rejected last step is not the answer.
+  if (accepted.has_value()) plan_ = *std::move(accepted);
+  summary.proximal_scale = proximal_scale;
   summary.nonlinear_violation = linearisation_->NonlinearViolation(plan_);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (plan != nullptr) *plan = plan_;

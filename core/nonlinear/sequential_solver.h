@@ -45,6 +45,10 @@ class Linearisation {
   // of the shape the linearisation was made for. Validated first; a rejected base leaves
   // the linearisation as it was.
   virtual absl::Status SetBase(const Problem& base) = 0;
+  // Multiplies the proximal terms' standard deviations (TrustRegion in nonlinear_model.h)
+  // by `scale` from the next Linearise() on: the sequential solver's step control. A
+  // linearisation without proximal terms ignores it.
+  virtual void SetProximalScale(double /*scale*/) {}
 };
 
 struct SequentialOptions {
@@ -58,6 +62,22 @@ struct SequentialOptions {
   double step_tolerance = 1e-6;
   // The next linearisation point is point + damping·(plan - point); 1 takes the plan.
   double damping = 1.0;
+  // Step control for linearisations with proximal terms (Levenberg-Marquardt): after a
+  // linearised problem solved to convergence, the terms' standard deviations grow by
+  // `proximal_growth` (up to `proximal_max_scale` times their initial size), so steps
+  // lengthen while the linear models keep predicting well; when one does not converge
+  // within the iteration cap (typically a linearisation that promises too much, or an
+  // infeasible one), its plan is discarded and the point re-linearised with the
+  // deviations divided by `proximal_shrink`. 1, 1, 1 keeps them fixed.
+  double proximal_growth = 1.0;
+  double proximal_max_scale = 1.0;
+  double proximal_shrink = 1.0;
+  // A plan is also discarded when its nonlinear violation exceeds both the floor and
+  // `proximal_model_error` times the step (max-norm change of states and inputs), unless
+  // it halved the last accepted plan's violation. Step control needs inner solves run to
+  // convergence (inner_iterations = 0) and is off while proximal_shrink = 1.
+  double proximal_violation_floor = 1e-6;
+  double proximal_model_error = 0.1;
 };
 absl::Status Validate(const SequentialOptions& options);
 
@@ -65,6 +85,8 @@ struct SequentialSummary {
   bool converged = false;
   int linearisations = 0;
   int inner_iterations = 0;        ///< message-passing passes over all linearisations
+  int rejected = 0;                ///< linearisations whose plan the step control discarded
+  double proximal_scale = 1.0;     ///< the proximal terms' scale at the end
   double last_step = 0.0;          ///< relative plan change at the last linearisation
   double nonlinear_violation = 0.0;
   SolveSummary last_inner;         ///< the last linearised problem's summary
@@ -98,6 +120,10 @@ class SequentialSolver {
  private:
   SequentialSolver(std::unique_ptr<Linearisation> linearisation, SequentialOptions options, Problem problem)
       : linearisation_(std::move(linearisation)), options_(options), problem_(std::move(problem)) {}
+
+  bool StepControlActive() const;
+  bool StepControlRejects(const SequentialSummary& summary, double violation, const SolveLimits& limits,
+                          double accepted_violation) const;
 
   std::unique_ptr<Linearisation> linearisation_;
   SequentialOptions options_;

@@ -5,6 +5,10 @@
 #include "core/nonlinear/nonlinear_model.h"
 
 #include <cmath>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "core/examples/scenarios/race_track.h"
 #include "gmock/gmock.h"
@@ -112,6 +116,92 @@ TEST(NonlinearModel, ATrustRegionBoundsEachLinearisationsStep) {
   EXPECT_NEAR(plan.inputs(0, 0), OneStepOptimum(0.6), 1e-6);
 }
 
+// Proximal terms on the state and the input shorten every step but vanish at a fixed
+// point: the plan still reaches the undamped optimum. A strong term (σ = 0.02 against a
+// first step of ~0.4 in x[1]) keeps the first step short.
+TEST(NonlinearModel, ProximalTermsShortenStepsButKeepTheOptimum) {
+  const Problem p = OneStepProblem(0.6);
+  TrustRegion damping;
+  damping.state_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
+  damping.input_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
+  SequentialOptions one;
+  one.max_linearisations = 1;
+  auto first = SequentialSolver::Create(*MakeModelLinearisation(SineCubeModel(), p, damping), {}, one);
+  ASSERT_TRUE(first.ok()) << first.status();
+  Solution plan;
+  ASSERT_TRUE((*first)->Solve(ZeroGuess(p), &plan).ok());
+  EXPECT_LT(std::abs(plan.states(1, 0) - 0.6), 0.05);
+  SequentialOptions options;
+  options.step_tolerance = 1e-12;
+  options.max_linearisations = 2000;
+  auto full = SequentialSolver::Create(*MakeModelLinearisation(SineCubeModel(), p, damping), {}, options);
+  ASSERT_TRUE(full.ok());
+  auto summary = (*full)->Solve(ZeroGuess(p), &plan);
+  ASSERT_TRUE(summary.ok()) << summary.status();
+  EXPECT_TRUE(summary->converged);
+  EXPECT_GT(summary->linearisations, 10);  // the damping did act
+  EXPECT_NEAR(plan.inputs(0, 0), OneStepOptimum(0.6), 1e-6);
+}
+
+// The step control widens the proximal terms while the linear models predict well, so
+// the same optimum needs far fewer linearisations than with the terms held fixed, and the
+// terms end at their full width.
+TEST(NonlinearModel, StepControlWidensTheProximalTermsWhileStepsSucceed) {
+  const Problem p = OneStepProblem(0.6);
+  TrustRegion damping;
+  damping.state_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
+  damping.input_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
+  SequentialOptions fixed;
+  fixed.step_tolerance = 1e-12;
+  fixed.max_linearisations = 2000;
+  SequentialOptions controlled = fixed;
+  controlled.proximal_growth = 2.0;
+  controlled.proximal_max_scale = 1e4;
+  controlled.proximal_shrink = 4.0;
+  int linearisations[2];
+  for (int k = 0; k < 2; ++k) {
+    auto solver =
+        SequentialSolver::Create(*MakeModelLinearisation(SineCubeModel(), p, damping), {}, k == 0 ? fixed : controlled);
+    ASSERT_TRUE(solver.ok());
+    Solution plan;
+    auto summary = (*solver)->Solve(ZeroGuess(p), &plan);
+    ASSERT_TRUE(summary.ok()) << summary.status();
+    EXPECT_TRUE(summary->converged);
+    EXPECT_NEAR(plan.inputs(0, 0), OneStepOptimum(0.6), 1e-6);
+    linearisations[k] = summary->linearisations;
+    if (k == 1) EXPECT_EQ(summary->proximal_scale, 1e4);
+  }
+  EXPECT_LT(2 * linearisations[1], linearisations[0]);
+}
+
+// From a guess on the far side of sin's peak (u = 2.5, where the linearisation points
+// the wrong way for a long step), wide proximal terms let the first linear models
+// promise steps they cannot keep: the step control discards those plans, shrinks the
+// terms and still converges to the optimum.
+TEST(NonlinearModel, StepControlDiscardsStepsTheLinearModelMispredicts) {
+  const Problem p = OneStepProblem(0.6);
+  TrustRegion damping;
+  damping.state_proximal_stddev = Eigen::VectorXd::Constant(1, 10.0);
+  damping.input_proximal_stddev = Eigen::VectorXd::Constant(1, 10.0);
+  SequentialOptions controlled;
+  controlled.step_tolerance = 1e-12;
+  controlled.max_linearisations = 500;
+  controlled.proximal_growth = 2.0;
+  controlled.proximal_max_scale = 4.0;
+  controlled.proximal_shrink = 4.0;
+  auto solver = SequentialSolver::Create(*MakeModelLinearisation(SineCubeModel(), p, damping), {}, controlled);
+  ASSERT_TRUE(solver.ok());
+  Solution guess = ZeroGuess(p), plan;
+  guess.inputs(0, 0) = 2.5;
+  guess.states(1, 0) = 0.6 + 0.5 * std::sin(2.5);
+  auto summary = (*solver)->Solve(guess, &plan);
+  ASSERT_TRUE(summary.ok()) << summary.status();
+  EXPECT_GT(summary->rejected, 0);
+  EXPECT_TRUE(summary->converged);
+  EXPECT_NEAR(plan.inputs(0, 0), OneStepOptimum(0.6), 1e-6);
+  EXPECT_LT(summary->nonlinear_violation, 1e-9);
+}
+
 TEST(NonlinearModel, BadShapesAreRefusedNamingTheField) {
   Problem p = OneStepProblem(0.6);
   p.num_outputs = 2;
@@ -124,6 +214,24 @@ TEST(NonlinearModel, BadShapesAreRefusedNamingTheField) {
   trust.state_radius = Eigen::VectorXd::Constant(1, -1.0);
   EXPECT_THAT(MakeModelLinearisation(SineCubeModel(), OneStepProblem(0.6), trust).status(),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("state_radius[0]")));
+  trust = TrustRegion{};
+  trust.state_proximal_stddev = Eigen::VectorXd::Constant(1, 0.0);
+  EXPECT_THAT(MakeModelLinearisation(SineCubeModel(), OneStepProblem(0.6), trust).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("TrustRegion.state_proximal_stddev[0]")));
+  trust = TrustRegion{};
+  trust.input_proximal_stddev = Eigen::VectorXd::Constant(3, 1.0);
+  EXPECT_THAT(MakeModelLinearisation(SineCubeModel(), OneStepProblem(0.6), trust).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("TrustRegion.input_proximal_stddev")));
+  for (const auto& [field, set] : std::vector<std::pair<std::string, std::function<void(SequentialOptions&)>>>{
+           {"proximal_growth", [](SequentialOptions& o) { o.proximal_growth = 0.5; }},
+           {"proximal_max_scale", [](SequentialOptions& o) { o.proximal_max_scale = std::nan(""); }},
+           {"proximal_shrink", [](SequentialOptions& o) { o.proximal_shrink = 0.0; }},
+           {"proximal_model_error", [](SequentialOptions& o) { o.proximal_model_error = -1.0; }},
+           {"proximal_violation_floor", [](SequentialOptions& o) { o.proximal_violation_floor = -1.0; }}}) {
+    SequentialOptions bad;
+    set(bad);
+    EXPECT_THAT(Validate(bad), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(field)));
+  }
   NonlinearModel no_output = SineCubeModel();
   no_output.output = nullptr;
   EXPECT_THAT(MakeModelLinearisation(no_output, OneStepProblem(0.6)).status(),

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/priors/scalar_prior.h"
 #include "core/session/session.h"
 #include "core/util/status_macros.h"
 
@@ -13,6 +14,11 @@ namespace {
 // Output bounds of [KL] §V-E (z, a, δ, a_tot²).
 constexpr double kLower[4] = {-0.006, -1.0, -0.35, 0.0};
 constexpr double kUpper[4] = {0.006, 1.0, 0.35, 150.0};
+// The model's outputs are these quantities divided by the largest magnitude of their
+// bounds, so that every bound is of size 1 and the sequential solver's step control
+// compares the linearisation errors of z (bound 0.006) and a_tot² (bound 150) on one
+// scale.
+constexpr double kOutputScale[4] = {0.006, 1.0, 0.35, 150.0};
 
 // One straight or arc: the point and heading after `length` from (p, φ).
 void Advance(double length, double curvature, Eigen::Vector2d* p, double* heading) {
@@ -122,7 +128,7 @@ core::NonlinearModel RaceModel(const Track& track, const Vehicle& vehicle, int s
     (*B)(4, 0) = ds * g;
     (*B)(3, 1) = ds * g;
   };
-  // y = [z, a, δ, a² + ψ v⁴ tan²δ / ℓ²] (eq. 110).
+  // y = [z, a, δ, a² + ψ v⁴ tan²δ / ℓ²] (eq. 110), each divided by kOutputScale.
   model.output = [ell, psi](int, const Eigen::VectorXd& x, Eigen::VectorXd* y, Eigen::MatrixXd* C) {
     const double v = x(2), a = x(3), td = std::tan(x(4)), lateral = psi / (ell * ell);
     *y << x(0), a, x(4), a * a + lateral * std::pow(v, 4) * td * td;
@@ -133,18 +139,46 @@ core::NonlinearModel RaceModel(const Track& track, const Vehicle& vehicle, int s
     (*C)(3, 2) = 4 * lateral * std::pow(v, 3) * td * td;
     (*C)(3, 3) = 2 * a;
     (*C)(3, 4) = 2 * lateral * std::pow(v, 4) * td * (1 + td * td);
+    for (int k = 0; k < 4; ++k) {
+      (*y)(k) /= kOutputScale[k];
+      C->row(k) /= kOutputScale[k];
+    }
   };
   return model;
 }
 
-absl::StatusOr<RaceRun> RaceLap(const Track& track, const Vehicle& vehicle, int steps, double v0,
-                                double speed_trust_radius, core::SequentialOptions options) {
+core::SequentialOptions RaceSettings::DefaultSequentialOptions() {
+  core::SequentialOptions options;
+  options.max_linearisations = 300;
+  options.proximal_growth = 1.5;
+  options.proximal_max_scale = 100.0;
+  options.proximal_shrink = 4.0;
+  return options;
+}
+
+core::SolverOptions RaceSettings::DefaultSolverOptions() {
+  core::SolverOptions options;
+  // The outputs are scaled to unit bounds; 1e-7 of a bound (6e-10 of the track's half
+  // width) is below anything the Euler model resolves, and IFFBDD spends many passes on
+  // the last decades of a near-degenerate problem.
+  options.violation_tolerance = 1e-7;
+  // A linearised problem IFFBDD has not solved in 1000 passes was linearised with too wide
+  // a proximal term (the step control shrinks it): waiting longer rarely pays.
+  options.max_iterations = 1000;
+  return options;
+}
+
+double TotalAccelerationSquared(const Eigen::VectorXd& outputs) { return kOutputScale[3] * outputs(3); }
+
+absl::StatusOr<RaceRun> RaceLap(const Track& track, const Vehicle& vehicle, int steps, const RaceSettings& settings) {
+  const double v0 = settings.start_speed;
   core::NonlinearModel model = RaceModel(track, vehicle, steps);
   core::Problem problem = core::Problem::TimeInvariant(6, 2, 4, steps);
   problem.initial_mean = (Eigen::VectorXd(6) << 0, 0, v0, 0, 0, 0).finished();
   for (core::ScalarPrior& prior : problem.input_priors) prior = core::ScalarPrior::Gaussian(0.0, 1e8);
   for (int n = 1; n <= steps; ++n) {
-    for (int k = 0; k < 4; ++k) problem.mutable_output_prior(n, k) = core::ScalarPrior::Box(kLower[k], kUpper[k]);
+    for (int k = 0; k < 4; ++k) problem.mutable_output_prior(n, k) =
+          core::ScalarPrior::Box(kLower[k] / kOutputScale[k], kUpper[k] / kOutputScale[k]);
   }
   Eigen::MatrixXd time_weight = Eigen::MatrixXd::Zero(6, 6);
   time_weight(5, 5) = 1.0 / 500.0;  // t[K] ~ N(0, 500): minimal lap time
@@ -162,11 +196,13 @@ absl::StatusOr<RaceRun> RaceLap(const Track& track, const Vehicle& vehicle, int 
   }
   core::TrustRegion trust;
   trust.state_radius = Eigen::VectorXd::Constant(6, core::kInfinity);
-  trust.state_radius(2) = speed_trust_radius;
+  trust.state_radius(2) = settings.speed_trust_radius;
+  trust.state_proximal_stddev = Eigen::VectorXd::Constant(6, settings.proximal_stddev);
+  trust.input_proximal_stddev = Eigen::VectorXd::Constant(2, settings.proximal_stddev);
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Linearisation> linearisation,
                           core::MakeModelLinearisation(model, problem, trust));
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::SequentialSolver> solver,
-                          core::SequentialSolver::Create(std::move(linearisation), {}, options));
+                          core::SequentialSolver::Create(std::move(linearisation), settings.solver, settings.sequential));
   RaceRun run;
   NUPMPC_ASSIGN_OR_RETURN(run.summary, solver->Solve(guess, &run.plan));
   run.lap_time = run.plan.states(steps, 5);
@@ -177,10 +213,36 @@ absl::StatusOr<RaceRun> RaceLap(const Track& track, const Vehicle& vehicle, int 
   for (int n = 1; n <= steps; ++n) {
     model.output(n, run.plan.states.row(n).transpose(), &y, &C);
     for (int k = 0; k < 4; ++k) {
-      run.max_output_violation = std::max({run.max_output_violation, kLower[k] - y(k), y(k) - kUpper[k]});
+      const double value = kOutputScale[k] * y(k);
+      run.max_output_violation = std::max({run.max_output_violation, kLower[k] - value, value - kUpper[k]});
     }
   }
   return run;
+}
+
+double CentreLineLapTime(const Track& track, const Vehicle& vehicle, double start_speed, int samples) {
+  const double ds = track.length() / samples, max_a = kUpper[1], max_total = kUpper[3];
+  const auto lateral = [&](double v, double kappa) { return vehicle.psi * std::pow(v * v * kappa, 2); };
+  // The speed the total-acceleration bound allows with no longitudinal acceleration, and
+  // the longitudinal acceleration left at speed v.
+  const auto top_speed = [&](double kappa) {
+    return kappa == 0.0 ? core::kInfinity : std::pow(max_total / vehicle.psi, 0.25) / std::sqrt(std::abs(kappa));
+  };
+  const auto acceleration = [&](double v, double kappa) {
+    return std::min(max_a, std::sqrt(std::max(0.0, max_total - lateral(v, kappa))));
+  };
+  std::vector<double> v(samples + 1), kappa(samples + 1);
+  for (int n = 0; n <= samples; ++n) kappa[n] = track.curvature_at(n * ds);
+  v[0] = start_speed;
+  for (int n = 0; n < samples; ++n) {  // accelerate as hard as allowed ...
+    v[n + 1] = std::min(top_speed(kappa[n + 1]), std::sqrt(v[n] * v[n] + 2 * acceleration(v[n], kappa[n]) * ds));
+  }
+  for (int n = samples - 1; n >= 1; --n) {  // ... and brake in time for every corner
+    v[n] = std::min(v[n], std::sqrt(v[n + 1] * v[n + 1] + 2 * acceleration(v[n + 1], kappa[n]) * ds));
+  }
+  double time = 0.0;
+  for (int n = 0; n < samples; ++n) time += 2 * ds / (v[n] + v[n + 1]);
+  return time;
 }
 
 }  // namespace nupmpc::examples

@@ -1,0 +1,67 @@
+// [KL] §V-E / Fig. 25: one minimal-time lap of the demo track (K = 1000 spatial steps by
+// default, or argv[2]); writes race_track.csv (the race line in the plane, the centre
+// line, the speed and the constrained outputs along s) and prints lap time,
+// linearisations, passes, constraint and model errors, the centre-line reference lap
+// and the solve time.
+#include <cstdio>
+#include <cstdlib>
+
+#include "core/examples/csv_table.h"
+#include "core/examples/scenarios/race_track.h"
+
+int main(int argc, char** argv) {
+  const std::string dir = nupmpc::examples::OutputDirectory(argc, argv);
+  const int steps = argc > 2 ? std::atoi(argv[2]) : 1000;
+  if (steps < 20) {
+    std::fprintf(stderr, "race track: steps (argv[2]) must be ≥ 20, got %s\n", argv[2]);
+    return 1;
+  }
+  const nupmpc::examples::Track track = nupmpc::examples::DemoTrack();
+  const nupmpc::examples::Vehicle vehicle;
+  const nupmpc::examples::RaceSettings settings;
+  auto run = nupmpc::examples::RaceLap(track, vehicle, steps, settings);
+  if (!run.ok()) {
+    std::fprintf(stderr, "race track: %s\n", run.status().ToString().c_str());
+    return 1;
+  }
+  const double centre_line = nupmpc::examples::CentreLineLapTime(track, vehicle, settings.start_speed, 100 * steps);
+  const auto& summary = run->summary;
+  std::printf(
+      "race track K=%d length=%.3f: lap=%.4f s (centre-line point mass %.4f s) converged=%d linearisations=%d "
+      "(rejected %d) passes=%d max_output_violation=%.1e model_defect=%.1e last_step=%.1e time=%.2f s\n",
+      steps, track.length(), run->lap_time, centre_line, summary.converged, summary.linearisations, summary.rejected,
+      summary.inner_iterations, run->max_output_violation, run->model_defect, summary.last_step,
+      summary.solve_seconds);
+  const Eigen::MatrixXd& x = run->plan.states;
+  Eigen::VectorXd s(steps + 1), px(steps + 1), py(steps + 1), cx(steps + 1), cy(steps + 1), a_total(steps + 1);
+  const nupmpc::core::NonlinearModel model = nupmpc::examples::RaceModel(track, vehicle, steps);
+  Eigen::VectorXd y(4);
+  Eigen::MatrixXd C(4, 6);
+  for (int n = 0; n <= steps; ++n) {
+    s(n) = n * track.length() / steps;
+    const Eigen::Vector2d on_line = track.point(s(n), x(n, 0)), centre = track.point(s(n));
+    px(n) = on_line(0);
+    py(n) = on_line(1);
+    cx(n) = centre(0);
+    cy(n) = centre(1);
+    model.output(n, x.row(n).transpose(), &y, &C);
+    a_total(n) = nupmpc::examples::TotalAccelerationSquared(y);
+  }
+  const absl::Status written = nupmpc::examples::WriteCsv(
+      dir + "/race_track.csv", {{"s", s},
+                                {"x", px},
+                                {"y", py},
+                                {"centre_x", cx},
+                                {"centre_y", cy},
+                                {"z", x.col(0)},
+                                {"speed", x.col(2)},
+                                {"a", x.col(3)},
+                                {"delta", x.col(4)},
+                                {"t", x.col(5)},
+                                {"a_total_sq", a_total}});
+  if (!written.ok()) {
+    std::fprintf(stderr, "%s\n", written.ToString().c_str());
+    return 1;
+  }
+  return 0;
+}
