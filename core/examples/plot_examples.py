@@ -105,12 +105,13 @@ def race_track(d):
     """[KL] Fig. 25: the minimal-time race line coloured by speed, and a_tot² along s."""
     t = read(f"{d}/race_track.csv")
     fig, (plane, profile) = plt.subplots(1, 2, figsize=(12, 5), gridspec_kw={"width_ratios": [3, 2]})
-    plane.plot(t["centre_x"], t["centre_y"], color="0.8", linewidth=6, label="track (±0.006 around the centre line)")
-    line = plane.scatter(t["x"], t["y"], c=t["speed"], s=4, cmap="viridis")
+    for side in ("left", "right"):
+        plane.plot(t[f"{side}_x"], t[f"{side}_y"], color="0.5", linewidth=0.6)
+    line = plane.scatter(t["x"], t["y"], c=t["speed"], s=2, cmap="viridis", label="race line")
     fig.colorbar(line, ax=plane, label="speed v")
     plane.set_aspect("equal")
     plane.set_title(f"minimal-time lap: {t['t'][-1]:.3f} s")
-    plane.legend(fontsize=7, loc="lower right")
+    plane.set_xlabel("track edges: 0.006 either side of the centre line (z in the right panel)", fontsize=8)
     profile.plot(t["s"], t["speed"], label="v")
     profile.plot(t["s"], [a / 150 for a in t["a_total_sq"]], label="a_tot² / 150")
     profile.plot(t["s"], [z / 0.006 for z in t["z"]], linewidth=0.8, label="z / 0.006")

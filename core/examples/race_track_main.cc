@@ -1,6 +1,6 @@
 // [KL] §V-E / Fig. 25: one minimal-time lap of the demo track (K = 1000 spatial steps by
-// default, or argv[2]); writes race_track.csv (the race line in the plane, the centre
-// line, the speed and the constrained outputs along s) and prints lap time,
+// default, or argv[2]); writes race_track.csv (the race line and the track's edges in the
+// plane, the speed and the constrained outputs along s) and prints lap time,
 // linearisations, passes, constraint and model errors, the centre-line reference lap
 // and the solve time.
 #include <cstdio>
@@ -33,17 +33,22 @@ int main(int argc, char** argv) {
       summary.inner_iterations, run->max_output_violation, run->model_defect, summary.last_step,
       summary.solve_seconds);
   const Eigen::MatrixXd& x = run->plan.states;
-  Eigen::VectorXd s(steps + 1), px(steps + 1), py(steps + 1), cx(steps + 1), cy(steps + 1), a_total(steps + 1);
+  const int rows = steps + 1;
+  Eigen::VectorXd s(rows), px(rows), py(rows), lx(rows), ly(rows), rx(rows), ry(rows), a_total(rows);
   const nupmpc::core::NonlinearModel model = nupmpc::examples::RaceModel(track, vehicle, steps);
   Eigen::VectorXd y(4);
   Eigen::MatrixXd C(4, 6);
   for (int n = 0; n <= steps; ++n) {
     s(n) = n * track.length() / steps;
-    const Eigen::Vector2d on_line = track.point(s(n), x(n, 0)), centre = track.point(s(n));
+    const Eigen::Vector2d on_line = track.point(s(n), x(n, 0));
+    const Eigen::Vector2d left = track.point(s(n), nupmpc::examples::kTrackHalfWidth);
+    const Eigen::Vector2d right = track.point(s(n), -nupmpc::examples::kTrackHalfWidth);
     px(n) = on_line(0);
     py(n) = on_line(1);
-    cx(n) = centre(0);
-    cy(n) = centre(1);
+    lx(n) = left(0);
+    ly(n) = left(1);
+    rx(n) = right(0);
+    ry(n) = right(1);
     model.output(n, x.row(n).transpose(), &y, &C);
     a_total(n) = nupmpc::examples::TotalAccelerationSquared(y);
   }
@@ -51,8 +56,10 @@ int main(int argc, char** argv) {
       dir + "/race_track.csv", {{"s", s},
                                 {"x", px},
                                 {"y", py},
-                                {"centre_x", cx},
-                                {"centre_y", cy},
+                                {"left_x", lx},
+                                {"left_y", ly},
+                                {"right_x", rx},
+                                {"right_y", ry},
                                 {"z", x.col(0)},
                                 {"speed", x.col(2)},
                                 {"a", x.col(3)},

@@ -12,13 +12,13 @@ namespace nupmpc::examples {
 namespace {
 
 // Output bounds of [KL] §V-E (z, a, δ, a_tot²).
-constexpr double kLower[4] = {-0.006, -1.0, -0.35, 0.0};
-constexpr double kUpper[4] = {0.006, 1.0, 0.35, 150.0};
+constexpr double kLower[4] = {-kTrackHalfWidth, -1.0, -0.35, 0.0};
+constexpr double kUpper[4] = {kTrackHalfWidth, 1.0, 0.35, 150.0};
 // The model's outputs are these quantities divided by the largest magnitude of their
 // bounds, so that every bound is of size 1 and the sequential solver's step control
 // compares the linearisation errors of z (bound 0.006) and a_tot² (bound 150) on one
 // scale.
-constexpr double kOutputScale[4] = {0.006, 1.0, 0.35, 150.0};
+constexpr double kOutputScale[4] = {kTrackHalfWidth, 1.0, 0.35, 150.0};
 
 // One straight or arc: the point and heading after `length` from (p, φ).
 void Advance(double length, double curvature, Eigen::Vector2d* p, double* heading) {

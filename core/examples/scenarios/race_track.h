@@ -25,6 +25,9 @@
 
 namespace nupmpc::examples {
 
+// The bound on z, the distance from the centre line ([KL] §V-E).
+inline constexpr double kTrackHalfWidth = 0.006;
+
 // A closed centre line of pieces of constant curvature.
 struct Track {
   struct Piece {
