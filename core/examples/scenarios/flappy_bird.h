@@ -53,9 +53,6 @@ double WorstSlitViolation(const std::vector<Wall>& walls, const Eigen::VectorXd&
 absl::StatusOr<FlappyRun> FlyThroughWalls(int steps, const std::vector<Wall>& walls, const FlappyParameters& params,
                                           int iterations = 2000);
 
-absl::StatusOr<FlappyRun> FlyRecedingHorizon(int steps, const std::vector<Wall>& walls, const FlappyParameters& params,
-                                             int horizon, int passes_per_step);
-
 }  // namespace nupmpc::examples
 
 #endif  // NUPMPC_CORE_EXAMPLES_SCENARIOS_FLAPPY_BIRD_H_
