@@ -58,6 +58,11 @@ absl::Status Validate(const SolverOptions& o) {
         absl::StrCat("SolverOptions.iake_variance_floor = ", o.iake_variance_floor, "; must be finite and >= 0"));
   }
   if (absl::Status s = AtLeast("max_iterations", o.max_iterations, 1); !s.ok()) return s;
+  if (!(o.elastic_slope >= 0.0) || !std::isfinite(o.elastic_slope)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("SolverOptions.elastic_slope = ", o.elastic_slope, "; must be finite and >= 0 (0: off)"));
+  }
+  if (absl::Status s = AtLeast("elastic_after_iterations", o.elastic_after_iterations, 1); !s.ok()) return s;
   if (absl::Status s = AtLeast("polish_after_stable_iterations", o.polish_after_stable_iterations, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("polish_rounds", o.polish_rounds, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("discrete_fixing_passes", o.discrete_fixing_passes, 0); !s.ok()) return s;

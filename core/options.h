@@ -83,6 +83,19 @@ struct SolverOptions {
   // many sweeps, until one finds nothing (0: off).
   int discrete_search_sweeps = 20;
 
+  // Elastic fallback (core/session/elastic.h) for output bounds that cannot all be met.
+  // With elastic_slope > 0, an IFFBDD solve with hard output bounds that has not converged
+  // after elastic_after_iterations passes continues, for the rest of its budget, on the
+  // problem with every hard output bound replaced by the exact penalty
+  // elastic_slope·distance (input bounds stay hard: the actuator's limits). If that plan
+  // meets every bound it is the hard problem's optimum (status converged); otherwise the
+  // solve reports SolveStatus::kInfeasible with the plan minimising
+  // J + slope·(distance outside the output bounds). On a feasible problem the first case
+  // needs a slope above the bounds' Lagrange multipliers (J's units per unit of the
+  // bounded output). 0: off, the solve runs to its iteration limit.
+  double elastic_slope = 0.0;
+  int elastic_after_iterations = 200;
+
   // Default per-solve iteration cap (SolveLimits may lower it).
   int max_iterations = 5000;
 };

@@ -16,6 +16,10 @@ enum class SolveStatus {
   kTimeLimit,       ///< wall-time limit reached
   kNumericalError,  ///< a non-finite number appeared; the last finite iterate is returned
   kCancelled,       ///< the cancel flag was raised
+  // The hard output bounds were not met: the plan minimises J + slope·(distance outside
+  // them) within the input bounds (SolverOptions.elastic_slope); max_violation says by
+  // how much.
+  kInfeasible,
 };
 const char* SolveStatusName(SolveStatus status);
 
@@ -36,6 +40,7 @@ struct SolveSummary {
   double discrete_gap = 0.0;  ///< largest distance of a binary (or an M-level sum) to its nearer level when rounded
   int discrete_moves = 0;     ///< level changes the discrete local search accepted after rounding
   bool warm_started = false;
+  bool elastic = false;  ///< the elastic fallback ran (SolverOptions.elastic_slope)
   double solve_seconds = 0.0;
   // Nonlinear problems solved by sequential linearisation (KeepOutSession): how many
   // linearised problems were solved (iterations counts the passes over all of them) and

@@ -161,7 +161,7 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   if (spec.has_keep_out()) return Invalid("spec.keep_out: cannot be combined with spec.gp");
   const v1::SolverOptions& o = spec.options();
   if (o.algorithm() != v1::ALGORITHM_UNSPECIFIED || o.max_iterations() != 0 || o.objective_tolerance() != 0.0 ||
-      o.violation_tolerance() != 0.0) {
+      o.violation_tolerance() != 0.0 || o.elastic_slope() != 0.0 || o.elastic_after_iterations() != 0) {
     return Invalid("spec.options: GP sessions take time_limit_ms only (SCP limits are in spec.gp.scp)");
   }
   if (!(o.time_limit_ms() >= 0.0) || !std::isfinite(o.time_limit_ms())) {

@@ -322,6 +322,13 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, 
   NUPMPC_RETURN_IF_ERROR(positive_or_zero(o.time_limit_ms(), "time_limit_ms"));
   if (o.objective_tolerance() > 0) out.objective_tolerance = o.objective_tolerance();
   if (o.violation_tolerance() > 0) out.violation_tolerance = o.violation_tolerance();
+  NUPMPC_RETURN_IF_ERROR(positive_or_zero(o.elastic_slope(), "elastic_slope"));
+  out.elastic_slope = o.elastic_slope();
+  if (o.elastic_after_iterations() > static_cast<unsigned>(limits.max_iterations)) {
+    return Invalid("spec.options.elastic_after_iterations = ", o.elastic_after_iterations(),
+                   ": must not exceed the server's iteration limit ", limits.max_iterations);
+  }
+  if (o.elastic_after_iterations() > 0) out.elastic_after_iterations = static_cast<int>(o.elastic_after_iterations());
   NUPMPC_RETURN_IF_ERROR(core::Validate(out));
   return out;
 }
@@ -392,6 +399,7 @@ v1::SolveStatus StatusToProto(core::SolveStatus s) {
     case core::SolveStatus::kTimeLimit: return v1::SOLVE_STATUS_TIME_LIMIT;
     case core::SolveStatus::kNumericalError: return v1::SOLVE_STATUS_NUMERICAL_ERROR;
     case core::SolveStatus::kCancelled: return v1::SOLVE_STATUS_CANCELLED;
+    case core::SolveStatus::kInfeasible: return v1::SOLVE_STATUS_INFEASIBLE;
   }
   return v1::SOLVE_STATUS_UNSPECIFIED;
 }

@@ -26,6 +26,7 @@ class Iffbdd final : public ActiveSetIteration {
 
   Algorithm algorithm() const override { return Algorithm::kIffbdd; }
   void Refresh(const Problem& problem) override;
+  void RefreshOutputPriors(const Problem& problem) override { RefreshFactorGraphOutputPriors(problem, &graph_); }
   void RefreshInitialState(const Problem& problem) override {
     RefreshFactorGraphInitialState(problem, &graph_);
     if (input_polish_) input_polish_->RefreshInitialState(problem);

@@ -36,6 +36,9 @@ class OuterIteration {
   virtual void Refresh(const Problem& problem) = 0;
   // Cheaper Refresh for the common per-step update: only x[0]'s mean changed. No allocation.
   virtual void RefreshInitialState(const Problem& problem) = 0;
+  // Cheaper Refresh when only the output priors' kind parts changed (the session's elastic
+  // fallback changes slopes). IFFBDD's needs no allocation; others refresh everything.
+  virtual void RefreshOutputPriors(const Problem& problem) { Refresh(problem); }
   // Forgets the carried state: the next Iterate() starts from the papers' initialisation.
   virtual void ColdStart() = 0;
   // Receding horizon: the state of step n+1 becomes the state of step n; the last step

@@ -175,4 +175,11 @@ void RefreshFactorGraph(const Problem& p, FactorGraph* graph) {
   }
 }
 
+void RefreshFactorGraphOutputPriors(const Problem& p, FactorGraph* graph) {
+  for (int r = 0; r < graph->num_rows(); ++r) {
+    const RowOrigin& o = graph->row_origin[r];
+    if (o.type == RowOrigin::Type::kOutput) graph->row_prior[r] = p.output_prior(o.step, o.index);
+  }
+}
+
 }  // namespace nupmpc::core

@@ -67,6 +67,8 @@ FactorGraph BuildFactorGraph(const Problem& problem, bool augment_inputs);
 // Copies the values of a problem of the same shape into an existing graph
 // (no allocation). The caller guarantees the shape matches the one built.
 void RefreshFactorGraph(const Problem& problem, FactorGraph* graph);
+// Only the output rows' priors (no allocation).
+void RefreshFactorGraphOutputPriors(const Problem& problem, FactorGraph* graph);
 
 // Copies only x[0]'s mean (the per-step measurement). No allocation.
 inline void RefreshFactorGraphInitialState(const Problem& problem, FactorGraph* graph) {

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/algorithms/select.h"
 #include "core/priors/scalar_rules.h"
+#include "core/session/elastic.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::core {
@@ -64,6 +65,7 @@ const char* SolveStatusName(SolveStatus status) {
     case SolveStatus::kTimeLimit: return "time_limit";
     case SolveStatus::kNumericalError: return "numerical_error";
     case SolveStatus::kCancelled: return "cancelled";
+    case SolveStatus::kInfeasible: return "infeasible";
   }
   return "unknown";
 }
@@ -95,9 +97,15 @@ absl::Status Session::Rebuild() {
   candidate_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   best_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   has_warm_state_ = false;
+  DerivePriorFlags();
+  return absl::OkStatus();
+}
+
+void Session::DerivePriorFlags() {
   has_binary_inputs_ = AnyBinaryInput(problem_);
   has_nonconvex_priors_ = AnyNonconvexPrior(problem_);
-  return absl::OkStatus();
+  FindHardOutputBounds(problem_, &hard_bounds_);
+  elastic_applies_ = options_.elastic_slope > 0.0 && ElasticFormApplies(hard_bounds_, algorithm_->algorithm());
 }
 
 absl::Status Session::SetInitialState(const Eigen::VectorXd& x0) {
@@ -129,8 +137,7 @@ absl::Status Session::Update(const Problem& problem) {
     algorithm_->Refresh(problem_);
   }
   evaluator_.Prepare(problem_);
-  has_binary_inputs_ = AnyBinaryInput(problem_);
-  has_nonconvex_priors_ = AnyNonconvexPrior(problem_);
+  DerivePriorFlags();
   return absl::OkStatus();
 }
 
@@ -303,12 +310,24 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   if (!warm) algorithm_->ColdStart();
   algorithm_->AcquireWorkspace(problem_);  // after ReleaseWorkspace(); outside the timed loop's iterations
   const auto start = std::chrono::steady_clock::now();
-  SolveSummary summary = RunLoop(limits, warm);
+  const int max_iterations =
+      limits.max_iterations > 0 ? std::min(limits.max_iterations, options_.max_iterations) : options_.max_iterations;
+  const bool elastic_possible = elastic_applies_ && options_.elastic_after_iterations < max_iterations;
+  SolveLimits hard_limits = limits;
+  if (elastic_possible) hard_limits.max_iterations = options_.elastic_after_iterations;
+  SolveSummary summary = RunLoop(hard_limits, warm);
+  bool elastic_ran = false;
+  if (elastic_possible && summary.status == SolveStatus::kIterationLimit &&
+      summary.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
+    ContinueElastic(limits, start, max_iterations, &summary);
+    elastic_ran = true;
+  }
   if (has_binary_inputs_ && summary.IsUsable()) MakeInputsDiscrete(limits, start, &summary);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.warm_started = warm;
   summary.algorithm = algorithm_->algorithm();
-  has_warm_state_ = summary.status != SolveStatus::kNumericalError;
+  // After the elastic fallback the algorithm was restarted for the hard problem.
+  has_warm_state_ = summary.status != SolveStatus::kNumericalError && !elastic_ran;
   if (!has_warm_state_) algorithm_->ColdStart();
   if (solution != nullptr) {
     evaluator_.Evaluate(problem_, best_);
@@ -317,6 +336,43 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
     solution->outputs = evaluator_.outputs().transpose();
   }
   return summary;
+}
+
+void Session::ContinueElastic(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
+                              int max_iterations, SolveSummary* summary) {
+  SolveLimits rest = limits;
+  rest.max_iterations = max_iterations - summary->iterations;
+  if (limits.time_limit_seconds > 0.0) {
+    rest.time_limit_seconds =
+        limits.time_limit_seconds - std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (rest.time_limit_seconds <= 0.0) {
+      summary->status = SolveStatus::kTimeLimit;
+      return;
+    }
+  }
+  // The same algorithm on the elastic form (ElasticFormApplies checked it), from a cold
+  // start: the hard problem's dual iterate may exceed the slope.
+  SetBoundSlopes(hard_bounds_, options_.elastic_slope, &problem_);
+  algorithm_->RefreshOutputPriors(problem_);
+  algorithm_->ColdStart();
+  evaluator_.Prepare(problem_);
+  const SolveSummary elastic = RunLoop(rest, /*warm=*/false);
+  SetBoundSlopes(hard_bounds_, kInfinity, &problem_);
+  algorithm_->RefreshOutputPriors(problem_);
+  evaluator_.Prepare(problem_);
+  // best_ is the elastic plan (or, if the elastic loop broke down, the hard one): judged
+  // against the hard bounds.
+  const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
+  summary->iterations += elastic.iterations;
+  summary->objective = r.objective;
+  summary->max_violation = r.max_violation;
+  summary->polished = elastic.polished;
+  summary->elastic = true;
+  summary->status = elastic.status;
+  if (elastic.status == SolveStatus::kConverged &&
+      r.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
+    summary->status = SolveStatus::kInfeasible;
+  }
 }
 
 SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {

@@ -11,6 +11,7 @@
 #include "core/algorithms/outer_iteration.h"
 #include "core/options.h"
 #include "core/problem.h"
+#include "core/session/elastic.h"
 #include "core/session/mpc_session.h"
 #include "core/solution.h"
 
@@ -53,7 +54,14 @@ class Session final : public MpcSession {
  private:
   Session(Problem problem, SolverOptions options);
   absl::Status Rebuild();
+  // has_binary_inputs_, has_nonconvex_priors_, hard_bounds_, elastic_applies_ from problem_.
+  void DerivePriorFlags();
   SolveSummary RunLoop(const SolveLimits& limits, bool warm);
+  // The elastic fallback (SolverOptions.elastic_slope) for the rest of the solve's budget
+  // after the hard problem's loop stopped unconverged: solves the elastic form, restores
+  // the hard bounds and reports the plan against them.
+  void ContinueElastic(const SolveLimits& limits, std::chrono::steady_clock::time_point start, int max_iterations,
+                       SolveSummary* summary);
   // Makes the binary inputs of the returned plan discrete (SolverOptions.discrete_fixing_*:
   // at once, or block by block with re-solves in between) and re-evaluates it.
   void MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
@@ -85,6 +93,8 @@ class Session final : public MpcSession {
   bool has_warm_state_ = false;
   bool has_binary_inputs_ = false;  ///< derived from problem_ whenever it is replaced
   bool has_nonconvex_priors_ = false;  ///< likewise
+  HardBounds hard_bounds_;             ///< likewise: the hard output bounds
+  bool elastic_applies_ = false;       ///< likewise: the elastic fallback is on and applies
 };
 
 }  // namespace nupmpc::core

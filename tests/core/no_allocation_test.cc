@@ -128,6 +128,31 @@ TEST(NoAllocation, BinaryFixingAndSearchDoNotAllocate) {
   }
 }
 
+TEST(NoAllocation, TheElasticFallbackDoesNotAllocate) {
+  // masses_N30 with its position bounds tightened to ±0.05 around a start far outside
+  // them: infeasible, so every solve switches to the elastic form and back.
+  auto inst = bench::LoadBenchmarkInstance(kDir + "/masses_N30.json");
+  ASSERT_TRUE(inst.ok());
+  Problem p = inst->problem;
+  for (ScalarPrior& prior : p.output_priors) {
+    if (prior.kind == PriorKind::kBox && prior.is_hard()) prior = ScalarPrior::Box(-0.05, 0.05);
+  }
+  p.initial_mean = Eigen::VectorXd::Constant(p.num_states, 3.0);
+  SolverOptions options;
+  options.elastic_slope = 1e3;
+  options.elastic_after_iterations = 20;
+  auto session = Session::Create(p, options);
+  ASSERT_TRUE(session.ok()) << session.status();
+  ASSERT_TRUE((*session)->Solve(nullptr).ok());  // warms up lazily built state
+  const long before = g_allocations.load();
+  auto s = (*session)->Solve(nullptr);
+  const long allocated = g_allocations.load() - before;
+  ASSERT_TRUE(s.ok());
+  EXPECT_TRUE(s->elastic);
+  EXPECT_EQ(s->status, SolveStatus::kInfeasible) << s->Describe();
+  EXPECT_EQ(allocated, 0);
+}
+
 INSTANTIATE_TEST_SUITE_P(Algorithms, NoAllocationInLoop,
                          ::testing::Values(std::pair{"masses_N30", Algorithm::kIffbdd},
                                            std::pair{"corridor_N175", Algorithm::kIffbdd},

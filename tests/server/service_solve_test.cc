@@ -69,6 +69,41 @@ TEST_F(ServiceTest, NonconvexPriorsReachTheCoreThroughTheApi) {
   }
 }
 
+// The elastic fallback through the API: an integrator that cannot reach its output bound
+// from x0 = 5 within the horizon is answered INFEASIBLE with the least-penalty plan (every
+// input at its hard limit -0.1, the bound missed by 3.9 at step 1); without the option
+// the same spec runs to its iteration cap; a bad slope is refused naming the field.
+TEST_F(ServiceTest, AnInfeasibleSpecIsAnsweredInfeasibleWithTheElasticFallback) {
+  core::Problem p = core::Problem::TimeInvariant(1, 1, 1, 20);
+  p.A[0] << 1;
+  p.B[0] << 1;
+  p.C[0] << 1;
+  p.initial_mean = Eigen::VectorXd::Constant(1, 5.0);
+  for (core::ScalarPrior& prior : p.input_priors) prior = core::ScalarPrior::Box(-0.1, 0.1).WithGaussian(0, 1);
+  for (int n = 1; n <= p.horizon; ++n) p.mutable_output_prior(n, 0) = core::ScalarPrior::Box(0, 1).WithGaussian(0.5, 1);
+  v1::ProblemSpec spec = SpecOrDie(p);
+  spec.mutable_options()->set_elastic_slope(1e3);
+  absl::StatusOr<v1::SolveResult> elastic = client_->SolveOnce(spec);
+  ASSERT_TRUE(elastic.ok()) << elastic.status();
+  EXPECT_EQ(elastic->status(), v1::SOLVE_STATUS_INFEASIBLE);
+  EXPECT_NEAR(elastic->max_violation(), 3.9, 1e-9);
+  ASSERT_EQ(elastic->inputs_size(), 20);
+  for (int n = 0; n < 20; ++n) EXPECT_NEAR(elastic->inputs(n), -0.1, 1e-9) << n;
+  EXPECT_LE(elastic->iterations(), 300u);
+
+  spec.mutable_options()->set_elastic_slope(0.0);
+  spec.mutable_options()->set_max_iterations(400);
+  absl::StatusOr<v1::SolveResult> plain = client_->SolveOnce(spec);
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  EXPECT_EQ(plain->status(), v1::SOLVE_STATUS_ITERATION_LIMIT);
+  EXPECT_EQ(plain->iterations(), 400u);
+
+  spec.mutable_options()->set_elastic_slope(-2.0);
+  absl::StatusOr<v1::SolveResult> refused = client_->SolveOnce(spec);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(refused.status().message()), ::testing::HasSubstr("spec.options.elastic_slope"));
+}
+
 TEST_F(ServiceTest, EveryInstanceThroughSolveOnceAndASessionMatchesTheCore) {
   const std::vector<std::string> names = InstanceNames();
   ASSERT_GE(names.size(), 10u);
