@@ -116,14 +116,28 @@ TEST(NonlinearModel, ATrustRegionBoundsEachLinearisationsStep) {
   EXPECT_NEAR(plan.inputs(0, 0), OneStepOptimum(0.6), 1e-6);
 }
 
+// Proximal terms of standard deviation σ on the state and the input.
+TrustRegion Proximal(double stddev) {
+  TrustRegion damping;
+  damping.state_proximal_stddev = Eigen::VectorXd::Constant(1, stddev);
+  damping.input_proximal_stddev = Eigen::VectorXd::Constant(1, stddev);
+  return damping;
+}
+
+// Enough linearisations for a tight step tolerance.
+SequentialOptions ToConvergence() {
+  SequentialOptions options;
+  options.step_tolerance = 1e-12;
+  options.max_linearisations = 2000;
+  return options;
+}
+
 // Proximal terms on the state and the input shorten every step but vanish at a fixed
 // point: the plan still reaches the undamped optimum. A strong term (σ = 0.02 against a
 // first step of ~0.4 in x[1]) keeps the first step short.
 TEST(NonlinearModel, ProximalTermsShortenStepsButKeepTheOptimum) {
   const Problem p = OneStepProblem(0.6);
-  TrustRegion damping;
-  damping.state_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
-  damping.input_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
+  const TrustRegion damping = Proximal(0.02);
   SequentialOptions one;
   one.max_linearisations = 1;
   auto first = SequentialSolver::Create(*MakeModelLinearisation(SineCubeModel(), p, damping), {}, one);
@@ -131,10 +145,7 @@ TEST(NonlinearModel, ProximalTermsShortenStepsButKeepTheOptimum) {
   Solution plan;
   ASSERT_TRUE((*first)->Solve(ZeroGuess(p), &plan).ok());
   EXPECT_LT(std::abs(plan.states(1, 0) - 0.6), 0.05);
-  SequentialOptions options;
-  options.step_tolerance = 1e-12;
-  options.max_linearisations = 2000;
-  auto full = SequentialSolver::Create(*MakeModelLinearisation(SineCubeModel(), p, damping), {}, options);
+  auto full = SequentialSolver::Create(*MakeModelLinearisation(SineCubeModel(), p, damping), {}, ToConvergence());
   ASSERT_TRUE(full.ok());
   auto summary = (*full)->Solve(ZeroGuess(p), &plan);
   ASSERT_TRUE(summary.ok()) << summary.status();
@@ -148,12 +159,8 @@ TEST(NonlinearModel, ProximalTermsShortenStepsButKeepTheOptimum) {
 // terms end at their full width.
 TEST(NonlinearModel, StepControlWidensTheProximalTermsWhileStepsSucceed) {
   const Problem p = OneStepProblem(0.6);
-  TrustRegion damping;
-  damping.state_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
-  damping.input_proximal_stddev = Eigen::VectorXd::Constant(1, 0.02);
-  SequentialOptions fixed;
-  fixed.step_tolerance = 1e-12;
-  fixed.max_linearisations = 2000;
+  const TrustRegion damping = Proximal(0.02);
+  const SequentialOptions fixed = ToConvergence();
   SequentialOptions controlled = fixed;
   controlled.proximal_growth = 2.0;
   controlled.proximal_max_scale = 1e4;
@@ -180,12 +187,8 @@ TEST(NonlinearModel, StepControlWidensTheProximalTermsWhileStepsSucceed) {
 // terms and still converges to the optimum.
 TEST(NonlinearModel, StepControlDiscardsStepsTheLinearModelMispredicts) {
   const Problem p = OneStepProblem(0.6);
-  TrustRegion damping;
-  damping.state_proximal_stddev = Eigen::VectorXd::Constant(1, 10.0);
-  damping.input_proximal_stddev = Eigen::VectorXd::Constant(1, 10.0);
-  SequentialOptions controlled;
-  controlled.step_tolerance = 1e-12;
-  controlled.max_linearisations = 500;
+  const TrustRegion damping = Proximal(10.0);
+  SequentialOptions controlled = ToConvergence();
   controlled.proximal_growth = 2.0;
   controlled.proximal_max_scale = 4.0;
   controlled.proximal_shrink = 4.0;
