@@ -177,8 +177,10 @@ absl::StatusOr<RaceRun> RaceLap(const Track& track, const Vehicle& vehicle, int 
   problem.initial_mean = (Eigen::VectorXd(6) << 0, 0, v0, 0, 0, 0).finished();
   for (core::ScalarPrior& prior : problem.input_priors) prior = core::ScalarPrior::Gaussian(0.0, 1e8);
   for (int n = 1; n <= steps; ++n) {
-    for (int k = 0; k < 4; ++k) problem.mutable_output_prior(n, k) =
+    for (int k = 0; k < 4; ++k) {
+      problem.mutable_output_prior(n, k) =
           core::ScalarPrior::Box(kLower[k] / kOutputScale[k], kUpper[k] / kOutputScale[k]);
+    }
   }
   Eigen::MatrixXd time_weight = Eigen::MatrixXd::Zero(6, 6);
   time_weight(5, 5) = 1.0 / 500.0;  // t[K] ~ N(0, 500): minimal lap time

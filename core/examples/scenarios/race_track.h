@@ -51,7 +51,6 @@ struct Vehicle {
 // The spatial model of the vehicle on `track` with K steps over one lap. Its outputs are
 // z, a, δ and a_tot² each divided by the largest magnitude of its bounds (0.006, 1, 0.35,
 // 150), so that the step control compares their linearisation errors on one scale.
-
 core::NonlinearModel RaceModel(const Track& track, const Vehicle& vehicle, int steps);
 // a_tot² from the model's (scaled) outputs.
 double TotalAccelerationSquared(const Eigen::VectorXd& outputs);
