@@ -72,7 +72,7 @@ const char* SolveStatusName(SolveStatus status) {
 
 std::string SolveSummary::Describe() const {
   return absl::StrCat(AlgorithmName(algorithm), ": ", SolveStatusName(status), " after ", iterations, " iterations",
-                      polished ? " (polished)" : "", warm_started ? ", warm" : "", ", J = ", objective,
+                      polished ? " (polished)" : "", elastic ? " (elastic)" : "", warm_started ? ", warm" : "", ", J = ", objective,
                       ", max violation = ", max_violation,
                       linearisations > 0 ? absl::StrCat(", ", linearisations, " linearisations, nonlinear violation = ",
                                                         nonlinear_violation)
