@@ -23,10 +23,13 @@ Solution RestingPoint(const Problem& shape) {
 
 double MaxAbs(const Eigen::MatrixXd& m) { return m.size() == 0 ? 0.0 : m.cwiseAbs().maxCoeff(); }
 
-// Relative max-norm change of states and inputs from `point` to `plan`.
-double RelativeStep(const Solution& point, const Solution& plan) {
-  const double change = std::max(MaxAbs(plan.states - point.states), MaxAbs(plan.inputs - point.inputs));
-  return change / (1.0 + std::max(MaxAbs(plan.states), MaxAbs(plan.inputs)));
+// Max-norm change of states and inputs from `point` to `plan`, and the same relative to
+// 1 + the plan's max-norm.
+double AbsoluteStep(const Solution& point, const Solution& plan) {
+  return std::max(MaxAbs(plan.states - point.states), MaxAbs(plan.inputs - point.inputs));
+}
+double RelativeStep(double absolute_step, const Solution& plan) {
+  return absolute_step / (1.0 + std::max(MaxAbs(plan.states), MaxAbs(plan.inputs)));
 }
 
 }  // namespace
@@ -41,13 +44,12 @@ bool SequentialSolver::StepControlActive() const {
 // linearised with too wide a proximal term, unless the plan at least halved the last
 // accepted plan's violation (a point that is itself far from the model must be repaired
 // by a step no proximal width shortens).
-bool SequentialSolver::StepControlRejects(const SequentialSummary& summary, double violation,
+bool SequentialSolver::StepControlRejects(const SequentialSummary& summary, double violation, double step,
                                           const SolveLimits& limits, double accepted_violation) const {
   if (!StepControlActive()) return false;
   if (limits.max_iterations > 0 && summary.inner_iterations >= limits.max_iterations) return false;  // no budget left
   if (summary.last_inner.status == SolveStatus::kIterationLimit) return true;
   if (violation <= 0.5 * accepted_violation) return false;
-  const double step = std::max(MaxAbs(plan_.states - point_.states), MaxAbs(plan_.inputs - point_.inputs));
   return violation > std::max(options_.proximal_violation_floor, options_.proximal_model_error * step);
 }
 
@@ -169,7 +171,8 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
     ++summary.linearisations;
     summary.inner_iterations += summary.last_inner.iterations;
     const double violation = StepControlActive() ? linearisation_->NonlinearViolation(plan_) : 0.0;
-    if (StepControlRejects(summary, violation, limits, accepted_violation)) {
+    const double step = AbsoluteStep(point_, plan_);
+    if (StepControlRejects(summary, violation, step, limits, accepted_violation)) {
       // The linear model promised too much: keep the point, shorten the step.
       ++summary.rejected;
       proximal_scale /= options_.proximal_shrink;
@@ -181,7 +184,7 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
       accepted = plan_;
       accepted_violation = violation;
     }
-    summary.last_step = RelativeStep(point_, plan_);
+    summary.last_step = RelativeStep(step, plan_);
     const bool inner_done = options_.inner_iterations > 0 || summary.last_inner.status == SolveStatus::kConverged;
     if (summary.last_inner.status == SolveStatus::kConverged && proximal_scale < options_.proximal_max_scale) {
       proximal_scale = std::min(proximal_scale * options_.proximal_growth, options_.proximal_max_scale);

@@ -122,7 +122,8 @@ class SequentialSolver {
       : linearisation_(std::move(linearisation)), options_(options), problem_(std::move(problem)) {}
 
   bool StepControlActive() const;
-  bool StepControlRejects(const SequentialSummary& summary, double violation, const SolveLimits& limits,
+  // `step`: the max-norm change of states and inputs from point_ to plan_.
+  bool StepControlRejects(const SequentialSummary& summary, double violation, double step, const SolveLimits& limits,
                           double accepted_violation) const;
 
   std::unique_ptr<Linearisation> linearisation_;

@@ -310,24 +310,21 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   if (!warm) algorithm_->ColdStart();
   algorithm_->AcquireWorkspace(problem_);  // after ReleaseWorkspace(); outside the timed loop's iterations
   const auto start = std::chrono::steady_clock::now();
-  const int max_iterations =
-      limits.max_iterations > 0 ? std::min(limits.max_iterations, options_.max_iterations) : options_.max_iterations;
+  const int max_iterations = IterationCap(limits);
   const bool elastic_possible = elastic_applies_ && options_.elastic_after_iterations < max_iterations;
   SolveLimits hard_limits = limits;
   if (elastic_possible) hard_limits.max_iterations = options_.elastic_after_iterations;
   SolveSummary summary = RunLoop(hard_limits, warm);
-  bool elastic_ran = false;
   if (elastic_possible && summary.status == SolveStatus::kIterationLimit &&
       summary.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
     ContinueElastic(limits, start, max_iterations, &summary);
-    elastic_ran = true;
   }
   if (has_binary_inputs_ && summary.IsUsable()) MakeInputsDiscrete(limits, start, &summary);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.warm_started = warm;
   summary.algorithm = algorithm_->algorithm();
-  // After the elastic fallback the algorithm was restarted for the hard problem.
-  has_warm_state_ = summary.status != SolveStatus::kNumericalError && !elastic_ran;
+  // The elastic fallback's carried state belongs to the elastic problem, not this one.
+  has_warm_state_ = summary.status != SolveStatus::kNumericalError && !summary.elastic;
   if (!has_warm_state_) algorithm_->ColdStart();
   if (solution != nullptr) {
     evaluator_.Evaluate(problem_, best_);
@@ -336,6 +333,10 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
     solution->outputs = evaluator_.outputs().transpose();
   }
   return summary;
+}
+
+int Session::IterationCap(const SolveLimits& limits) const {
+  return limits.max_iterations > 0 ? std::min(limits.max_iterations, options_.max_iterations) : options_.max_iterations;
 }
 
 void Session::ContinueElastic(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
@@ -378,8 +379,7 @@ void Session::ContinueElastic(const SolveLimits& limits, std::chrono::steady_clo
 SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
-  const int max_iterations =
-      limits.max_iterations > 0 ? std::min(limits.max_iterations, options_.max_iterations) : options_.max_iterations;
+  const int max_iterations = IterationCap(limits);
   const double violation_tolerance = options_.violation_tolerance * evaluator_.bound_scale();
   const bool polish_enabled = options_.polish_after_stable_iterations > 0;
 

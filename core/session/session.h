@@ -56,6 +56,8 @@ class Session final : public MpcSession {
   absl::Status Rebuild();
   // has_binary_inputs_, has_nonconvex_priors_, hard_bounds_, elastic_applies_ from problem_.
   void DerivePriorFlags();
+  // The solve's pass budget: the limits' cap within the options' one.
+  int IterationCap(const SolveLimits& limits) const;
   SolveSummary RunLoop(const SolveLimits& limits, bool warm);
   // The elastic fallback (SolverOptions.elastic_slope) for the rest of the solve's budget
   // after the hard problem's loop stopped unconverged: solves the elastic form, restores
