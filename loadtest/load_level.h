@@ -5,6 +5,7 @@
 // fixed time (or request count), closed or open loop.
 
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include "absl/status/statusor.h"
@@ -32,6 +33,8 @@ struct LevelReport {
   double service_p50_ms = 0.0, service_p99_ms = 0.0;  ///< from the hand-over to gRPC
   double solve_p50_ms = 0.0;  ///< the server's own solver time, median
   double mean_iterations = 0.0;
+  // The same level against the zero-work echo server (EchoControlServer), when run.
+  std::shared_ptr<const LevelReport> echo;
 };
 
 // Opens the streams (each creates its session), runs the level, closes them.

@@ -23,10 +23,11 @@
 #include "client/client.h"
 #include "client/problem_file.h"
 #include "loadtest/core_baseline.h"
-#include "loadtest/transport_floor.h"
+#include "loadtest/echo_server.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
 #include "loadtest/loadtest_report.h"
+#include "loadtest/transport_floor.h"
 
 ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
 ABSL_FLAG(std::string, instance, "../shared/benchmarks/masses_N30.json",
@@ -41,6 +42,8 @@ ABSL_FLAG(double, warmup_s, 0.5, "unmeasured seconds before each level");
 ABSL_FLAG(uint64_t, requests, 0, "stop a level once this many solves were answered (0: by time)");
 ABSL_FLAG(int, baseline_rounds, 20, "passes of the core-alone baseline over the closed-loop states");
 ABSL_FLAG(int, transport_calls, 2000, "health checks that measure gRPC's own round trip");
+ABSL_FLAG(bool, echo, true,
+          "also run every level against an in-process zero-work echo server (the transport floor at that load)");
 ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
 ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
 ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
@@ -123,7 +126,17 @@ int main(int argc, char** argv) {
   absl::StatusOr<lt::TransportFloor> transport = lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls));
   if (!transport.ok()) return Fail("transport floor", transport.status());
 
-  lt::RunHeader header{name, target, *info, *baseline, *transport, capacity_per_s};
+  std::unique_ptr<lt::EchoControlServer> echo;
+  if (absl::GetFlag(FLAGS_echo)) {
+    // The echo answers with the real server's plan for the first state: real message sizes.
+    absl::StatusOr<nupmpc::v1::SolveResult> answer = client.SolveOnce(file->spec);
+    if (!answer.ok()) return Fail("SolveOnce for the echo server's answer", answer.status());
+    absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> started = lt::EchoControlServer::Start(*std::move(answer));
+    if (!started.ok()) return Fail("echo server", started.status());
+    echo = *std::move(started);
+  }
+
+  lt::RunHeader header{name, target, *info, *baseline, *transport, capacity_per_s, echo != nullptr};
   if (!json) lt::PrintHeader(header);
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed"};
   std::vector<lt::LevelReport> reports;
@@ -141,6 +154,13 @@ int main(int argc, char** argv) {
     absl::StatusOr<lt::LevelReport> report = lt::RunLevel(target, plan, config);
     if (!report.ok()) return Fail(absl::StrCat("concurrency ", c), report.status());
     if (!json) lt::PrintLevel(header, *report);
+    if (echo != nullptr) {
+      config.progress = false;
+      absl::StatusOr<lt::LevelReport> floor = lt::RunLevel(echo->target(), plan, config);
+      if (!floor.ok()) return Fail(absl::StrCat("echo server, concurrency ", c), floor.status());
+      if (!json) lt::PrintEchoLevel(*floor);
+      report->echo = std::make_shared<const lt::LevelReport>(*std::move(floor));
+    }
     reports.push_back(*std::move(report));
   }
   if (json) lt::PrintJson(header, reports);

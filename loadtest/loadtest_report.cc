@@ -34,6 +34,10 @@ void PrintHeader(const RunHeader& h) {
               h.transport.p50_us, h.transport.p99_us, h.transport.calls);
   std::printf("(load generator and server share this machine's cores; latency is request sent, or open-loop "
               "arrival scheduled, to answer received; svc: from the hand-over to gRPC)\n");
+  if (h.echo) {
+    std::printf("(echo rows: the same level against a zero-work server in the load generator's process that "
+                "answers every step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
+  }
   std::printf("%5s %-6s %10s %10s %8s %8s %8s %8s %8s %8s %6s %10s %10s %9s  %s\n", "C", "mode", "offered/s",
               "solves/s", "p50 ms", "p90 ms", "p99 ms", "p99.9 ms", "max ms", "svc p99", "iter", "superseded",
               "overhead", "capacity", "errors");
@@ -46,6 +50,15 @@ void PrintLevel(const RunHeader& h, const LevelReport& l) {
               l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms, l.max_ms, l.service_p99_ms, l.mean_iterations,
               static_cast<unsigned long long>(l.tally.superseded), OverheadUs(h, l),
               100.0 * l.solves_per_s / h.capacity_per_s, Errors(l.tally).c_str());
+  std::fflush(stdout);
+}
+
+void PrintEchoLevel(const LevelReport& l) {
+  const std::string offered = l.config.closed_loop ? "-" : absl::StrCat(static_cast<long long>(l.config.rate_per_s));
+  std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6s %10llu %8.0f\xc2\xb5s %9s  %s\n",
+              l.config.concurrency, "echo", offered.c_str(), l.solves_per_s, l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms,
+              l.max_ms, l.service_p99_ms, "-", static_cast<unsigned long long>(l.tally.superseded), l.p50_ms * 1e3,
+              "-", Errors(l.tally).c_str());
   std::fflush(stdout);
 }
 
@@ -84,6 +97,12 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                             {"overhead_p50_us", OverheadUs(h, l)},
                             {"fraction_of_capacity", l.solves_per_s / h.capacity_per_s}};
     if (!l.config.closed_loop) level["offered_per_s"] = l.config.rate_per_s;
+    if (l.echo != nullptr) {
+      const LevelReport& e = *l.echo;
+      level["echo"] = {{"solves_per_s", e.solves_per_s}, {"p50_ms", e.p50_ms},        {"p90_ms", e.p90_ms},
+                       {"p99_ms", e.p99_ms},             {"p999_ms", e.p999_ms},      {"max_ms", e.max_ms},
+                       {"superseded", e.tally.superseded}, {"errors", e.tally.errors}};
+    }
     out["levels"].push_back(std::move(level));
   }
   std::printf("%s\n", out.dump(2).c_str());

@@ -2,8 +2,8 @@
 #define NUPMPC_LOADTEST_LOADTEST_REPORT_H_
 
 // nupmpc-loadtest's output: a table for people, one JSON document for scripts. Every
-// level is set against the core-alone baseline and gRPC's own round trip, both measured
-// in the same run.
+// level is set against the core-alone baseline, gRPC's own round trip and (when run) the
+// same level against a zero-work echo server, all measured in the same run.
 
 #include <string>
 #include <vector>
@@ -23,10 +23,13 @@ struct RunHeader {
   CoreBaseline baseline;
   TransportFloor transport;
   double capacity_per_s = 0.0;  ///< worker threads / core median solve time
+  bool echo = false;            ///< every level is also run against the zero-work echo server
 };
 
 void PrintHeader(const RunHeader& header);
 void PrintLevel(const RunHeader& header, const LevelReport& level);
+// The row of a level run against the echo server, below the real level's row.
+void PrintEchoLevel(const LevelReport& echo);
 void PrintJson(const RunHeader& header, const std::vector<LevelReport>& levels);
 void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& report, bool json);
 

@@ -9,6 +9,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "loadtest/core_baseline.h"
+#include "loadtest/echo_server.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
 #include "loadtest/transport_floor.h"
@@ -76,6 +77,36 @@ TEST_F(LoadTest, TransportFloorIsMeasuredOnTheServersHealthService) {
   // Nothing is listening here: a clear error, no hang.
   absl::StatusOr<loadtest::TransportFloor> none = loadtest::MeasureTransportFloor("127.0.0.1:1", 1);
   EXPECT_EQ(none.status().code(), absl::StatusCode::kUnavailable);
+}
+
+TEST_F(LoadTest, EchoServerAnswersEveryStepWithItsFixedPlanInBothModes) {
+  v1::SolveResult plan;
+  plan.set_status(v1::SOLVE_STATUS_CONVERGED);
+  plan.set_iterations(7);
+  for (int i = 0; i < 90; ++i) plan.add_inputs(0.01 * i);
+  absl::StatusOr<std::unique_ptr<loadtest::EchoControlServer>> echo = loadtest::EchoControlServer::Start(plan);
+  ASSERT_TRUE(echo.ok()) << echo.status();
+  loadtest::LevelConfig config;
+  config.concurrency = 3;
+  config.duration_s = 0.3;
+  config.warmup_s = 0.05;
+  absl::StatusOr<loadtest::LevelReport> closed =
+      loadtest::RunLevel((*echo)->target(), {&workload_.spec, &workload_.states, /*closed_loop=*/true}, config);
+  ASSERT_TRUE(closed.ok()) << closed.status();
+  EXPECT_TRUE(closed->tally.errors.empty());
+  EXPECT_GT(closed->tally.latency_ms.size(), 30u);
+  EXPECT_EQ(closed->tally.sent, closed->tally.latency_ms.size());
+  // The load generator reads the echoed plan as it reads the server's.
+  EXPECT_EQ(closed->tally.iterations, 7u * closed->tally.latency_ms.size());
+  config.closed_loop = false;
+  config.rate_per_s = 600.0;
+  absl::StatusOr<loadtest::LevelReport> open =
+      loadtest::RunLevel((*echo)->target(), {&workload_.spec, &workload_.states, /*closed_loop=*/false}, config);
+  ASSERT_TRUE(open.ok()) << open.status();
+  EXPECT_TRUE(open->tally.errors.empty());
+  EXPECT_EQ(open->tally.superseded, 0u);  // it never queues, so nothing is ever superseded
+  EXPECT_EQ(open->tally.sent, open->tally.latency_ms.size());
+  EXPECT_GT(open->tally.sent, 60u);
 }
 
 TEST_F(LoadTest, OpenLoopArrivalsAreAnsweredOrSupersededNeverLost) {

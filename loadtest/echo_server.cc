@@ -1,0 +1,107 @@
+#include "loadtest/echo_server.h"
+
+#include <deque>
+#include <mutex>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+
+namespace nupmpc::loadtest {
+namespace {
+
+// One echoed Control stream. Reads and writes overlap (an open-loop client sends before
+// its previous answer is written), so answers wait in a queue and go out one at a time.
+class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
+ public:
+  explicit EchoStream(const v1::SolveResult* answer) : answer_(answer) { StartRead(&incoming_); }
+
+  void OnReadDone(bool ok) override {
+    std::unique_lock<std::mutex> lock(mu_);
+    if (!ok) {
+      reads_done_ = true;
+      FinishIfIdleLocked(lock);
+      return;
+    }
+    v1::ControlResponse response;
+    response.set_sequence(incoming_.sequence());
+    if (incoming_.has_step()) {
+      *response.mutable_result() = *answer_;
+    } else {
+      response.set_session_id("echo");
+    }
+    writes_.push_back(std::move(response));
+    const bool start_write = !writing_;
+    writing_ = true;
+    lock.unlock();
+    StartRead(&incoming_);
+    if (start_write) StartWrite(&writes_.front());
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::unique_lock<std::mutex> lock(mu_);
+    writes_.pop_front();
+    if (!ok) writes_.clear();
+    if (writes_.empty()) {
+      writing_ = false;
+      if (!ok) reads_done_ = true;
+      FinishIfIdleLocked(lock);
+      return;
+    }
+    const v1::ControlResponse* next = &writes_.front();  // deque: stable while others are appended
+    lock.unlock();
+    StartWrite(next);
+  }
+
+  void OnDone() override { delete this; }
+
+ private:
+  void FinishIfIdleLocked(std::unique_lock<std::mutex>& lock) {
+    if (!reads_done_ || writing_ || finished_) return;
+    finished_ = true;
+    lock.unlock();
+    Finish(grpc::Status::OK);
+  }
+
+  const v1::SolveResult* const answer_;
+  v1::ControlRequest incoming_;
+  std::mutex mu_;
+  std::deque<v1::ControlResponse> writes_;
+  bool writing_ = false;
+  bool reads_done_ = false;
+  bool finished_ = false;
+};
+
+}  // namespace
+
+class EchoControlServer::Service : public v1::MpcService::CallbackService {
+ public:
+  explicit Service(v1::SolveResult answer) : answer_(std::move(answer)) {}
+
+  grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(
+      grpc::CallbackServerContext* /*context*/) override {
+    return new EchoStream(&answer_);
+  }
+
+ private:
+  const v1::SolveResult answer_;
+};
+
+absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Start(v1::SolveResult answer) {
+  std::unique_ptr<EchoControlServer> s(new EchoControlServer());
+  s->service_ = std::make_unique<Service>(std::move(answer));
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &s->port_);
+  builder.RegisterService(s->service_.get());
+  builder.SetMaxReceiveMessageSize(-1);
+  s->server_ = builder.BuildAndStart();
+  if (s->server_ == nullptr || s->port_ == 0) return absl::UnavailableError("echo server: could not listen on 127.0.0.1");
+  return s;
+}
+
+EchoControlServer::~EchoControlServer() {
+  if (server_ != nullptr) server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+}
+
+std::string EchoControlServer::target() const { return absl::StrCat("127.0.0.1:", port_); }
+
+}  // namespace nupmpc::loadtest

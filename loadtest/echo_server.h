@@ -1,0 +1,40 @@
+#ifndef NUPMPC_LOADTEST_ECHO_SERVER_H_
+#define NUPMPC_LOADTEST_ECHO_SERVER_H_
+
+// The third peer of the load test: a zero-work stand-in for nupmpc-server's Control
+// stream, run inside nupmpc-loadtest on a loopback port. It answers the first message with
+// a session id and every step at once, inside the gRPC reaction, with one fixed real answer
+// (the plan the real server returned for the instance's first state, so the messages have
+// the real sizes). The same load level against it measures what gRPC and this machine's
+// loopback cost for exactly this traffic, with the load generator on the same cores: the
+// gap between it and the real server is nupmpc's own cost (solve, hand-over to the worker
+// pool, validation, conversion).
+
+#include <memory>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "grpcpp/grpcpp.h"
+#include "nupmpc/v1/nupmpc.grpc.pb.h"
+
+namespace nupmpc::loadtest {
+
+class EchoControlServer {
+ public:
+  // Listens on 127.0.0.1 at a free port; every step is answered with `answer`.
+  static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(v1::SolveResult answer);
+  ~EchoControlServer();
+
+  std::string target() const;
+
+ private:
+  class Service;
+  EchoControlServer() = default;
+  std::unique_ptr<Service> service_;
+  std::unique_ptr<grpc::Server> server_;
+  int port_ = 0;
+};
+
+}  // namespace nupmpc::loadtest
+
+#endif  // NUPMPC_LOADTEST_ECHO_SERVER_H_
