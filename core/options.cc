@@ -68,6 +68,7 @@ absl::Status Validate(const SolverOptions& o) {
   if (absl::Status s = AtLeast("discrete_fixing_passes", o.discrete_fixing_passes, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("discrete_fixing_blocks", o.discrete_fixing_blocks, 1); !s.ok()) return s;
   if (absl::Status s = AtLeast("discrete_search_sweeps", o.discrete_search_sweeps, 0); !s.ok()) return s;
+  if (absl::Status s = AtLeast("discrete_pair_reach", o.discrete_pair_reach, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("polish_max_rounds", o.polish_max_rounds, o.polish_rounds); !s.ok()) return s;
   if (absl::Status s = Fraction("polish_settled_fraction", o.polish_settled_fraction); !s.ok()) return s;
   if (absl::Status s = Fraction("input_polish_settled_fraction", o.input_polish_settled_fraction); !s.ok()) return s;

@@ -286,9 +286,56 @@ ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& 
         first = last;
       }
     }
+    if (!improved && options_.discrete_pair_reach > 0) improved = TryPairMove(limits, start, summary, try_move);
     if (!improved) break;
   }
   return current;  // best_'s evaluation (Solve() re-evaluates it for the returned trajectories)
+}
+
+bool Session::MoveOneLevel(int n, int direction, int first, int last) {
+  const int to = n + direction;
+  if (to < 0 || to >= problem_.horizon || !SameGroupAt(n, to, first, last)) return false;
+  const int here = GroupLevel(n, first, last), there = GroupLevel(to, first, last);
+  if (here == 0 || there == last - first + 1) return false;
+  SetGroupLevel(n, first, last, here - 1);
+  SetGroupLevel(to, first, last, there + 1);
+  return true;
+}
+
+template <typename TryMove>
+bool Session::TryPairMove(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
+                          SolveSummary* summary, TryMove& try_move) {
+  const int N = problem_.horizon, L = problem_.num_inputs;
+  for (int n1 = 0; n1 < N; ++n1) {
+    if (StopRequested(limits, start, summary)) return false;
+    for (int first = 0; first < L; ++first) {
+      if (problem_.input_prior(n1, first).kind != PriorKind::kBinary) continue;
+      const int last = GroupEnd(n1, first);
+      if (GroupLevel(n1, first, last) > 0) {
+        const int reach = std::min(N - 1, n1 + options_.discrete_pair_reach);
+        for (int n2 = n1 + 1; n2 <= reach; ++n2) {
+          if (!SameGroupAt(n1, n2, first, last) || GroupLevel(n2, first, last) == 0) continue;
+          for (const int d1 : {-1, 1}) {
+            for (const int d2 : {-1, 1}) {
+              // Undone in reverse order, each move by its exact inverse.
+              if (!MoveOneLevel(n1, d1, first, last)) continue;
+              if (!MoveOneLevel(n2, d2, first, last)) {
+                MoveOneLevel(n1 + d1, -d1, first, last);
+                continue;
+              }
+              const auto undo = [&] {
+                MoveOneLevel(n2 + d2, -d2, first, last);
+                MoveOneLevel(n1 + d1, -d1, first, last);
+              };
+              if (try_move([] {}, undo)) return true;
+            }
+          }
+        }
+      }
+      first = last;
+    }
+  }
+  return false;
 }
 
 void Session::ShiftWarmStart() {

@@ -77,6 +77,18 @@ class Session final : public MpcSession {
   ObjectiveEvaluator::Result SearchDiscreteNeighbours(const SolveLimits& limits,
                                                       std::chrono::steady_clock::time_point start,
                                                       SolveSummary* summary);
+  // When the single moves are exhausted: moves two levels of the same binary group at
+  // once, each to a neighbouring step, for every pair of steps that carry a level at most
+  // SolverOptions.discrete_pair_reach apart (first improvement). On an integrator, one
+  // level moved earlier and a later one moved later lifts only the stretch between them:
+  // the correction a single move cannot make without shifting everything after it.
+  // `try_move` is the search's evaluate-and-keep-or-undo step.
+  template <typename TryMove>
+  bool TryPairMove(const SolveLimits& limits, std::chrono::steady_clock::time_point start, SolveSummary* summary,
+                   TryMove& try_move);
+  // Moves one level of the group at inputs first..last from step n to step n + direction
+  // (±1) if both steps carry that group, n has a level and the other step room for it.
+  bool MoveOneLevel(int n, int direction, int first, int last);
   // Binary group (one binary, or an M-level run) starting at input l of step n: how many
   // of its binaries are high, and setting that count.
   int GroupLevel(int n, int first, int last) const;

@@ -154,6 +154,51 @@ TEST(DiscretePlan, TheSearchImprovesTheLongDacPlan) {
   EXPECT_LT(e_searched, 0.9 * e_fixed);
 }
 
+// The best tracking error among the plans two flap moves away from `u`: two ones, each
+// moved to a neighbouring zero, searched exhaustively here with the test's own simulation.
+double BestPairMoveError(const Problem& p, const Eigen::VectorXd& u) {
+  const int N = static_cast<int>(u.size());
+  double best = INFINITY;
+  Eigen::VectorXd trial = u;
+  const auto move = [&](int from, int to) {
+    if (to < 0 || to >= N || trial(from) != 1.0 || trial(to) != 0.0) return false;
+    std::swap(trial(from), trial(to));
+    return true;
+  };
+  for (int n1 = 0; n1 < N; ++n1) {
+    for (int n2 = n1 + 1; n2 < N; ++n2) {
+      for (const int d1 : {-1, 1}) {
+        for (const int d2 : {-1, 1}) {
+          trial = u;
+          if (move(n1, n1 + d1) && move(n2, n2 + d2)) best = std::min(best, TrackingError(p, trial));
+        }
+      }
+    }
+  }
+  return best;
+}
+
+TEST(DiscretePlan, NoPairOfFlapMovesImprovesTheSearchedPlan) {
+  // The search ends where no two levels moved at once (within the reach, here the whole
+  // horizon) lower J; J of a Gaussian-tracking DAC plan is its tracking error over 2V_Y.
+  const Problem p = examples::DacWindow(kSteps, kOutputVariance, 0, 2.0);
+  SolverOptions options;
+  options.max_iterations = 300;
+  options.discrete_pair_reach = kSteps;
+  const Eigen::VectorXd u = SolveInputs(p, options);
+  ASSERT_TRUE(AllBinary(u));
+  const double error = TrackingError(p, u);
+  EXPECT_GE(BestPairMoveError(p, u), error * (1.0 - 1e-12));
+  // Without pair moves the same solve stops at a plan that a pair move improves.
+  options.discrete_pair_reach = 0;
+  const Eigen::VectorXd single = SolveInputs(p, options);
+  ASSERT_TRUE(AllBinary(single));
+  std::printf("DAC K=%d tracking error: single moves %.6g (best pair move from it %.6g), with pair moves %.6g\n",
+              kSteps, TrackingError(p, single), BestPairMoveError(p, single), error);
+  EXPECT_LT(BestPairMoveError(p, single), TrackingError(p, single) * (1.0 - 1e-9));
+  EXPECT_LE(error, TrackingError(p, single));
+}
+
 TEST(DiscretePlan, PinsDoNotOutliveTheSolve) {
   // A second cold solve on the same session equals a fresh session's solve: the pins of
   // the first solve's fixing phase were released.
@@ -201,6 +246,10 @@ TEST(DiscretePlan, BadOptionsAreRefusedNamingTheField) {
   options.discrete_search_sweeps = -2;
   EXPECT_THAT(Session::Create(p, options).status(),
               testing::StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("discrete_search_sweeps")));
+  options = {};
+  options.discrete_pair_reach = -1;
+  EXPECT_THAT(Session::Create(p, options).status(),
+              testing::StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("discrete_pair_reach")));
 }
 
 }  // namespace

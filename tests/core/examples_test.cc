@@ -56,10 +56,10 @@ INSTANTIATE_TEST_SUITE_P(AllFiveVersions, CorridorExample,
                                            CorridorVersion::kSparseChanges),
                          [](const auto& info) { return std::string(CorridorVersionName(info.param)); });
 
-// Flappy bird on eight random layouts: the flaps are exactly binary, and at least three
-// layouts pass every slit (measured: 3 of 8; the others miss one slit by 0.02 to 1, see
-// issue 4's note). Each layout is one long plan, as in [KL].
-TEST(FlappyBirdExample, FlapsAreBinaryAndThreeOfEightLayoutsPassEverySlit) {
+// Flappy bird on eight random layouts: the flaps are exactly binary, and at least seven
+// layouts pass every slit (measured: 8 of 8 here, 36 of layouts 1-40 in all; the margin is
+// for another machine's rounding). Each layout is one long plan, as in [KL].
+TEST(FlappyBirdExample, FlapsAreBinaryAndSevenOfEightLayoutsPassEverySlit) {
   const FlappyParameters params;
   int passed = 0;
   for (unsigned layout = 1; layout <= 8; ++layout) {
@@ -77,7 +77,7 @@ TEST(FlappyBirdExample, FlapsAreBinaryAndThreeOfEightLayoutsPassEverySlit) {
     passed += run->worst_slit_violation == 0.0;
   }
   RecordProperty("layouts_passing", std::to_string(passed));
-  EXPECT_GE(passed, 3);
+  EXPECT_GE(passed, 7);
 }
 
 // The minimal-time lap ([KL] §V-E) on the demo track with K = 100 spatial steps: the plan

@@ -8,8 +8,8 @@
 
 namespace nupmpc::examples {
 
-absl::StatusOr<TimedPlan> SolveWithBudget(const core::Problem& problem, int max_iterations) {
-  core::SolverOptions options;
+absl::StatusOr<TimedPlan> SolveWithBudget(const core::Problem& problem, int max_iterations,
+                                          core::SolverOptions options) {
   options.max_iterations = max_iterations;
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Session> session, core::Session::Create(problem, options));
   TimedPlan result;

@@ -5,6 +5,7 @@
 // examples with non-convex priors run a fixed budget, nup-algorithms.md §7.2).
 
 #include "absl/status/statusor.h"
+#include "core/options.h"
 #include "core/problem.h"
 #include "core/solution.h"
 
@@ -16,7 +17,9 @@ struct TimedPlan {
   double seconds = 0.0;  ///< the solve alone (not the session's set-up)
 };
 
-absl::StatusOr<TimedPlan> SolveWithBudget(const core::Problem& problem, int max_iterations);
+// `options.max_iterations` is set to `max_iterations`; everything else is as given.
+absl::StatusOr<TimedPlan> SolveWithBudget(const core::Problem& problem, int max_iterations,
+                                          core::SolverOptions options = {});
 
 }  // namespace nupmpc::examples
 
