@@ -2,7 +2,8 @@
 # The load-test figures of the service: builds, starts nupmpc-server in the background on
 # this machine, and runs nupmpc-loadtest against it (server and load generator share the
 # machine's cores: say so when you quote the figures):
-#   1. closed loop, concurrency 1, 2, 8, 64 (masses_N30 closed-loop states);
+#   1. closed loop, concurrency 1, 2, 8, 64 (masses_N30 closed-loop states), each level also
+#      against the zero-work echo and the inline-solve echo (peers in child processes);
 #   2. overload: masses_N300 (a few ms per solve, so the generator can offer 10x what
 #      the server can solve), open loop at 10x the core-alone capacity, then at half of
 #      it (recovery), against a server that refuses work it could not start within 20 ms;
@@ -35,7 +36,7 @@ stop_server() {
 loadtest=(build/bin/nupmpc-loadtest --server "$address" "$@")
 start_server
 echo "== closed loop, masses_N30"
-"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --sweep 1,2,8,64
+"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --sweep 1,2,8,64 --inline_solve
 echo "== memory: 10,000 idle masses_N30 sessions"
 "${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --idle_sessions 10000
 stop_server

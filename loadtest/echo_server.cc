@@ -1,5 +1,6 @@
 #include "loadtest/echo_server.h"
 
+#include <chrono>
 #include <deque>
 #include <mutex>
 #include <utility>
@@ -13,9 +14,17 @@ namespace {
 // its previous answer is written), so answers wait in a queue and go out one at a time.
 class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
  public:
-  explicit EchoStream(const v1::SolveResult* answer) : answer_(answer) { StartRead(&incoming_); }
+  EchoStream(const v1::SolveResult* answer, std::chrono::nanoseconds busy) : answer_(answer), busy_(busy) {
+    StartRead(&incoming_);
+  }
 
   void OnReadDone(bool ok) override {
+    if (ok && incoming_.has_step() && busy_.count() > 0) {
+      // Stands in for a solve done right here: busy, not asleep, as a solve would be.
+      const auto until = std::chrono::steady_clock::now() + busy_;
+      while (std::chrono::steady_clock::now() < until) {
+      }
+    }
     std::unique_lock<std::mutex> lock(mu_);
     if (!ok) {
       reads_done_ = true;
@@ -63,6 +72,7 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
   }
 
   const v1::SolveResult* const answer_;
+  const std::chrono::nanoseconds busy_;
   v1::ControlRequest incoming_;
   std::mutex mu_;
   std::deque<v1::ControlResponse> writes_;
@@ -75,20 +85,22 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
 
 class EchoControlServer::Service : public v1::MpcService::CallbackService {
  public:
-  explicit Service(v1::SolveResult answer) : answer_(std::move(answer)) {}
+  Service(v1::SolveResult answer, std::chrono::nanoseconds busy) : answer_(std::move(answer)), busy_(busy) {}
 
   grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(
       grpc::CallbackServerContext* /*context*/) override {
-    return new EchoStream(&answer_);
+    return new EchoStream(&answer_, busy_);
   }
 
  private:
   const v1::SolveResult answer_;
+  const std::chrono::nanoseconds busy_;
 };
 
-absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Start(v1::SolveResult answer) {
+absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Start(v1::SolveResult answer,
+                                                                              std::chrono::nanoseconds busy) {
   std::unique_ptr<EchoControlServer> s(new EchoControlServer());
-  s->service_ = std::make_unique<Service>(std::move(answer));
+  s->service_ = std::make_unique<Service>(std::move(answer), busy);
   grpc::ServerBuilder builder;
   builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &s->port_);
   builder.RegisterService(s->service_.get());

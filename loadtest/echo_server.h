@@ -2,7 +2,7 @@
 #define NUPMPC_LOADTEST_ECHO_SERVER_H_
 
 // The third peer of the load test: a zero-work stand-in for nupmpc-server's Control
-// stream, run inside nupmpc-loadtest on a loopback port. It answers the first message with
+// stream on a loopback port (nupmpc-loadtest runs it in a child process: EchoProcess). It answers the first message with
 // a session id and every step at once, inside the gRPC reaction, with one fixed real answer
 // (the plan the real server returned for the instance's first state, so the messages have
 // the real sizes). The same load level against it measures what gRPC and this machine's
@@ -10,6 +10,7 @@
 // gap between it and the real server is nupmpc's own cost (solve, hand-over to the worker
 // pool, validation, conversion).
 
+#include <chrono>
 #include <memory>
 #include <string>
 
@@ -21,8 +22,12 @@ namespace nupmpc::loadtest {
 
 class EchoControlServer {
  public:
-  // Listens on 127.0.0.1 at a free port; every step is answered with `answer`.
-  static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(v1::SolveResult answer);
+  // Listens on 127.0.0.1 at a free port; every step is answered with `answer`, after
+  // `busy` of busy-waiting inside the reaction when it is positive: a solve of that length
+  // done where the request arrives, with no hand-over to a worker (which nupmpc-server
+  // does not do: its reactions never block), the lowest round trip any server could have.
+  static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(
+      v1::SolveResult answer, std::chrono::nanoseconds busy = std::chrono::nanoseconds(0));
   ~EchoControlServer();
 
   std::string target() const;

@@ -33,8 +33,9 @@ struct LevelReport {
   double service_p50_ms = 0.0, service_p99_ms = 0.0;  ///< from the hand-over to gRPC
   double solve_p50_ms = 0.0;  ///< the server's own solver time, median
   double mean_iterations = 0.0;
-  // The same level against the zero-work echo server (EchoControlServer), when run.
-  std::shared_ptr<const LevelReport> echo;
+  // The same level against the zero-work echo server (EchoControlServer), and against the
+  // echo busy for the core's median solve time in its reaction, when run.
+  std::shared_ptr<const LevelReport> echo, inline_solve;
 };
 
 // Opens the streams (each creates its session), runs the level, closes them.

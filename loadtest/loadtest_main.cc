@@ -10,9 +10,11 @@
 // instance's recorded closed-loop states (or, for a file without them, its initial state).
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "absl/flags/flag.h"
@@ -23,6 +25,7 @@
 #include "client/client.h"
 #include "client/problem_file.h"
 #include "loadtest/core_baseline.h"
+#include "loadtest/echo_process.h"
 #include "loadtest/echo_server.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
@@ -43,7 +46,12 @@ ABSL_FLAG(uint64_t, requests, 0, "stop a level once this many solves were answer
 ABSL_FLAG(int, baseline_rounds, 20, "passes of the core-alone baseline over the closed-loop states");
 ABSL_FLAG(int, transport_calls, 2000, "health checks that measure gRPC's own round trip");
 ABSL_FLAG(bool, echo, true,
-          "also run every level against an in-process zero-work echo server (the transport floor at that load)");
+          "also run every level against a zero-work echo server in a child process (the transport floor at that load)");
+ABSL_FLAG(bool, inline_solve, false,
+          "also run every level against the echo server busy for the core's median solve time inside its reaction "
+          "(a server that solves where the request arrives: the lowest round trip any design could reach)");
+ABSL_FLAG(double, serve_echo_busy_us, -1.0,
+          "internal: run as the echo peer's child process, busy this long per step (>= 0), until stdin closes");
 ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
 ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
 ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
@@ -79,6 +87,17 @@ bool ShowProgress() {
   return p == "on" || (p == "auto" && isatty(STDERR_FILENO));
 }
 
+// The child process of an echo peer: the real server's plan for the spec is its answer.
+int ServeEcho(const std::string& target, const nupmpc::v1::ProblemSpec& spec, double busy_us) {
+  nupmpc::Client client(target, std::chrono::seconds(10));
+  absl::StatusOr<nupmpc::v1::SolveResult> answer = client.SolveOnce(spec);
+  if (!answer.ok()) return Fail("SolveOnce for the echo server's answer", answer.status());
+  absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> echo = lt::EchoControlServer::Start(
+      *std::move(answer), std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double, std::micro>(busy_us)));
+  if (!echo.ok()) return Fail("echo server", echo.status());
+  return lt::ServeEchoUntilStdinCloses(**echo);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -96,6 +115,9 @@ int main(int argc, char** argv) {
     file->closed_loop_states.emplace_back(mean.begin(), mean.end());
   }
   const std::string name = std::filesystem::path(instance_path).stem().string();
+  if (const double busy_us = absl::GetFlag(FLAGS_serve_echo_busy_us); busy_us >= 0.0) {
+    return ServeEcho(target, file->spec, busy_us);
+  }
   const bool json = absl::GetFlag(FLAGS_json);
 
   if (const int idle = absl::GetFlag(FLAGS_idle_sessions); idle > 0) {
@@ -126,17 +148,27 @@ int main(int argc, char** argv) {
   absl::StatusOr<lt::TransportFloor> transport = lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls));
   if (!transport.ok()) return Fail("transport floor", transport.status());
 
-  std::unique_ptr<lt::EchoControlServer> echo;
+  // The peers are echo servers in child processes (this program with --serve_echo_busy_us),
+  // answering with the real server's plan for the instance: real message sizes.
+  std::unique_ptr<lt::EchoProcess> echo, inline_solve;
+  const auto spawn_echo = [&](double busy_us) {
+    const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
+    return lt::EchoProcess::Spawn({self, "--server=" + target, "--instance=" + instance_path,
+                                   absl::StrCat("--serve_echo_busy_us=", busy_us)});
+  };
   if (absl::GetFlag(FLAGS_echo)) {
-    // The echo answers with the real server's plan for the first state: real message sizes.
-    absl::StatusOr<nupmpc::v1::SolveResult> answer = client.SolveOnce(file->spec);
-    if (!answer.ok()) return Fail("SolveOnce for the echo server's answer", answer.status());
-    absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> started = lt::EchoControlServer::Start(*std::move(answer));
+    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(0.0);
     if (!started.ok()) return Fail("echo server", started.status());
     echo = *std::move(started);
   }
+  if (absl::GetFlag(FLAGS_inline_solve)) {
+    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(baseline->median_ms * 1e3);
+    if (!started.ok()) return Fail("inline-solve echo server", started.status());
+    inline_solve = *std::move(started);
+  }
 
-  lt::RunHeader header{name, target, *info, *baseline, *transport, capacity_per_s, echo != nullptr};
+  lt::RunHeader header{name,           target, *info, *baseline, *transport, capacity_per_s, echo != nullptr,
+                      inline_solve != nullptr};
   if (!json) lt::PrintHeader(header);
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed"};
   std::vector<lt::LevelReport> reports;
@@ -154,12 +186,15 @@ int main(int argc, char** argv) {
     absl::StatusOr<lt::LevelReport> report = lt::RunLevel(target, plan, config);
     if (!report.ok()) return Fail(absl::StrCat("concurrency ", c), report.status());
     if (!json) lt::PrintLevel(header, *report);
-    if (echo != nullptr) {
-      config.progress = false;
-      absl::StatusOr<lt::LevelReport> floor = lt::RunLevel(echo->target(), plan, config);
-      if (!floor.ok()) return Fail(absl::StrCat("echo server, concurrency ", c), floor.status());
-      if (!json) lt::PrintEchoLevel(*floor);
-      report->echo = std::make_shared<const lt::LevelReport>(*std::move(floor));
+    config.progress = false;
+    for (const auto& [peer, slot, label, busy_ms] :
+         {std::tuple{echo.get(), &report->echo, "echo", 0.0},
+          std::tuple{inline_solve.get(), &report->inline_solve, "inline", baseline->median_ms}}) {
+      if (peer == nullptr) continue;
+      absl::StatusOr<lt::LevelReport> floor = lt::RunLevel(peer->target(), plan, config);
+      if (!floor.ok()) return Fail(absl::StrCat(label, " server, concurrency ", c), floor.status());
+      if (!json) lt::PrintPeerLevel(label, *floor, busy_ms);
+      *slot = std::make_shared<const lt::LevelReport>(*std::move(floor));
     }
     reports.push_back(*std::move(report));
   }

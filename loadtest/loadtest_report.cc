@@ -17,6 +17,12 @@ std::string Errors(const StreamTally& t) {
 // Round trip above the core's own median: what the network, gRPC and the server add.
 double OverheadUs(const RunHeader& h, const LevelReport& l) { return (l.p50_ms - h.baseline.median_ms) * 1e3; }
 
+nlohmann::json PeerJson(const LevelReport& e) {
+  return {{"solves_per_s", e.solves_per_s}, {"p50_ms", e.p50_ms},   {"p90_ms", e.p90_ms},
+          {"p99_ms", e.p99_ms},             {"p999_ms", e.p999_ms}, {"max_ms", e.max_ms},
+          {"superseded", e.tally.superseded}, {"errors", e.tally.errors}};
+}
+
 double MiB(std::uint64_t bytes) { return static_cast<double>(bytes) / (1024.0 * 1024.0); }
 
 }  // namespace
@@ -35,8 +41,12 @@ void PrintHeader(const RunHeader& h) {
   std::printf("(load generator and server share this machine's cores; latency is request sent, or open-loop "
               "arrival scheduled, to answer received; svc: from the hand-over to gRPC)\n");
   if (h.echo) {
-    std::printf("(echo rows: the same level against a zero-work server in the load generator's process that "
-                "answers every step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
+    std::printf("(echo rows: the same level against a zero-work server, a process of its own, that answers every "
+                "step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
+  }
+  if (h.inline_solve) {
+    std::printf("(inline rows: the same echo, busy for the core median inside its reaction before it answers: a "
+                "server that solves where the request arrives, with no hand-over; overhead = its p50 - core median)\n");
   }
   std::printf("%5s %-6s %10s %10s %8s %8s %8s %8s %8s %8s %6s %10s %10s %9s  %s\n", "C", "mode", "offered/s",
               "solves/s", "p50 ms", "p90 ms", "p99 ms", "p99.9 ms", "max ms", "svc p99", "iter", "superseded",
@@ -53,12 +63,12 @@ void PrintLevel(const RunHeader& h, const LevelReport& l) {
   std::fflush(stdout);
 }
 
-void PrintEchoLevel(const LevelReport& l) {
+void PrintPeerLevel(const char* label, const LevelReport& l, double busy_ms) {
   const std::string offered = l.config.closed_loop ? "-" : absl::StrCat(static_cast<long long>(l.config.rate_per_s));
   std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6s %10llu %8.0f\xc2\xb5s %9s  %s\n",
-              l.config.concurrency, "echo", offered.c_str(), l.solves_per_s, l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms,
-              l.max_ms, l.service_p99_ms, "-", static_cast<unsigned long long>(l.tally.superseded), l.p50_ms * 1e3,
-              "-", Errors(l.tally).c_str());
+              l.config.concurrency, label, offered.c_str(), l.solves_per_s, l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms,
+              l.max_ms, l.service_p99_ms, "-", static_cast<unsigned long long>(l.tally.superseded),
+              (l.p50_ms - busy_ms) * 1e3, "-", Errors(l.tally).c_str());
   std::fflush(stdout);
 }
 
@@ -97,12 +107,8 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                             {"overhead_p50_us", OverheadUs(h, l)},
                             {"fraction_of_capacity", l.solves_per_s / h.capacity_per_s}};
     if (!l.config.closed_loop) level["offered_per_s"] = l.config.rate_per_s;
-    if (l.echo != nullptr) {
-      const LevelReport& e = *l.echo;
-      level["echo"] = {{"solves_per_s", e.solves_per_s}, {"p50_ms", e.p50_ms},        {"p90_ms", e.p90_ms},
-                       {"p99_ms", e.p99_ms},             {"p999_ms", e.p999_ms},      {"max_ms", e.max_ms},
-                       {"superseded", e.tally.superseded}, {"errors", e.tally.errors}};
-    }
+    if (l.echo != nullptr) level["echo"] = PeerJson(*l.echo);
+    if (l.inline_solve != nullptr) level["inline"] = PeerJson(*l.inline_solve);
     out["levels"].push_back(std::move(level));
   }
   std::printf("%s\n", out.dump(2).c_str());

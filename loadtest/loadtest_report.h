@@ -24,12 +24,14 @@ struct RunHeader {
   TransportFloor transport;
   double capacity_per_s = 0.0;  ///< worker threads / core median solve time
   bool echo = false;            ///< every level is also run against the zero-work echo server
+  bool inline_solve = false;    ///< and against the echo busy for the core median in its reaction
 };
 
 void PrintHeader(const RunHeader& header);
 void PrintLevel(const RunHeader& header, const LevelReport& level);
-// The row of a level run against the echo server, below the real level's row.
-void PrintEchoLevel(const LevelReport& echo);
+// The row of a level run against an echo server (`label`: echo or inline), below the real
+// level's row; its overhead is the p50 above `busy_ms`, the echo's stand-in solve.
+void PrintPeerLevel(const char* label, const LevelReport& peer, double busy_ms);
 void PrintJson(const RunHeader& header, const std::vector<LevelReport>& levels);
 void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& report, bool json);
 

@@ -9,6 +9,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "loadtest/core_baseline.h"
+#include "loadtest/echo_process.h"
 #include "loadtest/echo_server.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
@@ -107,6 +108,32 @@ TEST_F(LoadTest, EchoServerAnswersEveryStepWithItsFixedPlanInBothModes) {
   EXPECT_EQ(open->tally.superseded, 0u);  // it never queues, so nothing is ever superseded
   EXPECT_EQ(open->tally.sent, open->tally.latency_ms.size());
   EXPECT_GT(open->tally.sent, 60u);
+}
+
+TEST_F(LoadTest, EchoPeerRunsAsAChildProcessOfTheLoadTestBinary) {
+  // nupmpc-loadtest's own child mode: the echo answers with this server's plan, then the
+  // child exits when the parent lets go of it.
+  const std::string instance = std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json";
+  absl::StatusOr<std::unique_ptr<loadtest::EchoProcess>> echo = loadtest::EchoProcess::Spawn(
+      {NUPMPC_LOADTEST_BINARY, "--server=" + target_, "--instance=" + instance, "--serve_echo_busy_us=200"});
+  ASSERT_TRUE(echo.ok()) << echo.status();
+  EXPECT_NE((*echo)->target(), target_);
+  loadtest::LevelConfig config;
+  config.duration_s = 0.3;
+  config.warmup_s = 0.05;
+  absl::StatusOr<loadtest::LevelReport> r =
+      loadtest::RunLevel((*echo)->target(), {&workload_.spec, &workload_.states, /*closed_loop=*/true}, config);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_TRUE(r->tally.errors.empty());
+  EXPECT_GT(r->tally.latency_ms.size(), 10u);
+  // Busy 200 µs per step before it answers, and its answer is the server's real plan.
+  EXPECT_GE(r->p50_ms, 0.2);
+  EXPECT_GT(r->tally.iterations, 0u);
+  echo->reset();  // returns once the child has exited
+
+  // A child that never names a target is an error, not a hang.
+  absl::StatusOr<std::unique_ptr<loadtest::EchoProcess>> mute = loadtest::EchoProcess::Spawn({"/bin/true"});
+  EXPECT_EQ(mute.status().code(), absl::StatusCode::kUnavailable);
 }
 
 TEST_F(LoadTest, OpenLoopArrivalsAreAnsweredOrSupersededNeverLost) {

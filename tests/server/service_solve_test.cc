@@ -1,5 +1,7 @@
 // Results through the service equal the core's: every benchmark instance via SolveOnce and
 // via a session, the masses_N30 closed loop through a Control stream, parallel sessions.
+#include <unistd.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <thread>
@@ -177,6 +179,34 @@ TEST_F(ServiceTest, MassesClosedLoopThroughAControlStreamReachesEveryReferenceSt
   // At most a third of SolveOnce's median (the bar). Measured: 1 warm vs 4 cold.
   EXPECT_LE(3 * Median(warm_iterations), Median(cold_iterations));
   EXPECT_THAT((*session)->Close(), ::testing::Property(&absl::Status::ok, true));
+}
+
+TEST_F(ServiceTest, AUnixDomainSocketAddressServesControlStreams) {
+  // A controller on the same machine may skip TCP: --address unix:PATH.
+  server_->Shutdown();
+  server::ServerOptions options = DefaultOptions();
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("nupmpc-test-" + std::to_string(::getpid()) + ".sock")).string();
+  options.address = "unix:" + path;
+  absl::StatusOr<std::unique_ptr<server::GrpcServer>> started = server::GrpcServer::Start(options);
+  ASSERT_TRUE(started.ok()) << started.status();
+  server_ = *std::move(started);
+  Client client(options.address);
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
+  const v1::ProblemSpec spec = SpecOrDie(inst.problem);
+  auto session = client.OpenSession(spec);
+  ASSERT_TRUE(session.ok()) << session.status();
+  v1::Step step;
+  const Eigen::VectorXd& x = inst.closed_loop->x1[0];
+  step.mutable_state()->Add(x.data(), x.data() + x.size());
+  absl::StatusOr<v1::SolveResult> result = (*session)->Step(step);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_EQ(result->status(), v1::SOLVE_STATUS_CONVERGED);
+  EXPECT_EQ(result->inputs_size(), inst.problem.horizon * inst.problem.num_inputs);
+  EXPECT_TRUE((*session)->Close().ok());
+  session->reset();
+  server_->Shutdown();
+  std::filesystem::remove(path);
 }
 
 TEST_F(ServiceTest, ParallelSessionsGiveTheSameResultsAsSequentialSolves) {
