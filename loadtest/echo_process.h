@@ -3,9 +3,8 @@
 
 // An EchoControlServer in a child process of its own. In the load generator's process the
 // echo would share the generator's gRPC threads and pollers, which makes its round trip
-// shorter than any separate server's can be (measured: 126 µs against 155 µs at
-// concurrency 1, and an echo busy for the solve time inside its reaction beat
-// nupmpc-server in-process but not as a process of its own). A peer for nupmpc-server is
+// shorter than any separate server's can be (measured at concurrency 1: 126-136 µs
+// in-process against 155-166 µs as a process of its own). A peer for nupmpc-server is
 // therefore a process, as the server is.
 
 #include <sys/types.h>
