@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Renders the examples' CSV (written by the nupmpc-example-* programs) as PNG figures
-like [KL] Figs. 2, 19, 20, 21 and 23. Usage: plot_examples.py DIR (reads and writes DIR).
+like [KL] Figs. 2, 18, 19, 20, 21 and 23. Usage: plot_examples.py DIR (reads and writes DIR).
 Needs Debian's python3-matplotlib."""
 import csv
 import math
@@ -20,7 +20,7 @@ def read(path):
 
 
 def dac(d):
-    fig, axes = plt.subplots(3, 1, figsize=(8, 8))
+    fig, axes = plt.subplots(4, 1, figsize=(8, 10.5))
     for ax, hz in zip(axes[:2], (2, 40)):
         t = read(f"{d}/dac_long_{hz}hz.csv")
         ax.plot(t["step"], t["target"], "k--", label="target")
@@ -34,6 +34,13 @@ def dac(d):
     ax.plot(t["step"], t["nup_output"], label="IAKE-EM, horizon 8")
     ax.plot(t["step"], t["exhaustive_output"], ":", label="exhaustive, horizon 8")
     ax.set_title("DAC receding horizon (Fig. 19)")
+    ax.legend(loc="upper right", fontsize=7)
+    t = read(f"{d}/dac_fig18.csv")
+    ax = axes[3]
+    ax.plot(t["step"], t["target"], "k--", label="target")
+    ax.plot(t["step"], t["long_output"], label="IAKE-EM, one plan K = 300")
+    ax.plot(t["step"], t["exhaustive_output"], ":", label="exhaustive, horizon 8")
+    ax.set_title("DAC long horizon vs exhaustive horizon 8, target 5 Hz (Fig. 18)")
     ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
     fig.savefig(f"{d}/dac.png", dpi=120)
