@@ -19,6 +19,15 @@ def read(path):
     return {k: [float(r[k]) for r in rows if r[k] != ""] for k in rows[0]}
 
 
+def against_exhaustive(ax, t, output, label, title):
+    """The target, one NUP output and the exhaustive horizon-8 controller's output."""
+    ax.plot(t["step"], t["target"], "k--", label="target")
+    ax.plot(t["step"], t[output], label=label)
+    ax.plot(t["step"], t["exhaustive_output"], ":", label="exhaustive, horizon 8")
+    ax.set_title(title)
+    ax.legend(loc="upper right", fontsize=7)
+
+
 def dac(d):
     fig, axes = plt.subplots(4, 1, figsize=(8, 10.5))
     for ax, hz in zip(axes[:2], (2, 40)):
@@ -28,20 +37,10 @@ def dac(d):
         ax.step(t["step"][:-1], t["input"], where="post", alpha=0.3, label="binary input u")
         ax.set_title(f"DAC, one plan K = 450, target {hz} Hz")
         ax.legend(loc="upper right", fontsize=7)
-    t = read(f"{d}/dac_online.csv")
-    ax = axes[2]
-    ax.plot(t["step"], t["target"], "k--", label="target")
-    ax.plot(t["step"], t["nup_output"], label="IAKE-EM, horizon 8")
-    ax.plot(t["step"], t["exhaustive_output"], ":", label="exhaustive, horizon 8")
-    ax.set_title("DAC receding horizon (Fig. 19)")
-    ax.legend(loc="upper right", fontsize=7)
-    t = read(f"{d}/dac_fig18.csv")
-    ax = axes[3]
-    ax.plot(t["step"], t["target"], "k--", label="target")
-    ax.plot(t["step"], t["long_output"], label="IAKE-EM, one plan K = 300")
-    ax.plot(t["step"], t["exhaustive_output"], ":", label="exhaustive, horizon 8")
-    ax.set_title("DAC long horizon vs exhaustive horizon 8, target 5 Hz (Fig. 18)")
-    ax.legend(loc="upper right", fontsize=7)
+    against_exhaustive(axes[2], read(f"{d}/dac_online.csv"), "nup_output", "IAKE-EM, horizon 8",
+                       "DAC receding horizon (Fig. 19)")
+    against_exhaustive(axes[3], read(f"{d}/dac_fig18.csv"), "long_output", "IAKE-EM, one plan K = 300",
+                       "DAC long horizon vs exhaustive horizon 8, target 5 Hz (Fig. 18)")
     fig.tight_layout()
     fig.savefig(f"{d}/dac.png", dpi=120)
 
