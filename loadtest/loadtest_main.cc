@@ -167,8 +167,14 @@ int main(int argc, char** argv) {
     inline_solve = *std::move(started);
   }
 
-  lt::RunHeader header{name,           target, *info, *baseline, *transport, capacity_per_s, echo != nullptr,
-                      inline_solve != nullptr};
+  const lt::RunHeader header{.instance = name,
+                             .target = target,
+                             .server = *info,
+                             .baseline = *baseline,
+                             .transport = *transport,
+                             .capacity_per_s = capacity_per_s,
+                             .echo = echo != nullptr,
+                             .inline_solve = inline_solve != nullptr};
   if (!json) lt::PrintHeader(header);
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed"};
   std::vector<lt::LevelReport> reports;
