@@ -51,17 +51,15 @@ int main(int argc, char** argv) {
   for (const double hz : {2.0, 5.0, 8.0}) {
     auto long300 = ex::DacLongPlan(kSteps, kOnlineVariance, hz, kBudget, true);
     if (!long300.ok()) return 1;
-    const double exhaustive = hz == 2.0 ? online->exhaustive_mse : ex::DacExhaustiveMse(kWindow, kSteps, hz);
+    const ex::DacExhaustiveRun exhaustive = ex::RunDacExhaustive(kWindow, kSteps, hz);
     std::printf("Fig. 18 at %.0f Hz: long plan K=%d MSE %.4e vs exhaustive K=%d online %.4e (ratio %.3f)\n", hz,
-                kSteps, long300->mse, kWindow, exhaustive, long300->mse / exhaustive);
+                kSteps, long300->mse, kWindow, exhaustive.mse, long300->mse / exhaustive.mse);
     if (hz != kFig18Hz) continue;
-    auto exhaustive_run = ex::DacOnline(kWindow, kSteps, kOnlineVariance, hz, 300);
-    if (!exhaustive_run.ok()) return 1;
     const absl::Status written =
         ex::WriteCsv(dir + "/dac_fig18.csv", {{"step", Steps(kSteps, 1)},
-                                              {"target", exhaustive_run->target},
+                                              {"target", exhaustive.target},
                                               {"long_output", long300->outputs.segment(1, kSteps)},
-                                              {"exhaustive_output", exhaustive_run->exhaustive_outputs}});
+                                              {"exhaustive_output", exhaustive.outputs}});
     if (!written.ok()) return 1;
   }
   const CsvColumns columns = {{"step", Steps(kSteps, 1)},

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <utility>
 
 #include "Eigen/LU"
 #include "core/examples/scenarios/timed_solve.h"
@@ -87,13 +88,10 @@ absl::StatusOr<DacOnlineRun> DacOnline(int window, int steps, double output_vari
   const Eigen::Matrix3d A = p.A[0];
   const Eigen::Vector3d B = p.B[0];
   const Eigen::RowVector3d C = p.C[0];
-  Eigen::Vector3d x_nup = p.initial_mean, x_exh = p.initial_mean;
+  Eigen::Vector3d x_nup = p.initial_mean;
   DacOnlineRun run;
   run.nup_inputs.resize(steps);
-  run.exhaustive_inputs.resize(steps);
   run.nup_outputs.resize(steps);
-  run.exhaustive_outputs.resize(steps);
-  run.target.resize(steps);
   core::Solution plan;
   core::SolveLimits cold;
   cold.warm_start = false;
@@ -108,27 +106,33 @@ absl::StatusOr<DacOnlineRun> DacOnline(int window, int steps, double output_vari
     run.nup_seconds += Seconds(start);
     run.largest_gap = std::max(run.largest_gap, summary.discrete_gap);
     run.nup_inputs(t) = plan.inputs(0, 0);
-    run.exhaustive_inputs(t) = ExhaustiveFirstInput(p, x_exh, window, t, frequency_hz);
     x_nup = A * x_nup + B * run.nup_inputs(t);
-    x_exh = A * x_exh + B * run.exhaustive_inputs(t);
     run.nup_outputs(t) = C * x_nup;
-    run.exhaustive_outputs(t) = C * x_exh;
-    run.target(t) = DacTarget(t + 1, frequency_hz);
   }
+  DacExhaustiveRun exhaustive = RunDacExhaustive(window, steps, frequency_hz);
+  run.exhaustive_inputs = std::move(exhaustive.inputs);
+  run.exhaustive_outputs = std::move(exhaustive.outputs);
+  run.target = std::move(exhaustive.target);
+  run.exhaustive_mse = exhaustive.mse;
   run.nup_mse = (run.nup_outputs - run.target).squaredNorm() / steps;
-  run.exhaustive_mse = (run.exhaustive_outputs - run.target).squaredNorm() / steps;
   return run;
 }
 
-double DacExhaustiveMse(int window, int steps, double frequency_hz) {
+DacExhaustiveRun RunDacExhaustive(int window, int steps, double frequency_hz) {
   const core::Problem p = DacPlant(window);
   Eigen::Vector3d x = p.initial_mean;
-  double sse = 0.0;
+  DacExhaustiveRun run;
+  run.inputs.resize(steps);
+  run.outputs.resize(steps);
+  run.target.resize(steps);
   for (int t = 0; t < steps; ++t) {
-    x = p.A[0] * x + p.B[0] * ExhaustiveFirstInput(p, x, window, t, frequency_hz);
-    sse += std::pow(p.C[0].row(0).dot(x) - DacTarget(t + 1, frequency_hz), 2);
+    run.inputs(t) = ExhaustiveFirstInput(p, x, window, t, frequency_hz);
+    x = p.A[0] * x + p.B[0] * run.inputs(t);
+    run.outputs(t) = p.C[0].row(0).dot(x);
+    run.target(t) = DacTarget(t + 1, frequency_hz);
   }
-  return sse / steps;
+  run.mse = (run.outputs - run.target).squaredNorm() / steps;
+  return run;
 }
 
 }  // namespace nupmpc::examples

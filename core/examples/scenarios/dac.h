@@ -54,9 +54,16 @@ struct DacOnlineRun {
 absl::StatusOr<DacOnlineRun> DacOnline(int window, int steps, double output_variance, double frequency_hz,
                                        int iterations);
 
-// Exhaustive search alone over `steps` steps with a `window`-step horizon, from x[0] of
-// DacPlant: the applied inputs' output MSE (for the long-horizon comparison, Fig. 18).
-double DacExhaustiveMse(int window, int steps, double frequency_hz);
+struct DacExhaustiveRun {
+  Eigen::VectorXd inputs;   ///< applied inputs, one per step
+  Eigen::VectorXd outputs;  ///< y[1..steps]
+  Eigen::VectorXd target;   ///< target[1..steps]
+  double mse = 0.0;
+};
+
+// The exhaustive-search receding-horizon loop alone over `steps` steps with a `window`-step
+// horizon, from x[0] of DacPlant (Fig. 19's reference, and Fig. 18's short-horizon side).
+DacExhaustiveRun RunDacExhaustive(int window, int steps, double frequency_hz);
 
 }  // namespace nupmpc::examples
 
