@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "nlohmann/json.hpp"
 
@@ -21,6 +22,18 @@ nlohmann::json PeerJson(const LevelReport& e) {
   return {{"solves_per_s", e.solves_per_s}, {"p50_ms", e.p50_ms},   {"p90_ms", e.p90_ms},
           {"p99_ms", e.p99_ms},             {"p999_ms", e.p999_ms}, {"max_ms", e.max_ms},
           {"superseded", e.tally.superseded}, {"errors", e.tally.errors}};
+}
+
+// One table row; the server's and the peers' rows differ in the label, the iterations and
+// the capacity columns (a peer does no solve) and in what the overhead is measured from.
+void PrintRow(const char* label, const LevelReport& l, const std::string& iterations, double overhead_us,
+              const std::string& capacity) {
+  const std::string offered = l.config.closed_loop ? "-" : absl::StrCat(static_cast<long long>(l.config.rate_per_s));
+  std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6s %10llu %8.0f\xc2\xb5s %9s  %s\n",
+              l.config.concurrency, label, offered.c_str(), l.solves_per_s, l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms,
+              l.max_ms, l.service_p99_ms, iterations.c_str(), static_cast<unsigned long long>(l.tally.superseded),
+              overhead_us, capacity.c_str(), Errors(l.tally).c_str());
+  std::fflush(stdout);
 }
 
 double MiB(std::uint64_t bytes) { return static_cast<double>(bytes) / (1024.0 * 1024.0); }
@@ -54,22 +67,12 @@ void PrintHeader(const RunHeader& h) {
 }
 
 void PrintLevel(const RunHeader& h, const LevelReport& l) {
-  const std::string offered = l.config.closed_loop ? "-" : absl::StrCat(static_cast<long long>(l.config.rate_per_s));
-  std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6.2f %10llu %8.0f\xc2\xb5s %8.0f%%  %s\n",
-              l.config.concurrency, l.config.closed_loop ? "closed" : "open", offered.c_str(), l.solves_per_s,
-              l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms, l.max_ms, l.service_p99_ms, l.mean_iterations,
-              static_cast<unsigned long long>(l.tally.superseded), OverheadUs(h, l),
-              100.0 * l.solves_per_s / h.capacity_per_s, Errors(l.tally).c_str());
-  std::fflush(stdout);
+  PrintRow(l.config.closed_loop ? "closed" : "open", l, absl::StrFormat("%.2f", l.mean_iterations), OverheadUs(h, l),
+           absl::StrFormat("%.0f%%", 100.0 * l.solves_per_s / h.capacity_per_s));
 }
 
 void PrintPeerLevel(const char* label, const LevelReport& l, double busy_ms) {
-  const std::string offered = l.config.closed_loop ? "-" : absl::StrCat(static_cast<long long>(l.config.rate_per_s));
-  std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6s %10llu %8.0f\xc2\xb5s %9s  %s\n",
-              l.config.concurrency, label, offered.c_str(), l.solves_per_s, l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms,
-              l.max_ms, l.service_p99_ms, "-", static_cast<unsigned long long>(l.tally.superseded),
-              (l.p50_ms - busy_ms) * 1e3, "-", Errors(l.tally).c_str());
-  std::fflush(stdout);
+  PrintRow(label, l, "-", (l.p50_ms - busy_ms) * 1e3, "-");
 }
 
 void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
