@@ -42,7 +42,16 @@ class LoadTest : public ServiceTest {
     config.concurrency = concurrency;
     config.duration_s = duration_s;
     config.warmup_s = 0.1;
-    return loadtest::RunLevel(target_, {&workload_.spec, &workload_.states, /*closed_loop=*/true}, config);
+    return loadtest::RunLevel(target_, Plan(/*closed_loop=*/true), config);
+  }
+  loadtest::StreamPlan Plan(bool closed_loop) const { return {&workload_.spec, &workload_.states, closed_loop}; }
+  // A short level for the echo peers: 0.3 s after 0.05 s of warm-up.
+  static loadtest::LevelConfig ShortLevel(int concurrency) {
+    loadtest::LevelConfig config;
+    config.concurrency = concurrency;
+    config.duration_s = 0.3;
+    config.warmup_s = 0.05;
+    return config;
   }
   const Workload workload_ = MassesWorkload();
 };
@@ -87,12 +96,8 @@ TEST_F(LoadTest, EchoServerAnswersEveryStepWithItsFixedPlanInBothModes) {
   for (int i = 0; i < 90; ++i) plan.add_inputs(0.01 * i);
   absl::StatusOr<std::unique_ptr<loadtest::EchoControlServer>> echo = loadtest::EchoControlServer::Start(plan);
   ASSERT_TRUE(echo.ok()) << echo.status();
-  loadtest::LevelConfig config;
-  config.concurrency = 3;
-  config.duration_s = 0.3;
-  config.warmup_s = 0.05;
-  absl::StatusOr<loadtest::LevelReport> closed =
-      loadtest::RunLevel((*echo)->target(), {&workload_.spec, &workload_.states, /*closed_loop=*/true}, config);
+  loadtest::LevelConfig config = ShortLevel(3);
+  absl::StatusOr<loadtest::LevelReport> closed = loadtest::RunLevel((*echo)->target(), Plan(true), config);
   ASSERT_TRUE(closed.ok()) << closed.status();
   EXPECT_TRUE(closed->tally.errors.empty());
   EXPECT_GT(closed->tally.latency_ms.size(), 30u);
@@ -101,8 +106,7 @@ TEST_F(LoadTest, EchoServerAnswersEveryStepWithItsFixedPlanInBothModes) {
   EXPECT_EQ(closed->tally.iterations, 7u * closed->tally.latency_ms.size());
   config.closed_loop = false;
   config.rate_per_s = 600.0;
-  absl::StatusOr<loadtest::LevelReport> open =
-      loadtest::RunLevel((*echo)->target(), {&workload_.spec, &workload_.states, /*closed_loop=*/false}, config);
+  absl::StatusOr<loadtest::LevelReport> open = loadtest::RunLevel((*echo)->target(), Plan(false), config);
   ASSERT_TRUE(open.ok()) << open.status();
   EXPECT_TRUE(open->tally.errors.empty());
   EXPECT_EQ(open->tally.superseded, 0u);  // it never queues, so nothing is ever superseded
@@ -118,11 +122,7 @@ TEST_F(LoadTest, EchoPeerRunsAsAChildProcessOfTheLoadTestBinary) {
       {NUPMPC_LOADTEST_BINARY, "--server=" + target_, "--instance=" + instance, "--serve_echo_busy_us=200"});
   ASSERT_TRUE(echo.ok()) << echo.status();
   EXPECT_NE((*echo)->target(), target_);
-  loadtest::LevelConfig config;
-  config.duration_s = 0.3;
-  config.warmup_s = 0.05;
-  absl::StatusOr<loadtest::LevelReport> r =
-      loadtest::RunLevel((*echo)->target(), {&workload_.spec, &workload_.states, /*closed_loop=*/true}, config);
+  absl::StatusOr<loadtest::LevelReport> r = loadtest::RunLevel((*echo)->target(), Plan(true), ShortLevel(1));
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_TRUE(r->tally.errors.empty());
   EXPECT_GT(r->tally.latency_ms.size(), 10u);
