@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
-# Installs every build and test dependency of nupmpc from Debian 12 packages.
-# Idempotent and quiet; run as root (or with sudo available) on a fresh machine.
+# Installs every build and test dependency of nupmpc from Debian 12 packages, saying what
+# it does (one line per step). Idempotent; run as root (or with sudo available).
 set -euo pipefail
 
 packages=(
-  build-essential cmake ninja-build pkg-config git
+  build-essential cmake ninja-build pkg-config git python3
   libeigen3-dev libabsl-dev
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  libceres-dev coinor-libipopt-dev
+  liblbfgs-dev coinor-libipopt-dev
+  clang libclang-rt-14-dev
 )
 
 missing=()
@@ -23,5 +24,17 @@ fi
 sudo_cmd=()
 if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
 export DEBIAN_FRONTEND=noninteractive
+echo "install-deps: ${#missing[@]} Debian packages to install: ${missing[*]}"
+echo "install-deps: apt-get update"
 "${sudo_cmd[@]}" apt-get update -qq
-"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "install-deps: downloading and installing them with their dependencies (a few minutes on a fresh machine)"
+requested=$(printf '%s\n' "${missing[@]}" | sed 's/[+.]/\\&/g' | paste -sd'|')  # as an ERE
+"${sudo_cmd[@]}" apt-get install -y --no-install-recommends "${missing[@]}" 2>&1 |
+  { grep -E "^(Need to get|Setting up ($requested)(:amd64)? )" || true; } |
+  sed -e 's/^/install-deps: /' -e 's/ \.\.\.$//'
+# The pipe above hides apt-get's exit status: check the result instead.
+for p in "${missing[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
+    { echo "install-deps: $p failed to install (run: apt-get install $p)" >&2; exit 1; }
+done
+echo "install-deps: done"

@@ -16,8 +16,18 @@ v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& st
 
 }  // namespace
 
+ControlStream* ControlStream::Start(ServerState* state, grpc::CallbackServerContext* context) {
+  // std::make_shared cannot reach the private constructor.
+  std::shared_ptr<ControlStream> stream(new ControlStream(state, context));
+  stream->grpc_reference_ = stream;
+  stream->Begin();
+  return stream.get();
+}
+
 ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* context)
-    : state_(state), context_(context) {
+    : state_(state), context_(context) {}
+
+void ControlStream::Begin() {
   if (state_->draining.load()) {
     Finish(state_->ToGrpc(absl::UnavailableError("the server is shutting down")));
     return;
@@ -110,8 +120,8 @@ void ControlStream::StartAttach(v1::ControlRequest first) {
     std::lock_guard<std::mutex> lock(mu_);
     solving_ = true;  // keeps the stream from finishing while the pool builds the session
   }
-  const absl::Status queued =
-      state_->pool.TrySubmit([this, first = std::move(first)]() mutable { AttachAndContinue(std::move(first)); });
+  const absl::Status queued = state_->pool.TrySubmit(
+      [self = shared_from_this(), first = std::move(first)]() mutable { self->AttachAndContinue(std::move(first)); });
   if (queued.ok()) return;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -175,11 +185,12 @@ void ControlStream::StartSolveLocked() {
   // runs first without a worker waiting for it.
   const absl::Status queued = SessionStrand::Submit(
       entry_->strand, state_->pool,
-      {[this, request = std::move(request), queued_at]() mutable {
-         SolveOnPool(std::move(request));
-         state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+      {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
+         self->SolveOnPool(std::move(request));
+         self->state_->metrics.RecordSolve(
+             std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
        },
-       [this, sequence](absl::Status refused) { FailQueuedSolve(sequence, refused); },
+       [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
        entry_->last_solve_ms.load(std::memory_order_relaxed)});
   if (!queued.ok()) {
     solving_ = false;
@@ -254,6 +265,8 @@ void ControlStream::OnWriteDone(bool ok) {
 void ControlStream::OnCancel() { cancelled_.store(true); }
 
 void ControlStream::OnDone() {
+  // Deletes this stream on return unless a pool task still holds it.
+  const std::shared_ptr<ControlStream> last_reference_maybe = std::move(grpc_reference_);
   if (entry_ != nullptr) {
     if (entry_->owned_by_stream) {
       (void)state_->registry.Close(entry_->id);
@@ -262,7 +275,6 @@ void ControlStream::OnDone() {
       entry_->attached.store(false);
     }
   }
-  delete this;
 }
 
 }  // namespace nupmpc::server

@@ -24,9 +24,17 @@ namespace nupmpc::server {
 //
 // A bad step is answered with error_code/error_message and the stream stays open (the
 // session is unchanged); a bad first message ends the stream with that status.
-class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
+//
+// Lifetime: gRPC and every task on the worker pool each hold a reference. gRPC calls
+// OnDone (and drops its reference) once Finish has completed, which can happen on a
+// gRPC thread while a worker is still running the tail of its task after it handed back
+// the stream (answer queued, `solving_` cleared, lock released); the last reference to
+// go deletes the stream.
+class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>,
+                      public std::enable_shared_from_this<ControlStream> {
  public:
-  ControlStream(ServerState* state, grpc::CallbackServerContext* context);
+  // The reactor for one Control call; it owns itself (see Lifetime above).
+  static ControlStream* Start(ServerState* state, grpc::CallbackServerContext* context);
 
   void OnReadDone(bool ok) override;
   void OnWriteDone(bool ok) override;
@@ -34,6 +42,9 @@ class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Con
   void OnDone() override;
 
  private:
+  ControlStream(ServerState* state, grpc::CallbackServerContext* context);
+  // Starts reading, or refuses the call while the server drains.
+  void Begin();
   // The session the first message names or creates (marked attached).
   absl::StatusOr<std::shared_ptr<SessionEntry>> Attach(const v1::ControlRequest& first);
   // Handles the first message: on the pool when it carries a spec (building a session
@@ -53,7 +64,10 @@ class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Con
   void Pump();
 
   ServerState* const state_;
+  // Valid until OnDone; read only while the stream cannot finish (a read pending or
+  // `solving_` set).
   grpc::CallbackServerContext* const context_;
+  std::shared_ptr<ControlStream> grpc_reference_;  // set by Start, dropped by OnDone
   v1::ControlRequest read_buffer_;
   std::atomic<bool> cancelled_{false};
 

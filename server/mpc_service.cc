@@ -2,6 +2,8 @@
 
 #include <functional>
 
+#include "absl/strings/ascii.h"
+#include "core/platform/cpu_baseline.h"
 #include "core/util/status_macros.h"
 #include "server/control_stream.h"
 #include "server/gp_conversion.h"
@@ -91,7 +93,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
 
 grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* MpcServiceImpl::Control(
     grpc::CallbackServerContext* context) {
-  return new ControlStream(state_, context);
+  return ControlStream::Start(state_, context);
 }
 
 grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* context, const v1::SolveRequest* request,
@@ -161,6 +163,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerCont
   response->set_active_sessions(state_->registry.size());
   response->set_draining(state_->draining.load());
   response->set_resident_memory_bytes(ResidentMemoryBytes());
+  response->set_cpu_baseline(platform::kBuildCpuBaseline);
+  response->set_cpu_features(std::string(absl::StripLeadingAsciiWhitespace(platform::kBuildCpuFeatures)));
   return FinishNow(context, grpc::Status::OK);
 }
 

@@ -264,7 +264,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   int changed = 0;
   double residual = 0.0;
   for (int n = g.N; n >= 0; --n) {
-    step_costate_.col(n) = xt;
+    View<MS, 1>(step_costate_.col(n).data(), M, 1) = xt;
     for (int r = g.row_begin[n + 1] - 1; r >= g.row_begin[n]; --r) {
       row_dual_(r) = 0.0;
       const ScalarPrior& prior = g.row_prior[r];

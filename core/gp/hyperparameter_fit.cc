@@ -2,12 +2,14 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
+#include <memory>
+#include <string_view>
 #include <numbers>
 
 #include "absl/strings/str_cat.h"
-#include "ceres/gradient_problem.h"
-#include "ceres/gradient_problem_solver.h"
-#include "ceres/iteration_callback.h"
+#include "absl/strings/str_format.h"
+#include "lbfgs.h"
 
 namespace nupmpc::gp {
 namespace {
@@ -30,28 +32,6 @@ SeArdKernel FromLog(const double* theta, int d, double min_noise) {
   k.noise_variance = std::max(std::exp(theta[d + 1]), min_noise);
   return k;
 }
-
-class LogLikelihoodCost final : public ceres::FirstOrderFunction {
- public:
-  LogLikelihoodCost(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets, double min_noise)
-      : inputs_(inputs), targets_(targets), min_noise_(min_noise) {}
-  bool Evaluate(const double* parameters, double* cost, double* gradient) const override {
-    const int d = static_cast<int>(inputs_.cols());
-    Eigen::VectorXd g;
-    absl::StatusOr<double> nll =
-        NegativeLogLikelihood(inputs_, targets_, FromLog(parameters, d, min_noise_), gradient ? &g : nullptr);
-    if (!nll.ok() || !std::isfinite(*nll)) return false;  // Ceres backs off
-    *cost = *nll;
-    if (gradient != nullptr) Eigen::Map<Eigen::VectorXd>(gradient, d + 2) = g;
-    return true;
-  }
-  int NumParameters() const override { return static_cast<int>(inputs_.cols()) + 2; }
-
- private:
-  const Eigen::MatrixXd& inputs_;
-  const Eigen::VectorXd& targets_;
-  double min_noise_;
-};
 
 }  // namespace
 
@@ -92,18 +72,100 @@ absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, cons
 }
 
 namespace {
-// Ends the fit after the current iteration once the flag is raised.
-class CancelCallback : public ceres::IterationCallback {
- public:
-  explicit CancelCallback(const std::atomic<bool>* cancel) : cancel_(cancel) {}
-  ceres::CallbackReturnType operator()(const ceres::IterationSummary&) override {
-    return cancel_ != nullptr && cancel_->load(std::memory_order_relaxed) ? ceres::SOLVER_ABORT
-                                                                          : ceres::SOLVER_CONTINUE;
+
+// One fit's state, reached from liblbfgs' C callbacks through their `instance` pointer.
+struct FitRun {
+  FitRun(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets, const FitOptions& options)
+      : inputs(inputs), targets(targets), options(options), start(std::chrono::steady_clock::now()) {}
+
+  const Eigen::MatrixXd& inputs;
+  const Eigen::VectorXd& targets;
+  const FitOptions& options;
+  std::chrono::steady_clock::time_point start;
+  Eigen::VectorXd gradient;  // NegativeLogLikelihood's output, reused across evaluations
+  double previous_nll = std::numeric_limits<double>::infinity();
+  // The NLL and gradient max-norm at the iterate liblbfgs will return (the last one it
+  // accepted, or the start): known without evaluating it again.
+  bool accepted_known = false;
+  double accepted_nll = 0.0;
+  double accepted_gradient_max = 0.0;
+  int evaluations = 0;
+  int iterations = 0;
+  bool converged = false;
+  bool stopped = false;
+
+  void Accept(double nll, double gradient_max) {
+    accepted_known = true;
+    accepted_nll = nll;
+    accepted_gradient_max = gradient_max;
   }
 
- private:
-  const std::atomic<bool>* cancel_;
+  bool MustStop() const {
+    if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed)) return true;
+    return options.max_seconds > 0.0 &&
+           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= options.max_seconds;
+  }
 };
+
+// A point where K_y is not positive definite evaluates to +inf, and so does every point
+// once the fit must stop: the backtracking line search then shortens its step, and gives up
+// after a few calls that cost nothing instead of O(P³) each. liblbfgs returns the last
+// accepted iterate when its line search fails (and the last accepted one otherwise).
+lbfgsfloatval_t EvaluateNll(void* instance, const lbfgsfloatval_t* theta, lbfgsfloatval_t* gradient, int n,
+                            lbfgsfloatval_t /*step*/) {
+  FitRun& run = *static_cast<FitRun*>(instance);
+  Eigen::Map<Eigen::VectorXd> g(gradient, n);
+  g.setZero();
+  if (run.MustStop()) {
+    run.stopped = true;
+    return std::numeric_limits<double>::infinity();
+  }
+  const absl::StatusOr<double> nll = NegativeLogLikelihood(
+      run.inputs, run.targets, FromLog(theta, n - 2, run.options.min_noise_variance), &run.gradient);
+  if (!nll.ok() || !std::isfinite(*nll) || !run.gradient.allFinite()) return std::numeric_limits<double>::infinity();
+  g = run.gradient;
+  if (run.evaluations++ == 0) run.Accept(*nll, run.gradient.cwiseAbs().maxCoeff());  // the start
+  return *nll;
+}
+
+// Our own stopping tests (liblbfgs' are relative to ‖θ‖ and ill-defined for a negative
+// NLL): the gradient's max-norm, or the relative decrease of the NLL in one iteration.
+// A non-zero return ends the fit.
+int AfterIteration(void* instance, const lbfgsfloatval_t* /*theta*/, const lbfgsfloatval_t* gradient,
+                   lbfgsfloatval_t nll, lbfgsfloatval_t /*theta_norm*/, lbfgsfloatval_t /*gradient_norm*/,
+                   lbfgsfloatval_t /*step*/, int n, int iteration, int /*evaluations*/) {
+  FitRun& run = *static_cast<FitRun*>(instance);
+  run.iterations = iteration;
+  const double gradient_max = Eigen::Map<const Eigen::VectorXd>(gradient, n).cwiseAbs().maxCoeff();
+  run.Accept(nll, gradient_max);
+  const double decrease = run.previous_nll - nll;
+  run.previous_nll = nll;
+  if (gradient_max <= run.options.gradient_tolerance ||
+      std::abs(decrease) <= run.options.function_tolerance * std::max(1.0, std::abs(nll))) {
+    run.converged = true;
+    return 1;
+  }
+  if (run.MustStop()) {
+    run.stopped = true;
+    return 1;
+  }
+  return 0;
+}
+
+std::string_view LbfgsOutcome(int code) {
+  switch (code) {
+    case LBFGS_SUCCESS: return "success";
+    case LBFGS_STOP: return "stopping test met";
+    case LBFGS_ALREADY_MINIMIZED: return "already minimal";
+    case LBFGSERR_MAXIMUMITERATION: return "iteration limit";
+    case LBFGSERR_MAXIMUMLINESEARCH: return "line search: evaluation limit";
+    case LBFGSERR_MINIMUMSTEP: return "line search: step below minimum";
+    case LBFGSERR_ROUNDING_ERROR: return "line search: rounding errors";
+    case LBFGSERR_INCREASEGRADIENT: return "line search: gradient increases";
+    default: return "line search failed";
+  }
+}
+
 }  // namespace
 
 absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
@@ -115,40 +177,48 @@ absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, cons
   if (!(options.max_seconds >= 0.0)) {
     return absl::InvalidArgumentError(absl::StrCat("FitOptions.max_seconds = ", options.max_seconds, "; must be >= 0"));
   }
-  const auto start = std::chrono::steady_clock::now();
+  if (options.max_iterations < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("FitOptions.max_iterations = ", options.max_iterations, "; must be >= 1"));
+  }
+  FitRun run(inputs, targets, options);
   FitResult result;
-  Eigen::VectorXd theta = ToLog(initial);
   absl::StatusOr<double> first = NegativeLogLikelihood(inputs, targets, initial, nullptr);
   if (!first.ok()) return first.status();
   result.initial_negative_log_likelihood = *first;
 
-  ceres::GradientProblem problem(new LogLikelihoodCost(inputs, targets, options.min_noise_variance));
-  ceres::GradientProblemSolver::Options solver_options;
-  solver_options.line_search_direction_type = ceres::LBFGS;
-  solver_options.max_num_iterations = options.max_iterations;
-  solver_options.gradient_tolerance = options.gradient_tolerance;
-  solver_options.function_tolerance = options.function_tolerance;
-  solver_options.logging_type = ceres::SILENT;
-  if (options.max_seconds > 0.0) solver_options.max_solver_time_in_seconds = options.max_seconds;
-  CancelCallback cancel(options.cancel);
-  if (options.cancel != nullptr) solver_options.callbacks.push_back(&cancel);
-  ceres::GradientProblemSolver::Summary summary;
-  ceres::Solve(solver_options, problem, theta.data(), &summary);
-  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  result.stopped = summary.termination_type == ceres::USER_FAILURE ||
-                   (options.max_seconds > 0.0 && summary.termination_type == ceres::NO_CONVERGENCE &&
-                    elapsed >= options.max_seconds);
+  // liblbfgs may be built to need its own (aligned) allocation for the variables.
+  const int n = d + 2;
+  const std::unique_ptr<lbfgsfloatval_t, void (*)(lbfgsfloatval_t*)> theta(lbfgs_malloc(n), lbfgs_free);
+  if (theta == nullptr) return absl::ResourceExhaustedError("hyper-parameter fit: out of memory");
+  Eigen::Map<Eigen::VectorXd>(theta.get(), n) = ToLog(initial);
+  lbfgs_parameter_t parameters;
+  lbfgs_parameter_init(&parameters);
+  parameters.max_iterations = options.max_iterations;
+  parameters.linesearch = LBFGS_LINESEARCH_BACKTRACKING_WOLFE;  // copes with +inf (see EvaluateNll)
+  parameters.epsilon = 0.0;  // AfterIteration decides convergence
+  parameters.past = 0;
+  lbfgsfloatval_t last_nll = 0.0;
+  const int code = lbfgs(n, theta.get(), &last_nll, EvaluateNll, AfterIteration, &run, &parameters);
 
-  result.kernel = FromLog(theta.data(), d, options.min_noise_variance);
-  Eigen::VectorXd gradient;
-  absl::StatusOr<double> nll = NegativeLogLikelihood(inputs, targets, result.kernel, &gradient);
-  if (!nll.ok()) return nll.status();
-  result.negative_log_likelihood = *nll;
-  result.gradient_norm = gradient.cwiseAbs().maxCoeff();
-  result.iterations = static_cast<int>(summary.iterations.size());
-  result.converged = summary.termination_type == ceres::CONVERGENCE;
-  result.report = summary.BriefReport();
-  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.kernel = FromLog(theta.get(), d, options.min_noise_variance);
+  if (!run.accepted_known) {  // stopped before liblbfgs evaluated the start
+    Eigen::VectorXd gradient;
+    absl::StatusOr<double> nll = NegativeLogLikelihood(inputs, targets, result.kernel, &gradient);
+    if (!nll.ok()) return nll.status();
+    run.Accept(*nll, gradient.cwiseAbs().maxCoeff());
+  }
+  result.negative_log_likelihood = run.accepted_nll;
+  result.gradient_norm = run.accepted_gradient_max;
+  result.iterations = run.iterations;
+  result.converged = run.converged;
+  result.stopped = !run.converged && run.stopped;
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - run.start).count();
+  result.report = absl::StrFormat(
+      "L-BFGS: %d iterations, NLL %.6g -> %.6g, |gradient|max %.3g, %s (%.3f s)", result.iterations,
+      result.initial_negative_log_likelihood, result.negative_log_likelihood, result.gradient_norm,
+      result.converged ? "converged" : result.stopped ? "stopped (time or cancel)" : LbfgsOutcome(code),
+      result.seconds);
   return result;
 }
 

@@ -6,8 +6,10 @@
 //   NLL(θ) = ½ Yᵀ K_y⁻¹ Y + ½ log det K_y + (N/2) log 2π,   K_y = K + σ_n² I
 // over θ = log(σ_f², ℓ_1..ℓ_d, σ_n²) with its analytic gradient
 //   ∂NLL/∂θ_j = -½ tr((α αᵀ - K_y⁻¹) ∂K_y/∂θ_j)          (Rasmussen & Williams (5.9))
-// by Ceres' L-BFGS (a gradient problem). O(N³) per evaluation: fit on a few hundred
-// points; the model for more data reuses the hyper-parameters.
+// by L-BFGS (liblbfgs, a C library: it shares no C++ or Eigen types with us, so no
+// inline Eigen code compiled with other alignment settings can enter our link). O(N³) per
+// evaluation: fit on a few hundred points; the model for more data reuses the
+// hyper-parameters.
 
 #include <atomic>
 #include <string>
@@ -24,8 +26,8 @@ struct FitOptions {
   double function_tolerance = 1e-10;
   // Lower bound on σ_n² (keeps K_y well conditioned on noise-free data).
   double min_noise_variance = 1e-8;
-  // Wall time for the whole fit (0: none) and a flag checked after every iteration: a fit
-  // of P points costs O(P³) per iteration, and a service must be able to stop it.
+  // Wall time for the whole fit (0: none) and a flag, both checked before every likelihood
+  // evaluation: one costs O(P³) for P points, and a service must be able to stop the fit.
   double max_seconds = 0.0;
   const std::atomic<bool>* cancel = nullptr;
 };
@@ -35,11 +37,11 @@ struct FitResult {
   double negative_log_likelihood = 0.0;
   double initial_negative_log_likelihood = 0.0;
   int iterations = 0;
-  bool converged = false;  ///< Ceres reported convergence (not the iteration cap)
+  bool converged = false;  ///< a stopping test (gradient or function tolerance) was met
   bool stopped = false;    ///< max_seconds or the cancel flag ended it (kernel: the start's or the last step's)
   double gradient_norm = 0.0;  ///< max-norm of the gradient in log parameters at the end
   double seconds = 0.0;
-  std::string report;      ///< Ceres' one-line summary
+  std::string report;      ///< one line: iterations, NLL before and after, how it ended
 };
 
 // NLL and its gradient with respect to log(σ_f², ℓ, σ_n²) (exposed for tests).

@@ -50,6 +50,15 @@ Eigen::Map<const Eigen::Matrix<double, Rows, Cols>> ConstView(const double* data
   return Eigen::Map<const Eigen::Matrix<double, Rows, Cols>>(data, rows, cols);
 }
 
+// A writable view of the same kind. Writing a fixed-size vector through it (rather than
+// into a dynamic block) keeps the assignment at its compile-time size: through a dynamic
+// destination Eigen also compiles a whole-packet loop that can never run for a short
+// vector, and GCC 12 warns (-Warray-bounds) about that loop's 64-byte loads under AVX-512.
+template <int Rows, int Cols>
+Eigen::Map<Eigen::Matrix<double, Rows, Cols>> View(double* data, int rows, int cols) {
+  return Eigen::Map<Eigen::Matrix<double, Rows, Cols>>(data, rows, cols);
+}
+
 // dst = lhs · rhs for state-sized matrices. Even for fixed sizes Eigen takes its blocked
 // GEMM path (packing, made for large matrices) once rows + cols + depth ≥ 20; for 8..16
 // the coefficient-based product is 1.2–7× faster (microbenchmark, AVX-512). Dynamic sizes

@@ -2,7 +2,9 @@
 // formulas with an explicit inverse, gradients and the linGP against finite differences
 // of the exact GP, V̂ positive semidefinite; the likelihood gradient against finite
 // differences; the hyper-parameter fit recovers the parameters of data drawn from a
-// known GP; NARX data layout.
+// known GP and stops within one evaluation of its time limit; NARX data layout.
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -269,6 +271,45 @@ TEST(HyperparameterFit, RecoversKnownParameters) {
   EXPECT_NEAR(std::log(fit->kernel.length_scales(1) / truth.length_scales(1)), 0.0, std::log(1.3));
   EXPECT_NEAR(std::log(fit->kernel.noise_variance / truth.noise_variance), 0.0, std::log(1.5));
   EXPECT_NEAR(std::log(fit->kernel.signal_variance / truth.signal_variance), 0.0, std::log(2.5));
+}
+
+// Seconds one likelihood-and-gradient evaluation takes on `d`, measured now (the fit's
+// stop latency is stated in evaluations, not in absolute time).
+double EvaluationSeconds(const Data& d) {
+  Eigen::VectorXd gradient;
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_TRUE(NegativeLogLikelihood(d.x, d.y, TestKernel(), &gradient).ok());
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// The limit is checked before every O(P³) evaluation: once it has passed, at most the
+// evaluation under way finishes, and the result is the last accepted iterate.
+TEST(HyperparameterFit, StopsAtItsTimeLimitWithinOneEvaluation) {
+  const Data d = SmoothData(600, 3);
+  const double evaluation = EvaluationSeconds(d);
+  FitOptions options;
+  options.max_seconds = 3 * evaluation;  // far fewer evaluations than the fit needs
+  auto fit = FitHyperparameters(d.x, d.y, TestKernel(), options);
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_TRUE(fit->stopped) << fit->report;
+  EXPECT_FALSE(fit->converged);
+  EXPECT_LT(fit->seconds, options.max_seconds + 2 * evaluation) << fit->report << "; one evaluation " << evaluation;
+  EXPECT_LE(fit->negative_log_likelihood, fit->initial_negative_log_likelihood);
+  // What it reports is the likelihood at the kernel it returns.
+  EXPECT_NEAR(fit->negative_log_likelihood, *NegativeLogLikelihood(d.x, d.y, fit->kernel, nullptr),
+              1e-9 * std::abs(fit->negative_log_likelihood));
+}
+
+TEST(HyperparameterFit, ARaisedCancelFlagStopsTheFitBeforeItsFirstIteration) {
+  const Data d = SmoothData(300, 4);
+  const std::atomic<bool> cancel{true};
+  FitOptions options;
+  options.cancel = &cancel;
+  auto fit = FitHyperparameters(d.x, d.y, TestKernel(), options);
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_TRUE(fit->stopped);
+  EXPECT_EQ(fit->iterations, 0);
+  EXPECT_DOUBLE_EQ(fit->negative_log_likelihood, fit->initial_negative_log_likelihood);
 }
 
 TEST(Narx, RegressorsFollowTheLayout) {

@@ -20,7 +20,7 @@ Problem SmallPlant() {
   p.A[0] << 1.0, 0.1, 0.0, 0.98;
   p.B[0] << 0.005, 0.1;
   p.C[0] << 1.0, 0.0;
-  p.initial_mean = Eigen::Vector2d(-0.4, 0.0);
+  p.initial_mean << -0.4, 0.0;
   p.input_priors.assign(kN, ScalarPrior::Gaussian(0.0, 1.0 / 0.1));        // ½·0.1·u²
   p.output_priors.assign(kN + 1, ScalarPrior::Gaussian(1.0, 1.0 / 50.0));  // ½·50·(y - 1)²
   return p;

@@ -22,7 +22,7 @@ Problem Plant() {
   p.A[0] << 1.0, 0.5, 0.0, 1.0;
   p.B[0] << 0.125, 0.01, 0.5, 0.0;
   p.C[0] << 1.0, 0.0;
-  p.initial_mean = Eigen::Vector2d(0.0, 0.0);
+  p.initial_mean << 0.0, 0.0;
   p.input_priors.assign(static_cast<std::size_t>(kN) * 2, ScalarPrior::Free());
   for (int n = 0; n < kN; ++n) p.mutable_input_prior(n, 1) = ScalarPrior::Gaussian(0.0, 1.0);
   for (int n = 0; n <= kN; ++n) p.mutable_output_prior(n, 0) = ScalarPrior::Gaussian(n < 3 ? 0.6 : 1.4, 0.05);
@@ -78,7 +78,7 @@ TEST(MultiLevelInputs, ThreeLevelDacComesCloseToExhaustiveSearch) {
   for (int t = 0; t < steps; ++t) {
     p.output_priors.assign(K + 1, ScalarPrior::Free());
     for (int n = 0; n <= K; ++n) p.output_priors[n] = ScalarPrior::Gaussian(DacTarget(t + n), VY);
-    p.initial_mean = x_nup;
+    p.initial_mean.head<3>() = x_nup;  // at its fixed size (see View in core/message_passing/fixed_size.h)
     auto expanded = ExpandMultiLevelInputs(p, levels);
     ASSERT_TRUE(expanded.ok()) << expanded.status();
     auto session = Session::Create(*expanded, options);

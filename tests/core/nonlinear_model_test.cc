@@ -176,7 +176,9 @@ TEST(NonlinearModel, StepControlWidensTheProximalTermsWhileStepsSucceed) {
     EXPECT_TRUE(summary->converged);
     EXPECT_NEAR(plan.inputs(0, 0), OneStepOptimum(0.6), 1e-6);
     linearisations[k] = summary->linearisations;
-    if (k == 1) EXPECT_EQ(summary->proximal_scale, 1e4);
+    if (k == 1) {
+      EXPECT_EQ(summary->proximal_scale, 1e4);
+    }
   }
   EXPECT_LT(2 * linearisations[1], linearisations[0]);
 }

@@ -32,7 +32,7 @@ TEST_F(ServiceTest, NonconvexPriorsReachTheCoreThroughTheApi) {
   p.A[0] << 1.0, 0.1, 0.0, 0.95;
   p.B[0] << 0.0, 0.05, 0.02, 0.1, 0.1, -0.05;
   p.C[0] << 1.0, 0.0, 0.0, 1.0;
-  p.initial_mean = Eigen::Vector2d(0.5, -0.2);
+  p.initial_mean << 0.5, -0.2;
   for (int n = 0; n < p.horizon; ++n) {
     p.mutable_input_prior(n, 0) = core::ScalarPrior::Binary(-1.0, 1.0);
     p.mutable_input_prior(n, 1) = core::ScalarPrior::PlainNuv(0.0).WithGaussian(0.0, 10.0);

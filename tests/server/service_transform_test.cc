@@ -21,7 +21,7 @@ core::Problem SmallPlant() {
   p.A[0] << 1.0, 0.1, 0.0, 0.98;
   p.B[0] << 0.005, 0.1;
   p.C[0] << 1.0, 0.0;
-  p.initial_mean = Eigen::Vector2d(-0.4, 0.0);
+  p.initial_mean << -0.4, 0.0;
   p.input_priors.assign(kN, core::ScalarPrior::Box(-0.5, 0.5).WithGaussian(0.0, 10.0));
   p.output_priors.assign(kN + 1, core::ScalarPrior::Gaussian(1.0, 1.0 / 50.0));
   return p;

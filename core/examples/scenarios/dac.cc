@@ -99,7 +99,7 @@ absl::StatusOr<DacOnlineRun> DacOnline(int window, int steps, double output_vari
     for (int n = 0; n <= window; ++n) {
       p.output_priors[n] = core::ScalarPrior::Gaussian(DacTarget(t + n, frequency_hz), output_variance);
     }
-    p.initial_mean = x_nup;
+    p.initial_mean.head<3>() = x_nup;  // at its fixed size (see View in core/message_passing/fixed_size.h)
     NUPMPC_RETURN_IF_ERROR(session->Update(p));
     const auto start = std::chrono::steady_clock::now();
     NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, session->Solve(cold, &plan));
