@@ -25,8 +25,6 @@
 
 namespace nupmpc {
 
-namespace v1 = ::nupmpc::v1;
-
 class Session;
 
 class Client {

@@ -11,13 +11,15 @@
 namespace nupmpc::server {
 namespace {
 
-// Occupies the pool's only thread until released.
+// Occupies the pool's only thread until released. The task holds its own copy of the
+// release future: it may still be waking up when a test has released it and the Blocker
+// is gone (ASan: stack-use-after-scope when the task called release_.get_future() late).
 class Blocker {
  public:
   explicit Blocker(WorkerPool& pool) {
-    EXPECT_TRUE(pool.TrySubmit([this] {
-                      started_.set_value();
-                      release_.get_future().wait();
+    EXPECT_TRUE(pool.TrySubmit([this, released = release_.get_future().share()] {
+                      started_.set_value();  // the constructor is still waiting: `this` lives
+                      released.wait();
                     }).ok());
     started_.get_future().wait();
   }
