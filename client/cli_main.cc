@@ -25,6 +25,7 @@
 #include "absl/strings/str_join.h"
 #include "client/client.h"
 #include "client/problem_file.h"
+#include "client/server_info_table.h"
 #include "google/protobuf/util/json_util.h"
 
 ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
@@ -173,7 +174,11 @@ int main(int argc, char** argv) {
   if (command == "info") {
     absl::StatusOr<v1::GetServerInfoResponse> info = client.GetServerInfo();
     if (!info.ok()) return Fail(info.status());
-    PrintJson(*info, json);
+    if (json) {
+      PrintJson(*info, /*one_line=*/true);
+    } else {
+      std::fputs(nupmpc::ServerInfoTable(*info).c_str(), stdout);
+    }
     return 0;
   }
   if (command == "sessions") {
