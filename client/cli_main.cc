@@ -11,7 +11,8 @@
 //
 // FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.
 // --format table|json; with json, closed-loop prints one object per step and line with
-// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, u0.
+// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, u0, then
+// one summary object ("summary": true); with table, a summary after the steps.
 #include <cstdio>
 #include <random>
 #include <string>
@@ -19,13 +20,13 @@
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
-#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/strip.h"
 #include "absl/strings/str_join.h"
 #include "client/client.h"
+#include "client/closed_loop_summary.h"
 #include "client/problem_file.h"
 #include "client/server_info_table.h"
+#include "client/solve_status_name.h"
 #include "google/protobuf/util/json_util.h"
 
 ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
@@ -38,11 +39,7 @@ ABSL_FLAG(int, deadline_ms, 0, "deadline of unary calls (0: none)");
 namespace {
 
 namespace v1 = nupmpc::v1;
-
-// "SOLVE_STATUS_TIME_LIMIT" → "time_limit" (the names the core and nupmpc-bench print).
-std::string StatusName(v1::SolveStatus s) {
-  return absl::AsciiStrToLower(absl::StripPrefix(v1::SolveStatus_Name(s), "SOLVE_STATUS_"));
-}
+using nupmpc::SolveStatusName;
 
 std::string U0(const v1::SolveResult& r, int L) {
   std::vector<std::string> parts;
@@ -54,11 +51,11 @@ void PrintResult(const v1::SolveResult& r, int L, bool json) {
   if (json) {
     std::printf("{\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%.6g,"
                 "\"u0\":%s}\n",
-                StatusName(r.status()).c_str(), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
+                SolveStatusName(r.status()).c_str(), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
                 U0(r, L).c_str());
   } else {
     std::printf("status %s, %u iterations, %.4f ms, J = %.12g, max violation %.3g\nu[0] = %s\n",
-                StatusName(r.status()).c_str(), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
+                SolveStatusName(r.status()).c_str(), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
                 U0(r, L).c_str());
   }
 }
@@ -111,6 +108,7 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   std::vector<double> x(problem.spec.initial_state().mean().begin(), problem.spec.initial_state().mean().end());
   if (!json) std::printf("%5s %-16s %6s %10s %10s %18s %10s  %s\n", "step", "status", "iter", "solve_ms", "rtt_ms",
                          "objective", "max_viol", "u0");
+  std::vector<nupmpc::ClosedLoopStep> record;
   for (int t = 0; t < steps; ++t) {
     if (recorded) x = problem.closed_loop_states[t];
     v1::Step step;
@@ -119,19 +117,22 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
     absl::StatusOr<v1::SolveResult> r = (*session)->Step(step);
     const double rtt_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     if (!r.ok()) return Fail(r.status());
+    record.push_back({r->status(), r->solve_ms(), rtt_ms, r->max_violation()});
     if (json) {
       std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,"
                   "\"round_trip_ms\":%.6f,\"max_violation\":%.6g,\"warm_started\":%s,\"u0\":%s}\n",
-                  t, StatusName(r->status()).c_str(), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
+                  t, SolveStatusName(r->status()).c_str(), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
                   r->max_violation(), r->warm_started() ? "true" : "false", U0(*r, L).c_str());
     } else {
-      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, StatusName(r->status()).c_str(),
+      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, SolveStatusName(r->status()).c_str(),
                   r->iterations(), r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), U0(*r, L).c_str());
     }
     std::fflush(stdout);
     if (!recorded) x = Simulate(problem.spec, x, *r, noise, rng);
   }
   if (absl::Status s = (*session)->Close(); !s.ok()) return Fail(s);
+  const nupmpc::ClosedLoopSummary summary = nupmpc::SummariseClosedLoop(record);
+  std::fputs((json ? nupmpc::SummaryJson(summary) : "\n" + nupmpc::SummaryText(summary)).c_str(), stdout);
   return 0;
 }
 
