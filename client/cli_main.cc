@@ -18,10 +18,9 @@
 #include <string>
 
 #include "absl/flags/flag.h"
-#include "absl/flags/parse.h"
-#include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "cli/program_flags.h"
 #include "client/client.h"
 #include "client/closed_loop_summary.h"
 #include "client/problem_file.h"
@@ -40,6 +39,24 @@ namespace {
 
 namespace v1 = nupmpc::v1;
 using nupmpc::SolveStatusName;
+
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc",
+    .summary = "nupmpc: command-line client of nupmpc-server.\n"
+               "  solve FILE        one stateless solve (SolveOnce)\n"
+               "  closed-loop FILE  a receding-horizon run through a Control stream: the instance's recorded\n"
+               "                    closed-loop states if it has them, else the model simulated locally\n"
+               "                    (--noise); ends with a summary (convergence, solve and round-trip times)\n"
+               "  fit-gp FILE       GP hyper-parameters by maximum likelihood (FitGpModel); FILE is a\n"
+               "                    FitGpModelRequest in proto JSON\n"
+               "  info              server version, CPU baseline, limits, counters\n"
+               "  sessions          open sessions\n"
+               "FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.",
+    .usage = "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
+             "sessions",
+    .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
+    .max_arguments = 2,
+};
 
 std::string U0(const v1::SolveResult& r, int L) {
   std::vector<std::string> parts;
@@ -139,21 +156,19 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
 }  // namespace
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage(
-      "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
-      "sessions");
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
-  std::vector<char*> args = absl::ParseCommandLine(argc, argv);
-  if (args.size() < 2) {
-    std::fprintf(stderr, "%s\n", absl::ProgramUsageMessage().data());
-    return 2;
-  }
+  std::vector<char*> args = nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
+  if (args.size() < 2) return nupmpc::cli::ReportUsageError(kProgram, "no command given");
   const std::string command = args[1];
-  const bool json = absl::GetFlag(FLAGS_format) == "json";
+  const std::string format = absl::GetFlag(FLAGS_format);
+  if (format != "table" && format != "json") {
+    return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("--format ", format, ": must be table or json"));
+  }
+  const bool json = format == "json";
   nupmpc::Client client(absl::GetFlag(FLAGS_server), std::chrono::milliseconds(absl::GetFlag(FLAGS_deadline_ms)));
 
   if (command == "solve" || command == "closed-loop") {
-    if (args.size() < 3) return Fail(absl::InvalidArgumentError(absl::StrCat(command, ": FILE missing")));
+    if (args.size() < 3) return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat(command, ": FILE missing"));
     absl::StatusOr<nupmpc::ProblemFile> problem = nupmpc::LoadProblemFile(args[2]);
     if (!problem.ok()) return Fail(problem.status());
     if (command == "closed-loop") return ClosedLoop(client, *problem, json);
@@ -164,7 +179,7 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (command == "fit-gp") {
-    if (args.size() < 3) return Fail(absl::InvalidArgumentError("fit-gp: FILE missing"));
+    if (args.size() < 3) return nupmpc::cli::ReportUsageError(kProgram, "fit-gp: FILE missing");
     absl::StatusOr<v1::FitGpModelRequest> request = nupmpc::LoadJsonMessage<v1::FitGpModelRequest>(args[2]);
     if (!request.ok()) return Fail(request.status());
     absl::StatusOr<v1::FitGpModelResponse> fit = client.FitGpModel(*request);
@@ -199,5 +214,5 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
-  return Fail(absl::InvalidArgumentError(absl::StrCat("unknown command \"", command, "\"")));
+  return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("unknown command \"", command, "\""));
 }
