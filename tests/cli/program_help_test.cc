@@ -114,7 +114,7 @@ class ProgramHelpTest : public ::testing::TestWithParam<Program> {
   std::filesystem::path root_, cwd_;
 };
 
-TEST_P(ProgramHelpTest, HelpDescribesTheProgramsOwnFlagsAndExitsZero) {
+TEST_P(ProgramHelpTest, HelpListsOwnFlagsAndExitsZero) {
   const Program& p = GetParam();
   for (const char* help : {"--help", "-h", "--helpfull"}) {
     SCOPED_TRACE(help);
@@ -133,7 +133,7 @@ TEST_P(ProgramHelpTest, HelpDescribesTheProgramsOwnFlagsAndExitsZero) {
   }
 }
 
-TEST_P(ProgramHelpTest, AnUnknownFlagIsRefusedWithAPointerToHelp) {
+TEST_P(ProgramHelpTest, UnknownFlagExitsTwoPointingToHelp) {
   const std::string name = GetParam().name;
   const Output run = Start({"--frobnicate"});
   EXPECT_EQ(run.exit_code, 2);
@@ -142,7 +142,7 @@ TEST_P(ProgramHelpTest, AnUnknownFlagIsRefusedWithAPointerToHelp) {
   EXPECT_TRUE(LeftNothingBehind());
 }
 
-TEST_P(ProgramHelpTest, AMisspeltFlagGetsASuggestion) {
+TEST_P(ProgramHelpTest, MisspeltFlagGetsASuggestion) {
   const std::string name = GetParam().name;
   const std::string flag = std::string(GetParam().own_flag).substr(2, std::string(GetParam().own_flag).find('=') - 2);
   const Output run = Start({"--" + flag.substr(0, flag.size() - 1) + "x=1"});  // last letter wrong
@@ -151,9 +151,11 @@ TEST_P(ProgramHelpTest, AMisspeltFlagGetsASuggestion) {
   EXPECT_TRUE(LeftNothingBehind());
 }
 
-INSTANTIATE_TEST_SUITE_P(EveryProgram, ProgramHelpTest, ::testing::ValuesIn(kPrograms),
+// Named after the program without its "nupmpc-" prefix (ctest names stay short).
+INSTANTIATE_TEST_SUITE_P(Programs, ProgramHelpTest, ::testing::ValuesIn(kPrograms),
                          [](const ::testing::TestParamInfo<Program>& info) {
                            std::string name = info.param.name;
+                           if (name.rfind("nupmpc-", 0) == 0) name.erase(0, 7);
                            for (char& c : name) c = c == '-' ? '_' : c;
                            return name;
                          });
