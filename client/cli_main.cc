@@ -11,20 +11,21 @@
 //
 // FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.
 // --format table|json; with json, closed-loop prints one object per step and line with
-// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, u0.
+// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, u0, then
+// one summary object ("summary": true); with table, a summary after the steps.
 #include <cstdio>
 #include <random>
 #include <string>
 
 #include "absl/flags/flag.h"
-#include "absl/flags/parse.h"
-#include "absl/flags/usage.h"
-#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/strip.h"
 #include "absl/strings/str_join.h"
+#include "cli/program_flags.h"
 #include "client/client.h"
+#include "client/closed_loop_summary.h"
 #include "client/problem_file.h"
+#include "client/server_info_table.h"
+#include "client/solve_status_name.h"
 #include "google/protobuf/util/json_util.h"
 
 ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
@@ -37,11 +38,25 @@ ABSL_FLAG(int, deadline_ms, 0, "deadline of unary calls (0: none)");
 namespace {
 
 namespace v1 = nupmpc::v1;
+using nupmpc::SolveStatusName;
 
-// "SOLVE_STATUS_TIME_LIMIT" → "time_limit" (the names the core and nupmpc-bench print).
-std::string StatusName(v1::SolveStatus s) {
-  return absl::AsciiStrToLower(absl::StripPrefix(v1::SolveStatus_Name(s), "SOLVE_STATUS_"));
-}
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc",
+    .summary = "nupmpc: command-line client of nupmpc-server.\n"
+               "  solve FILE        one stateless solve (SolveOnce)\n"
+               "  closed-loop FILE  a receding-horizon run through a Control stream: the instance's recorded\n"
+               "                    closed-loop states if it has them, else the model simulated locally\n"
+               "                    (--noise); ends with a summary (convergence, solve and round-trip times)\n"
+               "  fit-gp FILE       GP hyper-parameters by maximum likelihood (FitGpModel); FILE is a\n"
+               "                    FitGpModelRequest in proto JSON\n"
+               "  info              server version, CPU baseline, limits, counters\n"
+               "  sessions          open sessions\n"
+               "FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.",
+    .usage = "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
+             "sessions",
+    .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
+    .max_arguments = 2,
+};
 
 std::string U0(const v1::SolveResult& r, int L) {
   std::vector<std::string> parts;
@@ -53,11 +68,11 @@ void PrintResult(const v1::SolveResult& r, int L, bool json) {
   if (json) {
     std::printf("{\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%.6g,"
                 "\"u0\":%s}\n",
-                StatusName(r.status()).c_str(), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
+                SolveStatusName(r.status()).c_str(), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
                 U0(r, L).c_str());
   } else {
     std::printf("status %s, %u iterations, %.4f ms, J = %.12g, max violation %.3g\nu[0] = %s\n",
-                StatusName(r.status()).c_str(), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
+                SolveStatusName(r.status()).c_str(), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
                 U0(r, L).c_str());
   }
 }
@@ -110,6 +125,7 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   std::vector<double> x(problem.spec.initial_state().mean().begin(), problem.spec.initial_state().mean().end());
   if (!json) std::printf("%5s %-16s %6s %10s %10s %18s %10s  %s\n", "step", "status", "iter", "solve_ms", "rtt_ms",
                          "objective", "max_viol", "u0");
+  std::vector<nupmpc::ClosedLoopStep> record;
   for (int t = 0; t < steps; ++t) {
     if (recorded) x = problem.closed_loop_states[t];
     v1::Step step;
@@ -118,40 +134,41 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
     absl::StatusOr<v1::SolveResult> r = (*session)->Step(step);
     const double rtt_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     if (!r.ok()) return Fail(r.status());
+    record.push_back({r->status(), r->solve_ms(), rtt_ms, r->max_violation()});
     if (json) {
       std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,"
                   "\"round_trip_ms\":%.6f,\"max_violation\":%.6g,\"warm_started\":%s,\"u0\":%s}\n",
-                  t, StatusName(r->status()).c_str(), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
+                  t, SolveStatusName(r->status()).c_str(), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
                   r->max_violation(), r->warm_started() ? "true" : "false", U0(*r, L).c_str());
     } else {
-      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, StatusName(r->status()).c_str(),
+      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, SolveStatusName(r->status()).c_str(),
                   r->iterations(), r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), U0(*r, L).c_str());
     }
     std::fflush(stdout);
     if (!recorded) x = Simulate(problem.spec, x, *r, noise, rng);
   }
   if (absl::Status s = (*session)->Close(); !s.ok()) return Fail(s);
+  const nupmpc::ClosedLoopSummary summary = nupmpc::SummariseClosedLoop(record);
+  std::fputs((json ? nupmpc::SummaryJson(summary) : "\n" + nupmpc::SummaryText(summary)).c_str(), stdout);
   return 0;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage(
-      "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
-      "sessions");
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
-  std::vector<char*> args = absl::ParseCommandLine(argc, argv);
-  if (args.size() < 2) {
-    std::fprintf(stderr, "%s\n", absl::ProgramUsageMessage().data());
-    return 2;
-  }
+  std::vector<char*> args = nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
+  if (args.size() < 2) return nupmpc::cli::ReportUsageError(kProgram, "no command given");
   const std::string command = args[1];
-  const bool json = absl::GetFlag(FLAGS_format) == "json";
+  const std::string format = absl::GetFlag(FLAGS_format);
+  if (format != "table" && format != "json") {
+    return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("--format ", format, ": must be table or json"));
+  }
+  const bool json = format == "json";
   nupmpc::Client client(absl::GetFlag(FLAGS_server), std::chrono::milliseconds(absl::GetFlag(FLAGS_deadline_ms)));
 
   if (command == "solve" || command == "closed-loop") {
-    if (args.size() < 3) return Fail(absl::InvalidArgumentError(absl::StrCat(command, ": FILE missing")));
+    if (args.size() < 3) return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat(command, ": FILE missing"));
     absl::StatusOr<nupmpc::ProblemFile> problem = nupmpc::LoadProblemFile(args[2]);
     if (!problem.ok()) return Fail(problem.status());
     if (command == "closed-loop") return ClosedLoop(client, *problem, json);
@@ -162,7 +179,7 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (command == "fit-gp") {
-    if (args.size() < 3) return Fail(absl::InvalidArgumentError("fit-gp: FILE missing"));
+    if (args.size() < 3) return nupmpc::cli::ReportUsageError(kProgram, "fit-gp: FILE missing");
     absl::StatusOr<v1::FitGpModelRequest> request = nupmpc::LoadJsonMessage<v1::FitGpModelRequest>(args[2]);
     if (!request.ok()) return Fail(request.status());
     absl::StatusOr<v1::FitGpModelResponse> fit = client.FitGpModel(*request);
@@ -173,7 +190,11 @@ int main(int argc, char** argv) {
   if (command == "info") {
     absl::StatusOr<v1::GetServerInfoResponse> info = client.GetServerInfo();
     if (!info.ok()) return Fail(info.status());
-    PrintJson(*info, json);
+    if (json) {
+      PrintJson(*info, /*one_line=*/true);
+    } else {
+      std::fputs(nupmpc::ServerInfoTable(*info).c_str(), stdout);
+    }
     return 0;
   }
   if (command == "sessions") {
@@ -193,5 +214,5 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
-  return Fail(absl::InvalidArgumentError(absl::StrCat("unknown command \"", command, "\"")));
+  return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("unknown command \"", command, "\""));
 }

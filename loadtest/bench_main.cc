@@ -9,9 +9,9 @@
 #include <vector>
 
 #include "absl/flags/flag.h"
-#include "absl/flags/parse.h"
-#include "absl/flags/usage.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "cli/program_flags.h"
 #include "core/session/session.h"
 #include "loadtest/benchmark_instance.h"
 #include "loadtest/bench_report.h"
@@ -25,15 +25,20 @@ ABSL_FLAG(int, max_iterations, 5000, "iteration cap per solve");
 ABSL_FLAG(int, polish_after, 1, "polish once the active set is unchanged for this many iterations (0: never)");
 ABSL_FLAG(int, polish_rounds, 4, "primal-dual active-set corrections after a failed polish");
 
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-bench",
+    .summary = "nupmpc-bench: the core's speed and accuracy on benchmark instance files (format: "
+               "../shared/benchmarks/README.md), in process, without the service. Per instance: algorithm, "
+               "iterations, median cold solve time of --repeat solves, objective, relative gap to reference.json, "
+               "max violation, status and GFLOP/s next to the machine's Eigen GEMM rate; instances with a "
+               "closed loop also get warm and cold per-step times and iterations.",
+    .usage = "nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] FILE...",
+};
+
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage(
-      "nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] FILE...");
-  std::vector<char*> files = absl::ParseCommandLine(argc, argv);
+  std::vector<char*> files = nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
   files.erase(files.begin());
-  if (files.empty()) {
-    std::fprintf(stderr, "nupmpc-bench: no instance files given (see --help)\n");
-    return 2;
-  }
+  if (files.empty()) return nupmpc::cli::ReportUsageError(kProgram, "no instance files given");
   nupmpc::bench::BenchOptions options;
   options.json = absl::GetFlag(FLAGS_json);
   options.reference = absl::GetFlag(FLAGS_reference);
@@ -43,10 +48,7 @@ int main(int argc, char** argv) {
   options.polish_after = absl::GetFlag(FLAGS_polish_after);
   options.polish_rounds = absl::GetFlag(FLAGS_polish_rounds);
   absl::StatusOr<nupmpc::core::Algorithm> algorithm = nupmpc::core::ParseAlgorithm(absl::GetFlag(FLAGS_algorithm));
-  if (!algorithm.ok()) {
-    std::fprintf(stderr, "nupmpc-bench: --%s\n", std::string(algorithm.status().message()).c_str());
-    return 2;
-  }
+  if (!algorithm.ok()) return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("--", algorithm.status().message()));
   options.algorithm = *algorithm;
   std::vector<std::string> paths(files.begin(), files.end());
   return nupmpc::bench::RunBenchmarks(paths, options);

@@ -15,10 +15,10 @@
 #include <vector>
 
 #include "absl/flags/flag.h"
-#include "absl/flags/parse.h"
-#include "absl/flags/usage.h"
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "cli/program_flags.h"
 #include "core/examples/csv_table.h"
 #include "core/examples/scenarios/gp_tanh.h"
 #include "core/gp/hyperparameter_fit.h"
@@ -33,6 +33,18 @@ ABSL_FLAG(bool, no_ipopt, false, "skip the Ipopt loop");
 namespace {
 
 using nupmpc::bench::ClosedLoopTrace;
+
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-gp-bench",
+    .summary = "nupmpc-gp-bench: [Nghiem] Table I on this machine. For each training-set size N, a GP model of "
+               "the tanh plant drives two closed loops, one with linGP-SCP on the NUP core and one with Ipopt on "
+               "the full GP-MPC NLP (same run, same noise); prints the time per MPC step (mean, std, median), "
+               "the SCP's time in its NUP subproblems, the speed-up, tracking error and constraint satisfaction "
+               "of both loops and the largest difference between the two solvers' plans. --csv DIR writes the "
+               "closed-loop trajectories for plot_gp.py.",
+    .usage = "nupmpc-gp-bench [--sizes 500,...,1500] [--steps 100] [--csv DIR] [--no_ipopt]",
+    .max_arguments = 0,
+};
 
 struct Stats {
   double mean = 0.0, std = 0.0, median = 0.0;
@@ -54,14 +66,12 @@ Stats Summarise(std::vector<double> seconds) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage("nupmpc-gp-bench [--sizes 500,...,1500] [--steps 100] [--csv DIR] [--no_ipopt]");
-  absl::ParseCommandLine(argc, argv);
+  nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
   std::vector<int> sizes;
   for (absl::string_view part : absl::StrSplit(absl::GetFlag(FLAGS_sizes), ',', absl::SkipEmpty())) {
     int n = 0;
     if (!absl::SimpleAtoi(part, &n) || n < 10) {
-      std::fprintf(stderr, "nupmpc-gp-bench: --sizes: bad size \"%s\"\n", std::string(part).c_str());
-      return 2;
+      return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("--sizes: bad size \"", part, "\" (at least 10)"));
     }
     sizes.push_back(n);
   }

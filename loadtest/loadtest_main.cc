@@ -18,10 +18,9 @@
 #include <vector>
 
 #include "absl/flags/flag.h"
-#include "absl/flags/parse.h"
-#include "absl/flags/usage.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_split.h"
+#include "cli/program_flags.h"
 #include "client/client.h"
 #include "client/problem_file.h"
 #include "loadtest/core_baseline.h"
@@ -62,6 +61,19 @@ namespace {
 
 namespace lt = nupmpc::loadtest;
 
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-loadtest",
+    .summary = "nupmpc-loadtest: drives a running nupmpc-server with concurrent Control streams and reports "
+               "throughput and latency next to the core's own solve time for the same steps (and, with --echo, "
+               "the transport floor of a zero-work server at the same load). Every stream creates its own "
+               "session from --instance and cycles through the instance's recorded closed-loop states (or its "
+               "initial state). --idle_sessions N instead measures the server's memory per idle session.",
+    .usage = "nupmpc-loadtest [--server HOST:PORT] [--instance FILE] [--concurrency C | --sweep 1,2,8,64] "
+             "[--mode closed|open [--rate R | --rate_x X]] [--duration_s T] [--json] | --idle_sessions N",
+    .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
+    .max_arguments = 0,
+};
+
 int Fail(const std::string& what, const absl::Status& s) {
   std::fprintf(stderr, "nupmpc-loadtest: %s: %s\n", what.c_str(), s.ToString().c_str());
   return 1;
@@ -101,11 +113,8 @@ int ServeEcho(const std::string& target, const nupmpc::v1::ProblemSpec& spec, do
 }  // namespace
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage(
-      "nupmpc-loadtest [--server HOST:PORT] [--instance FILE] [--concurrency C | --sweep 1,2,8,64] "
-      "[--mode closed|open [--rate R | --rate_x X]] [--duration_s T] [--json] | --idle_sessions N");
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
-  absl::ParseCommandLine(argc, argv);
+  nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
   const std::string target = absl::GetFlag(FLAGS_server);
   const std::string instance_path = absl::GetFlag(FLAGS_instance);
   absl::StatusOr<nupmpc::ProblemFile> file = nupmpc::LoadProblemFile(instance_path);

@@ -1,8 +1,8 @@
 // nupmpc-server: the nupmpc.v1 gRPC service. Configuration: --help (flags; environment
 // variables NUPMPC_* as fallbacks). SIGTERM/SIGINT drain and exit 0.
 #include <csignal>
-#include <cstdio>
 
+#include "cli/program_flags.h"
 #include "server/grpc_server.h"
 #include "server/server_flags.h"
 #include "server/version.h"
@@ -17,10 +17,7 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
   absl::StatusOr<nupmpc::server::ParsedFlags> flags = nupmpc::server::ParseServerFlags(argc, argv);
-  if (!flags.ok()) {
-    std::fprintf(stderr, "nupmpc-server: %s\n", std::string(flags.status().message()).c_str());
-    return 2;
-  }
+  if (!flags.ok()) return nupmpc::cli::ReportUsageError(nupmpc::server::ServerProgram(), flags.status().message());
   spdlog::set_level(spdlog::level::from_str(flags->log_level));
   auto server = nupmpc::server::GrpcServer::Start(flags->options);
   if (!server.ok()) {

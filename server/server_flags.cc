@@ -3,11 +3,10 @@
 #include <cstdlib>
 
 #include "absl/flags/flag.h"
-#include "absl/flags/parse.h"
 #include "absl/flags/reflection.h"
-#include "absl/flags/usage.h"
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
+#include "cli/program_flags.h"
 
 ABSL_FLAG(std::string, address, "[::]:50051", "listen address host:port (env NUPMPC_ADDRESS)");
 ABSL_FLAG(int, threads, 2, "solver worker threads (env NUPMPC_THREADS)");
@@ -51,14 +50,28 @@ absl::Status RequireAtLeast(const char* name, T value, T minimum) {
 
 }  // namespace
 
+const cli::ProgramInfo& ServerProgram() {
+  static const cli::ProgramInfo program{
+      .name = "nupmpc-server",
+      .summary = "nupmpc-server: model-predictive control over gRPC (nupmpc.v1.MpcService: sessions, the "
+                 "Control stream, one-off solves, GP fits), with grpc.health.v1 and server reflection. "
+                 "SIGTERM/SIGINT drain (in-flight solves get --grace_period_s) and exit 0.",
+      .usage = "nupmpc-server [--address HOST:PORT] [--threads N] [FLAGS]",
+      .environment = {{"NUPMPC_<FLAG>",
+                       "every flag above, its name in upper case (NUPMPC_ADDRESS, NUPMPC_THREADS, ...): the "
+                       "value used when the flag is not on the command line"}},
+      .max_arguments = 0,
+  };
+  return program;
+}
+
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
-  absl::SetProgramUsageMessage("nupmpc-server: model-predictive control over gRPC (nupmpc.v1.MpcService)");
   for (const char* name : {"address", "threads", "queue_capacity", "max_sessions", "session_idle_timeout_s",
                            "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states", "max_iterations", "grace_period_s",
                            "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
-  absl::ParseCommandLine(argc, argv);
+  cli::ParseProgramFlags(ServerProgram(), argc, argv);
   ParsedFlags out;
   ServerOptions& o = out.options;
   o.address = absl::GetFlag(FLAGS_address);

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "cli/program_info.h"
 #include "server/server_context.h"
 
 namespace nupmpc::server {
@@ -15,7 +16,12 @@ struct ParsedFlags {
   ServerOptions options;
   std::string log_level;
 };
+// --help and unknown flags exit here (cli/program_flags.h); a value out of range or a bad
+// environment variable is an error status.
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv);
+
+// The server's --help and usage-error identity.
+const cli::ProgramInfo& ServerProgram();
 
 }  // namespace nupmpc::server
 

@@ -3,11 +3,25 @@
 #include <cstdio>
 
 #include "core/examples/csv_table.h"
+#include "core/examples/example_command_line.h"
 #include "core/examples/scenarios/corridor.h"
+
+namespace {
+
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-example-corridor",
+    .summary = "nupmpc-example-corridor: [KL] §V-B / Fig. 20, the five input versions on one corridor. Prints "
+               "the corridor violation and each version's structural counts and writes corridor.csv into "
+               "--out_dir.",
+    .usage = "nupmpc-example-corridor [--out_dir DIR]",
+    .max_arguments = 0,
+};
+
+}  // namespace
 
 int main(int argc, char** argv) {
   namespace ex = nupmpc::examples;
-  const std::string dir = ex::OutputDirectory(argc, argv);
+  const std::string dir = ex::ParseExampleCommandLine(kProgram, argc, argv);
   const int K = ex::kCorridorSteps;
   Eigen::VectorXd target(K + 1);
   for (int n = 0; n <= K; ++n) target(n) = ex::CorridorTarget(n);

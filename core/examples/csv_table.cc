@@ -1,7 +1,6 @@
 #include "core/examples/csv_table.h"
 
 #include <algorithm>
-#include <filesystem>
 #include <fstream>
 
 #include "absl/strings/str_cat.h"
@@ -27,12 +26,6 @@ absl::Status WriteCsv(const std::string& path, const CsvColumns& columns) {
   }
   if (!out) return absl::UnavailableError(absl::StrCat(path, ": write failed"));
   return absl::OkStatus();
-}
-
-std::string OutputDirectory(int argc, char** argv) {
-  const std::string dir = argc > 1 ? argv[1] : "figures";
-  std::filesystem::create_directories(dir);
-  return dir;
 }
 
 }  // namespace nupmpc::examples

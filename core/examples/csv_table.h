@@ -17,9 +17,6 @@ using CsvColumns = std::vector<std::pair<std::string, Eigen::VectorXd>>;
 
 absl::Status WriteCsv(const std::string& path, const CsvColumns& columns);
 
-// The output directory from argv[1] (default "figures"), created if missing.
-std::string OutputDirectory(int argc, char** argv);
-
 }  // namespace nupmpc::examples
 
 #endif  // NUPMPC_CORE_EXAMPLES_CSV_TABLE_H_

@@ -4,11 +4,25 @@
 #include <cstdio>
 
 #include "core/examples/csv_table.h"
+#include "core/examples/example_command_line.h"
 #include "core/examples/scenarios/flappy_bird.h"
+
+namespace {
+
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-example-flappy-bird",
+    .summary = "nupmpc-example-flappy-bird: [KL] §V-C / Fig. 21, K = 300 with five double-slit walls. Flies "
+               "eight random layouts, prints each one's slit violation and passes, and writes layout 1 into "
+               "--out_dir as flappy_bird.csv (height and flaps) and flappy_walls.csv.",
+    .usage = "nupmpc-example-flappy-bird [--out_dir DIR]",
+    .max_arguments = 0,
+};
+
+}  // namespace
 
 int main(int argc, char** argv) {
   namespace ex = nupmpc::examples;
-  const std::string dir = ex::OutputDirectory(argc, argv);
+  const std::string dir = ex::ParseExampleCommandLine(kProgram, argc, argv);
   constexpr int kSteps = 300, kLayouts = 8;
   int passed = 0;
   for (unsigned layout = 1; layout <= kLayouts; ++layout) {

@@ -12,7 +12,7 @@ if ! /usr/bin/python3 -c "import matplotlib" 2>/dev/null; then
 fi
 for example in dac corridor flappy-bird obstacle-avoidance race-track; do
   echo "== nupmpc-example-${example}"
-  "build/bin/nupmpc-example-${example}" "${out}"
+  "build/bin/nupmpc-example-${example}" --out_dir "${out}"
 done
 echo "== nupmpc-gp-bench (N = 200, 1500)"
 build/bin/nupmpc-gp-bench --sizes 200,1500 --csv "${out}"

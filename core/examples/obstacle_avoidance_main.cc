@@ -4,9 +4,19 @@
 #include <numbers>
 
 #include "core/examples/csv_table.h"
+#include "core/examples/example_command_line.h"
 #include "core/examples/scenarios/obstacle_avoidance.h"
 
 namespace {
+
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-example-obstacle-avoidance",
+    .summary = "nupmpc-example-obstacle-avoidance: [KL] §V-D / Fig. 23, planning around keep-out regions (one "
+               "circle; mixed shapes). Prints clearance, goal error, linearisations and time, and writes "
+               "obstacles_single.csv, obstacles_mixed.csv and obstacles_regions.csv into --out_dir.",
+    .usage = "nupmpc-example-obstacle-avoidance [--out_dir DIR]",
+    .max_arguments = 0,
+};
 
 using nupmpc::core::KeepOutRegion;
 using nupmpc::core::KeepOutShape;
@@ -33,7 +43,7 @@ int Run(const std::string& dir, const char* name, const std::vector<KeepOutRegio
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string dir = nupmpc::examples::OutputDirectory(argc, argv);
+  const std::string dir = nupmpc::examples::ParseExampleCommandLine(kProgram, argc, argv);
   const auto single = nupmpc::examples::SingleCircleScene(5.0);  // the paper's γ = 5
   const auto mixed = nupmpc::examples::MixedShapesScene(nupmpc::core::kInfinity);
   const int failed = Run(dir, "single", single) + Run(dir, "mixed", mixed);

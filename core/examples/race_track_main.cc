@@ -1,21 +1,38 @@
 // [KL] §V-E / Fig. 25: one minimal-time lap of the demo track (K = 1000 spatial steps by
-// default, or argv[2]); writes race_track.csv (the race line and the track's edges in the
+// default, or --steps); writes race_track.csv (the race line and the track's edges in the
 // plane, the speed and the constrained outputs along s) and prints lap time,
 // linearisations, passes, constraint and model errors, the centre-line reference lap
 // and the solve time.
 #include <cstdio>
-#include <cstdlib>
 
+#include "absl/flags/flag.h"
+#include "absl/strings/str_cat.h"
 #include "core/examples/csv_table.h"
+#include "core/examples/example_command_line.h"
 #include "core/examples/scenarios/race_track.h"
 
+ABSL_FLAG(int, steps, 1000, "spatial steps K of the lap (at least 20)");
+
+namespace {
+
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-example-race-track",
+    .summary = "nupmpc-example-race-track: [KL] §V-E / Fig. 25, one minimal-time lap of the demo track. Writes "
+               "race_track.csv into --out_dir (the race line and the track's edges in the plane, the speed and "
+               "the constrained outputs along s) and prints lap time, linearisations, passes, constraint and "
+               "model errors, the centre-line reference lap and the solve time.",
+    .usage = "nupmpc-example-race-track [--out_dir DIR] [--steps K]",
+    .max_arguments = 0,
+};
+
+}  // namespace
+
 int main(int argc, char** argv) {
-  const std::string dir = nupmpc::examples::OutputDirectory(argc, argv);
-  const int steps = argc > 2 ? std::atoi(argv[2]) : 1000;
-  if (steps < 20) {
-    std::fprintf(stderr, "race track: steps (argv[2]) must be ≥ 20, got %s\n", argv[2]);
-    return 1;
-  }
+  const std::string dir = nupmpc::examples::ParseExampleCommandLine(kProgram, argc, argv, [] {
+    const int steps = absl::GetFlag(FLAGS_steps);
+    return steps < 20 ? absl::StrCat("--steps ", steps, ": must be at least 20") : std::string();
+  });
+  const int steps = absl::GetFlag(FLAGS_steps);
   const nupmpc::examples::Track track = nupmpc::examples::DemoTrack();
   const nupmpc::examples::Vehicle vehicle;
   const nupmpc::examples::RaceSettings settings;

@@ -9,6 +9,7 @@
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/benchmark_instance.h"
+#include "tests/util/test_names.h"
 
 namespace nupmpc::core {
 namespace {
@@ -97,7 +98,8 @@ std::vector<Case> Cases() {
 }
 
 INSTANTIATE_TEST_SUITE_P(Instances, BenchmarkReference, ::testing::ValuesIn(Cases()), [](const auto& info) {
-  return info.param.instance + "_" + AlgorithmName(info.param.algorithm) + (info.param.polish ? "_polished" : "_plain");
+  return testing::ShortInstanceName(info.param.instance) + "_" + AlgorithmName(info.param.algorithm) +
+         (info.param.polish ? "_polished" : "_plain");
 });
 
 TEST(BenchmarkSelection, AutoPicksTheAlgorithmOfTheMathNote) {

@@ -12,6 +12,7 @@
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/benchmark_instance.h"
+#include "tests/util/test_names.h"
 
 namespace {
 std::atomic<long> g_allocations{0};
@@ -161,7 +162,7 @@ INSTANTIATE_TEST_SUITE_P(Algorithms, NoAllocationInLoop,
                                            std::pair{"ibffd_2d_N100_hinge", Algorithm::kIake},
                                            std::pair{"random_outbox_M40_K20_L20_N1000_s1", Algorithm::kIffbdd}),
                          [](const auto& info) {
-                           return std::string(info.param.first) + "_" + AlgorithmName(info.param.second);
+                           return testing::ShortInstanceName(info.param.first) + "_" + AlgorithmName(info.param.second);
                          });
 
 }  // namespace

@@ -1,0 +1,76 @@
+#include "client/closed_loop_summary.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "client/solve_status_name.h"
+
+namespace nupmpc {
+namespace {
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t mid = v.size() / 2;
+  return v.size() % 2 == 1 ? v[mid] : 0.5 * (v[mid - 1] + v[mid]);
+}
+
+double NearestRank(std::vector<double> v, double fraction) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const auto rank = static_cast<std::size_t>(std::ceil(fraction * static_cast<double>(v.size())));
+  return v[std::clamp<std::size_t>(rank, 1, v.size()) - 1];
+}
+
+}  // namespace
+
+ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps) {
+  ClosedLoopSummary s;
+  s.steps = static_cast<int>(steps.size());
+  std::vector<double> solve_ms, round_trip_ms;
+  for (const ClosedLoopStep& step : steps) {
+    if (step.status != v1::SOLVE_STATUS_CONVERGED) {
+      ++s.not_converged;
+      ++s.not_converged_by_status[SolveStatusName(step.status)];
+    }
+    solve_ms.push_back(step.solve_ms);
+    round_trip_ms.push_back(step.round_trip_ms);
+    s.max_solve_ms = std::max(s.max_solve_ms, step.solve_ms);
+    s.max_violation = std::max(s.max_violation, step.max_violation);
+  }
+  s.median_solve_ms = Median(solve_ms);
+  s.median_round_trip_ms = Median(round_trip_ms);
+  s.p90_round_trip_ms = NearestRank(round_trip_ms, 0.9);
+  return s;
+}
+
+std::string SummaryText(const ClosedLoopSummary& s) {
+  std::string convergence = "all converged";
+  if (s.not_converged > 0) {
+    std::vector<std::string> parts;
+    for (const auto& [status, count] : s.not_converged_by_status) parts.push_back(absl::StrCat(status, " ", count));
+    convergence = absl::StrCat(s.not_converged, " not converged (", absl::StrJoin(parts, ", "), ")");
+  }
+  return absl::StrFormat(
+      "summary: %d steps, %s\n"
+      "  solve time (server)  median %.4f ms, max %.4f ms\n"
+      "  round trip           median %.4f ms, p90 %.4f ms\n"
+      "  max violation        %.3g\n",
+      s.steps, convergence, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms,
+      s.max_violation);
+}
+
+std::string SummaryJson(const ClosedLoopSummary& s) {
+  std::vector<std::string> by_status;
+  for (const auto& [status, count] : s.not_converged_by_status) by_status.push_back(absl::StrCat("\"", status, "\":", count));
+  return absl::StrFormat(
+      "{\"summary\":true,\"steps\":%d,\"all_converged\":%s,\"not_converged\":{%s},\"median_solve_ms\":%.6f,"
+      "\"max_solve_ms\":%.6f,\"median_round_trip_ms\":%.6f,\"p90_round_trip_ms\":%.6f,\"max_violation\":%.6g}\n",
+      s.steps, s.not_converged == 0 ? "true" : "false", absl::StrJoin(by_status, ","), s.median_solve_ms,
+      s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms, s.max_violation);
+}
+
+}  // namespace nupmpc

@@ -1,0 +1,45 @@
+#ifndef NUPMPC_CLIENT_CLOSED_LOOP_SUMMARY_H_
+#define NUPMPC_CLIENT_CLOSED_LOOP_SUMMARY_H_
+
+// What `nupmpc closed-loop` concludes after its per-step lines: did every step converge,
+// how long the server's solves and the round trips took, and the worst bound violation.
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "nupmpc/v1/nupmpc.pb.h"
+
+namespace nupmpc {
+
+struct ClosedLoopStep {
+  v1::SolveStatus status = v1::SOLVE_STATUS_UNSPECIFIED;
+  double solve_ms = 0.0;       // the server's SolveResult.solve_ms
+  double round_trip_ms = 0.0;  // measured by the client around Session::Step
+  double max_violation = 0.0;
+};
+
+struct ClosedLoopSummary {
+  int steps = 0;
+  int not_converged = 0;
+  std::map<std::string, int> not_converged_by_status;  // status name → steps
+  double median_solve_ms = 0.0, max_solve_ms = 0.0;
+  double median_round_trip_ms = 0.0, p90_round_trip_ms = 0.0;
+  double max_violation = 0.0;
+};
+
+// Median: the mean of the two middle values for an even count. p90: the nearest-rank
+// percentile (the smallest value with at least 90% of the steps at or below it), so it is
+// always a measured round trip. All zero for no steps.
+ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps);
+
+// The lines printed after the table (--format table).
+std::string SummaryText(const ClosedLoopSummary& summary);
+
+// One JSON object on one line, marked "summary": true so that a reader of the per-step
+// objects can tell it apart (--format json).
+std::string SummaryJson(const ClosedLoopSummary& summary);
+
+}  // namespace nupmpc
+
+#endif  // NUPMPC_CLIENT_CLOSED_LOOP_SUMMARY_H_
