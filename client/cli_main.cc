@@ -149,7 +149,12 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   }
   if (absl::Status s = (*session)->Close(); !s.ok()) return Fail(s);
   const nupmpc::ClosedLoopSummary summary = nupmpc::SummariseClosedLoop(record);
-  std::fputs((json ? nupmpc::SummaryJson(summary) : "\n" + nupmpc::SummaryText(summary)).c_str(), stdout);
+  // Not `"\n" + text`: GCC 12 warns about it (-Wrestrict, a false positive fixed in GCC 13).
+  if (json) {
+    std::fputs(nupmpc::SummaryJson(summary).c_str(), stdout);
+  } else {
+    std::printf("\n%s", nupmpc::SummaryText(summary).c_str());
+  }
   return 0;
 }
 
