@@ -4,8 +4,8 @@
 #include <cmath>
 #include <limits>
 #include <memory>
-#include <string_view>
 #include <numbers>
+#include <string_view>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -109,8 +109,8 @@ struct FitRun {
 
 // A point where K_y is not positive definite evaluates to +inf, and so does every point
 // once the fit must stop: the backtracking line search then shortens its step, and gives up
-// after a few calls that cost nothing instead of O(P³) each. liblbfgs returns the last
-// accepted iterate when its line search fails (and the last accepted one otherwise).
+// after a few calls that cost nothing instead of O(P³) each. Whatever ends the fit,
+// liblbfgs leaves the last iterate it accepted in its variables.
 lbfgsfloatval_t EvaluateNll(void* instance, const lbfgsfloatval_t* theta, lbfgsfloatval_t* gradient, int n,
                             lbfgsfloatval_t /*step*/) {
   FitRun& run = *static_cast<FitRun*>(instance);
