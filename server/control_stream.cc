@@ -1,5 +1,8 @@
 #include "server/control_stream.h"
 
+#include "absl/strings/str_cat.h"
+#include "server/catch_exceptions.h"
+#include "server/raw_messages.h"
 #include "server/step_solver.h"
 #include "spdlog/spdlog.h"
 
@@ -32,7 +35,23 @@ void ControlStream::Begin() {
     Finish(state_->ToGrpc(absl::UnavailableError("the server is shutting down")));
     return;
   }
+  counted_ = true;
+  if (state_->control_streams.fetch_add(1) >= state_->options.max_control_streams) {
+    Finish(state_->ToGrpc(absl::ResourceExhaustedError(
+        absl::StrCat("the server has its maximum of ", state_->options.max_control_streams,
+                     " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
+    return;
+  }
   StartRead(&read_buffer_);
+}
+
+bool ControlStream::ShouldReadLocked() {
+  if (finish_requested_ || reads_done_) return false;
+  // The client does not read its answers: stop reading its steps (flow control) until it does.
+  const bool pause = static_cast<int>(writes_.size()) >= state_->options.max_stream_answers;
+  if (pause && !read_paused_) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
+  read_paused_ = pause;
+  return !read_paused_;
 }
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::ControlRequest& first) {
@@ -44,7 +63,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       entry = *std::move(found);
       if (entry->owned_by_stream || entry->attached.exchange(true)) {
         return absl::FailedPreconditionError(
-            absl::StrCat("session_id \"", first.session_id(), "\": another Control stream is attached to it"));
+            absl::StrCat("session_id ", QuoteSessionId(first.session_id()), ": another Control stream is attached to it"));
       }
       break;
     }
@@ -52,12 +71,9 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       CallContext call;  // the stream's deadline and cancellation bound a kernel fit on creation
       call.deadline = SteadyDeadline(*context_);
       call.cancel = &cancelled_;
-      absl::StatusOr<BuiltSession> built =
-          BuildSession(first.spec(), state_->options.size_limits, &state_->gp_models, &call);
-      if (!built.ok()) return built.status();
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
-          state_->registry.Add(std::move(built->solver), built->default_time_limit_ms,
-                               /*owned_by_stream=*/true, std::move(built->transform));
+          CreateAndRegister(first.spec(), state_->options.size_limits, &state_->gp_models, &state_->budget,
+                            &state_->registry, call, /*owned_by_stream=*/true);
       if (!added.ok()) return added.status();
       entry = *std::move(added);
       entry->attached.store(true);
@@ -79,7 +95,8 @@ void ControlStream::OnReadDone(bool ok) {
     Pump();
     return;
   }
-  v1::ControlRequest request = std::move(read_buffer_);
+  v1::ControlRequest request;
+  const absl::Status parsed = ParseRaw(&read_buffer_, &request);
   read_buffer_.Clear();
   // The next read starts only once the first message is handled, so attached_ cannot
   // change under this check.
@@ -88,6 +105,15 @@ void ControlStream::OnReadDone(bool ok) {
     std::lock_guard<std::mutex> lock(mu_);
     first_message = !attached_;
   }
+  if (first_message && !parsed.ok()) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      final_status_ = state_->ToGrpc(parsed);
+      finish_requested_ = true;
+    }
+    Pump();
+    return;
+  }
   if (first_message) {
     StartAttach(std::move(request));
     return;
@@ -95,8 +121,9 @@ void ControlStream::OnReadDone(bool ok) {
   bool read_more;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    read_more = !finish_requested_;
-    if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
+    if (!parsed.ok()) {
+      QueueWriteLocked(ErrorResponse(0, state_->ToGrpc(parsed)));
+    } else if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
       QueueWriteLocked(ErrorResponse(
           request.sequence(),
           state_->ToGrpc(absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
@@ -106,6 +133,7 @@ void ControlStream::OnReadDone(bool ok) {
     } else {
       EnqueueStepLocked(std::move(request));
     }
+    read_more = ShouldReadLocked();
   }
   if (read_more) StartRead(&read_buffer_);
   Pump();
@@ -133,7 +161,12 @@ void ControlStream::StartAttach(v1::ControlRequest first) {
 }
 
 void ControlStream::AttachAndContinue(v1::ControlRequest first) {
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = Attach(first);
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry;
+  const absl::Status attached = RunCatchingExceptions("Control (first message)", [&] {
+    entry = Attach(first);
+    return entry.status();
+  });
+  if (!attached.ok()) entry = attached;
   bool read_more = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -144,7 +177,6 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
     } else {
       entry_ = *std::move(entry);
       attached_ = true;
-      read_more = true;
       if (first.has_step()) {
         EnqueueStepLocked(std::move(first));
       } else {
@@ -153,6 +185,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
         hello.set_session_id(entry_->id);
         QueueWriteLocked(std::move(hello));
       }
+      read_more = ShouldReadLocked();
     }
   }
   if (read_more) StartRead(&read_buffer_);
@@ -214,7 +247,8 @@ void ControlStream::SolveOnPool(v1::ControlRequest request) {
   call.cancel = &cancelled_;
   v1::ControlResponse response;
   response.set_sequence(request.sequence());
-  const absl::Status status = SolveStep(*entry_, request.step(), call, response.mutable_result());
+  const absl::Status status = RunCatchingExceptions(
+      "Control", [&] { return SolveStep(*entry_, request.step(), call, response.mutable_result()); });
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (status.ok()) {
@@ -228,10 +262,17 @@ void ControlStream::SolveOnPool(v1::ControlRequest request) {
   Pump();
 }
 
-void ControlStream::QueueWriteLocked(v1::ControlResponse response) { writes_.push_back(std::move(response)); }
+void ControlStream::QueueWriteLocked(v1::ControlResponse response) {
+  grpc::ByteBuffer bytes;
+  if (!SerializeRaw(response, &bytes).ok()) {  // cannot happen for a message we built; never send nothing
+    (void)SerializeRaw(ErrorResponse(response.sequence(), grpc::Status(grpc::StatusCode::INTERNAL, "unserializable")),
+                       &bytes);
+  }
+  writes_.push_back(bytes);
+}
 
 void ControlStream::Pump() {
-  const v1::ControlResponse* to_write = nullptr;
+  const grpc::ByteBuffer* to_write = nullptr;
   bool finish = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -249,6 +290,7 @@ void ControlStream::Pump() {
 }
 
 void ControlStream::OnWriteDone(bool ok) {
+  bool resume_reading = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
     writes_.pop_front();
@@ -258,7 +300,9 @@ void ControlStream::OnWriteDone(bool ok) {
       parked_.reset();
       reads_done_ = true;
     }
+    resume_reading = read_paused_ && ShouldReadLocked();
   }
+  if (resume_reading) StartRead(&read_buffer_);
   Pump();
 }
 
@@ -267,6 +311,7 @@ void ControlStream::OnCancel() { cancelled_.store(true); }
 void ControlStream::OnDone() {
   // Deletes this stream on return unless a pool task still holds it.
   const std::shared_ptr<ControlStream> last_reference_maybe = std::move(grpc_reference_);
+  if (counted_) state_->control_streams.fetch_sub(1);
   if (entry_ != nullptr) {
     if (entry_->owned_by_stream) {
       (void)state_->registry.Close(entry_->id);

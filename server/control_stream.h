@@ -22,6 +22,13 @@ namespace nupmpc::server {
 // that sends faster than the server solves therefore always gets the plan for its latest
 // state next, and never builds up a backlog.
 //
+// Bounded: at most ServerLimits.max_stream_answers answers wait for the client to read
+// them; then the stream stops reading (HTTP/2 flow control holds the client's writes) until
+// it does. At most max_control_streams streams are open server-wide.
+//
+// Messages are parsed here from raw bytes: a first message that does not parse ends the
+// stream with INVALID_ARGUMENT, a later one is answered with error_code 3 (sequence 0).
+//
 // A bad step is answered with error_code/error_message and the stream stays open (the
 // session is unchanged); a bad first message ends the stream with that status.
 //
@@ -30,7 +37,7 @@ namespace nupmpc::server {
 // gRPC thread while a worker is still running the tail of its task after it handed back
 // the stream (answer queued, `solving_` cleared, lock released); the last reference to
 // go deletes the stream.
-class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>,
+class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
                       public std::enable_shared_from_this<ControlStream> {
  public:
   // The reactor for one Control call; it owns itself (see Lifetime above).
@@ -60,6 +67,9 @@ class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Con
   // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
   void QueueWriteLocked(v1::ControlResponse response);
+  // Whether to start the next read now: not while the client leaves max_stream_answers
+  // answers unread (then read_paused_ is set and OnWriteDone resumes). Called with mu_.
+  bool ShouldReadLocked();
   // Starts the next write / finishes the stream if nothing is left. Called without mu_.
   void Pump();
 
@@ -68,17 +78,19 @@ class ControlStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Con
   // `solving_` set).
   grpc::CallbackServerContext* const context_;
   std::shared_ptr<ControlStream> grpc_reference_;  // set by Start, dropped by OnDone
-  v1::ControlRequest read_buffer_;
+  grpc::ByteBuffer read_buffer_;  // raw: parsed by OnReadDone (server/raw_messages.h)
   std::atomic<bool> cancelled_{false};
+  bool counted_ = false;  // in state_->control_streams (set by Begin, before any reaction)
 
   std::mutex mu_;
   std::shared_ptr<SessionEntry> entry_;        // set by the first message
   bool attached_ = false;
   std::optional<v1::ControlRequest> parked_;   // the newest step not yet started
   bool solving_ = false;                       // a solve (or the attach) is on the pool
-  std::deque<v1::ControlResponse> writes_;     // front is being written when writing_
+  std::deque<grpc::ByteBuffer> writes_;        // serialized answers; front is being written when writing_
   bool writing_ = false;
   bool reads_done_ = false;
+  bool read_paused_ = false;  // no read pending because too many answers wait (flow control)
   bool finish_requested_ = false;
   bool finished_ = false;
   grpc::Status final_status_;

@@ -23,6 +23,15 @@ void ServerState::FillLimits(v1::ServerLimits* out) const {
   out->set_queue_capacity(options.queue_capacity);
   out->set_max_queue_wait_ms(options.max_queue_wait_ms);
   out->set_max_gp_points(options.size_limits.max_gp_points);
+  out->set_max_input_levels(options.size_limits.max_input_levels);
+  out->set_max_keep_out_regions(options.size_limits.max_keep_out_regions);
+  out->set_max_session_bytes(options.size_limits.max_session_bytes);
+  out->set_max_pass_flops(options.size_limits.max_pass_flops);
+  out->set_max_spec_scalars(options.size_limits.max_scalars);
+  out->set_memory_budget_bytes(budget.capacity());
+  out->set_max_control_streams(options.max_control_streams);
+  out->set_max_stream_answers(options.max_stream_answers);
+  out->set_max_streams_per_connection(options.max_streams_per_connection);
 }
 
 std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context) {

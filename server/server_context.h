@@ -9,6 +9,7 @@
 #include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
 #include "server/gp_model_cache.h"
+#include "server/memory_budget.h"
 #include "server/metrics.h"
 #include "server/session_registry.h"
 #include "server/spec_conversion.h"
@@ -26,6 +27,10 @@ struct ServerOptions {
   double session_compact_idle_s = 10.0;  ///< 0: idle sessions keep their scratch
   int max_message_bytes = 64 << 20;
   double grace_period_s = 5.0;
+  std::int64_t memory_budget_bytes = 0;  ///< 0: DefaultMemoryBudgetBytes()
+  int max_control_streams = 1000;         ///< open Control streams, server-wide
+  int max_stream_answers = 16;            ///< answers a Control stream queues before it stops reading
+  int max_streams_per_connection = 100;   ///< HTTP/2 concurrent streams (calls) per client connection
   SizeLimits size_limits;
 };
 
@@ -33,13 +38,19 @@ struct ServerOptions {
 // draining flag (set on SIGTERM: new work is refused with UNAVAILABLE).
 struct ServerState {
   explicit ServerState(const ServerOptions& o)
-      : options(o), registry(o.max_sessions), pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms) {}
+      : options(o),
+        budget(o.memory_budget_bytes > 0 ? o.memory_budget_bytes : DefaultMemoryBudgetBytes()),
+        registry(o.max_sessions),
+        pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms) {}
   ServerOptions options;
+  MemoryBudget budget;  ///< before the registry: sessions give their reservations back to it
   SessionRegistry registry;
   WorkerPool pool;
   Metrics metrics;
   GpModelCache gp_models;  ///< factorised GP models shared by the sessions that use them
   std::atomic<bool> draining{false};
+  std::atomic<int> control_streams{0};  ///< open Control streams
+  std::atomic<std::uint64_t> stream_read_pauses{0};  ///< times a stream stopped reading (flow control)
 
   // An absl::Status as a gRPC status, counted when it is an error.
   grpc::Status ToGrpc(const absl::Status& status);

@@ -23,6 +23,19 @@ ABSL_FLAG(int, max_horizon, 100000, "largest horizon N (env NUPMPC_MAX_HORIZON)"
 ABSL_FLAG(int, max_states, 1000, "largest state dimension (env NUPMPC_MAX_STATES)");
 ABSL_FLAG(int, max_iterations, 100000, "largest per-solve iteration cap (env NUPMPC_MAX_ITERATIONS)");
 ABSL_FLAG(double, grace_period_s, 5, "on SIGTERM/SIGINT: time for in-flight solves (env NUPMPC_GRACE_PERIOD_S)");
+ABSL_FLAG(int, memory_budget_mb, 0,
+          "memory all sessions and calls in flight may reserve, by estimate, before requests are refused with "
+          "RESOURCE_EXHAUSTED; 0: 3/4 of the smaller of physical memory and the cgroup limit (env NUPMPC_MEMORY_BUDGET_MB)");
+ABSL_FLAG(int, max_session_memory_mb, 2048,
+          "estimated memory one session, SolveOnce or GP fit may need (env NUPMPC_MAX_SESSION_MEMORY_MB)");
+ABSL_FLAG(double, max_pass_gflop, 1000,
+          "estimated work (GFLOP) of one message-passing pass a session may need (env NUPMPC_MAX_PASS_GFLOP)");
+ABSL_FLAG(int, max_control_streams, 1000, "open Control streams, server-wide (env NUPMPC_MAX_CONTROL_STREAMS)");
+ABSL_FLAG(int, max_stream_answers, 16,
+          "answers a Control stream queues for a client that does not read before it stops reading its steps "
+          "(env NUPMPC_MAX_STREAM_ANSWERS)");
+ABSL_FLAG(int, max_streams_per_connection, 100,
+          "concurrent calls on one client connection (env NUPMPC_MAX_STREAMS_PER_CONNECTION)");
 ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error|off (env NUPMPC_LOG_LEVEL)");
 
 namespace nupmpc::server {
@@ -67,7 +80,9 @@ const cli::ProgramInfo& ServerProgram() {
 
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   for (const char* name : {"address", "threads", "queue_capacity", "max_sessions", "session_idle_timeout_s",
-                           "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states", "max_iterations", "grace_period_s",
+                           "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states",
+                           "max_iterations", "grace_period_s", "memory_budget_mb", "max_session_memory_mb",
+                           "max_pass_gflop", "max_control_streams", "max_stream_answers", "max_streams_per_connection",
                            "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
@@ -86,6 +101,12 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.size_limits.max_states = absl::GetFlag(FLAGS_max_states);
   o.size_limits.max_iterations = absl::GetFlag(FLAGS_max_iterations);
   o.grace_period_s = absl::GetFlag(FLAGS_grace_period_s);
+  o.memory_budget_bytes = static_cast<std::int64_t>(absl::GetFlag(FLAGS_memory_budget_mb)) << 20;
+  o.size_limits.max_session_bytes = static_cast<long long>(absl::GetFlag(FLAGS_max_session_memory_mb)) << 20;
+  o.size_limits.max_pass_flops = absl::GetFlag(FLAGS_max_pass_gflop) * 1e9;
+  o.max_control_streams = absl::GetFlag(FLAGS_max_control_streams);
+  o.max_stream_answers = absl::GetFlag(FLAGS_max_stream_answers);
+  o.max_streams_per_connection = absl::GetFlag(FLAGS_max_streams_per_connection);
   out.log_level = absl::GetFlag(FLAGS_log_level);
   for (const absl::Status& s :
        {RequireAtLeast("threads", o.worker_threads, 1), RequireAtLeast("queue_capacity", o.queue_capacity, 1),
@@ -94,7 +115,13 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
         RequireAtLeast("max_states", o.size_limits.max_states, 1), RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
         RequireAtLeast("grace_period_s", o.grace_period_s, 0.0),
         RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
-        RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0)}) {
+        RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0),
+        RequireAtLeast("memory_budget_mb", absl::GetFlag(FLAGS_memory_budget_mb), 0),
+        RequireAtLeast("max_session_memory_mb", absl::GetFlag(FLAGS_max_session_memory_mb), 1),
+        RequireAtLeast("max_pass_gflop", absl::GetFlag(FLAGS_max_pass_gflop), 1e-6),
+        RequireAtLeast("max_control_streams", o.max_control_streams, 1),
+        RequireAtLeast("max_stream_answers", o.max_stream_answers, 2),
+        RequireAtLeast("max_streams_per_connection", o.max_streams_per_connection, 1)}) {
     if (!s.ok()) return s;
   }
   return out;

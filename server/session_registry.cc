@@ -1,9 +1,13 @@
 #include "server/session_registry.h"
 
+#include <algorithm>
 #include <random>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/str_format.h"
+#include "core/util/status_macros.h"
 #include "server/spec_conversion.h"
 
 namespace nupmpc::server {
@@ -33,7 +37,8 @@ std::string SessionRegistry::NewId() {
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
                                                                    double default_time_limit_ms,
-                                                                   bool owned_by_stream, InputTransform transform) {
+                                                                   bool owned_by_stream, InputTransform transform,
+                                                                   SessionMemory memory) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owned_by_stream = owned_by_stream;
   entry->default_time_limit_ms = default_time_limit_ms;
@@ -47,6 +52,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_p
   entry->x0.setZero(entry->dims.num_states());
   entry->transform = std::move(transform);
   entry->solver = std::move(solver);
+  entry->memory = std::move(memory);
   entry->Touch();
   std::lock_guard<std::mutex> lock(mu_);
   if (static_cast<int>(sessions_.size()) >= max_sessions_) {
@@ -60,25 +66,42 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_p
   return entry;
 }
 
+std::string QuoteSessionId(absl::string_view id) {
+  constexpr std::size_t kShown = 8;
+  if (id.size() <= kShown) return absl::StrCat("\"", absl::CHexEscape(id), "\"");
+  return absl::StrCat("\"", absl::CHexEscape(id.substr(0, kShown)), "...\" (", id.size(), " characters)");
+}
+
+absl::Status CheckSessionIdForm(absl::string_view id) {
+  const bool hex = std::all_of(id.begin(), id.end(), [](char c) { return absl::ascii_isxdigit(c); });
+  if (id.size() == kSessionIdLength && hex) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat("session_id ", QuoteSessionId(id), ": must be ", kSessionIdLength,
+                                                 " hex digits, as CreateSession returns it"));
+}
+
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Find(const std::string& id) const {
+  NUPMPC_RETURN_IF_ERROR(CheckSessionIdForm(id));
   std::lock_guard<std::mutex> lock(mu_);
   const auto it = sessions_.find(id);
-  if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id \"", id, "\": no such session"));
+  if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
   return it->second;
 }
 
 absl::Status SessionRegistry::Close(const std::string& id) {
+  NUPMPC_RETURN_IF_ERROR(CheckSessionIdForm(id));
   std::shared_ptr<SessionEntry> entry;
   {
     std::lock_guard<std::mutex> lock(mu_);
     const auto it = sessions_.find(id);
-    if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id \"", id, "\": no such session"));
+    if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
     entry = std::move(it->second);
     sessions_.erase(it);
   }
   // Mark it closed after any solve in flight; the memory goes with the last reference.
   std::lock_guard<std::mutex> lock(entry->mu);
   entry->closed = true;
+  entry->solver.reset();
+  entry->memory = SessionMemory{};
   closed_total_.fetch_add(1, std::memory_order_relaxed);
   return absl::OkStatus();
 }
@@ -90,6 +113,7 @@ int SessionRegistry::CompactIdle(double idle_seconds) {
     std::unique_lock<std::mutex> lock(entry->mu, std::try_to_lock);
     if (!lock.owns_lock() || entry->closed || entry->compacted) continue;
     entry->solver->ReleaseWorkspace();
+    entry->memory.scratch.Release();
     entry->compacted = true;
     ++compacted;
   }

@@ -10,14 +10,24 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/input_transform.h"
+#include "server/memory_budget.h"
 #include "server/session_strand.h"
 
 namespace nupmpc::server {
 
 using Clock = std::chrono::steady_clock;
+
+// A session's share of the memory budget: what it keeps while it exists, and its solver
+// scratch, given back while the session is compacted.
+struct SessionMemory {
+  MemoryBudget::Reservation resident;
+  MemoryBudget::Reservation scratch;
+  std::int64_t scratch_bytes = 0;  ///< what `scratch` holds when the scratch is allocated
+};
 
 // One client session: the core session (problem, workspace, warm start). `mu` serialises
 // solves: one solve at a time per session.
@@ -34,6 +44,7 @@ struct SessionEntry {
   bool compacted = false;                 ///< guarded by mu: solver scratch released while idle
   core::Solution solution;                ///< guarded by mu; reused buffer
   bool closed = false;                    ///< guarded by mu: removed from the registry
+  SessionMemory memory;                   ///< guarded by mu
 
   // Solves of this session go through its strand: one at a time, none holding a worker
   // while another one runs.
@@ -50,6 +61,13 @@ struct SessionEntry {
   std::atomic<core::Algorithm> algorithm{core::Algorithm::kAuto};
 };
 
+// Session ids are 32 lower-case hex digits (128 random bits).
+inline constexpr std::size_t kSessionIdLength = 32;
+// INVALID_ARGUMENT for anything else (checked before any lookup).
+absl::Status CheckSessionIdForm(absl::string_view id);
+// An id as error messages show it: at most its first 8 characters, escaped, and its length.
+std::string QuoteSessionId(absl::string_view id);
+
 // Sessions by unguessable id (128 random bits from the OS), with a maximum count and idle
 // expiry. Thread-safe; lookups are short critical sections (never held during a solve).
 class SessionRegistry {
@@ -59,15 +77,17 @@ class SessionRegistry {
   // RESOURCE_EXHAUSTED when full.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver,
                                                     double default_time_limit_ms, bool owned_by_stream,
-                                                    InputTransform transform = {});
-  // NOT_FOUND for unknown (or closed, or expired) ids.
+                                                    InputTransform transform = {}, SessionMemory memory = {});
+  // INVALID_ARGUMENT for malformed ids, NOT_FOUND for unknown (or closed, or expired) ones.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id) const;
+  // Frees the session's solver and gives its memory back at once (after a solve in flight).
   absl::Status Close(const std::string& id);
   std::vector<std::shared_ptr<SessionEntry>> List() const;
   // Closes sessions idle longer than `idle_seconds` that no stream is attached to.
   int ExpireIdle(double idle_seconds);
-  // Releases the solver scratch of sessions idle longer than `idle_seconds` (skipping any
-  // that is solving right now); returns how many it compacted.
+  // Releases the solver scratch (and its share of the memory budget) of sessions idle
+  // longer than `idle_seconds`, skipping any that is solving right now; returns how many
+  // it compacted.
   int CompactIdle(double idle_seconds);
   int size() const;
   int max_sessions() const { return max_sessions_; }

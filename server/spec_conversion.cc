@@ -415,8 +415,10 @@ void CopyRows(const Eigen::MatrixXd& m, google::protobuf::RepeatedField<double>*
 void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, v1::SolveResult* out) {
   out->set_status(StatusToProto(s.status));
   out->set_iterations(static_cast<unsigned>(s.iterations));
-  out->set_objective(s.objective);
-  out->set_max_violation(s.max_violation);
+  const bool has_plan = s.IsUsable() && s.status != core::SolveStatus::kCancelled;
+  out->set_has_plan(has_plan);
+  out->set_objective(has_plan ? s.objective : std::numeric_limits<double>::quiet_NaN());
+  out->set_max_violation(has_plan ? s.max_violation : std::numeric_limits<double>::quiet_NaN());
   out->set_solve_ms(s.solve_seconds * 1e3);
   out->set_algorithm(AlgorithmToProto(s.algorithm));
   out->set_warm_started(s.warm_started);
@@ -426,6 +428,8 @@ void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, 
   out->set_discrete_moves(static_cast<uint32_t>(s.discrete_moves));
   out->set_linearisations(static_cast<unsigned>(s.linearisations));
   out->set_keep_out_violation(s.nonlinear_violation);
+  // Without a plan for this step's state nothing of one is sent (SolveResult.has_plan).
+  if (!has_plan) return;
   CopyRows(solution.inputs, out->mutable_inputs());
   CopyRows(solution.outputs, out->mutable_outputs());
   CopyRows(solution.states, out->mutable_states());

@@ -23,6 +23,13 @@ struct SizeLimits {
   int max_iterations = 100000;
   // Training pairs of a GP model (memory O(P²), fit time O(P³) per iteration).
   int max_gp_points = 5000;
+  // Levels of one multi-level input (each adds count - 1 binary inputs per step).
+  int max_input_levels = 64;
+  int max_keep_out_regions = 256;
+  // What one session (or one-off solve, or fit) may cost, estimated from the spec before
+  // anything is allocated (server/session_cost.h).
+  long long max_session_bytes = 2LL << 30;
+  double max_pass_flops = 1e12;  ///< one message-passing pass over the horizon
 };
 
 // A v1::Matrix of the given size with finite entries; INVALID_ARGUMENT naming `path`.

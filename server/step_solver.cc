@@ -9,6 +9,7 @@
 #include "core/util/status_macros.h"
 #include "server/gp_conversion.h"
 #include "server/keep_out_conversion.h"
+#include "server/session_cost.h"
 
 namespace nupmpc::server {
 namespace {
@@ -83,14 +84,61 @@ absl::StatusOr<gp::FitOptions> FitLimits(const CallContext* call) {
   return fit;
 }
 
+absl::Status CheckCallStillWanted(const CallContext& call, const char* what) {
+  if (call.cancel != nullptr && call.cancel->load()) {
+    return absl::CancelledError(absl::StrCat(what, " after the client cancelled the call; it was not kept"));
+  }
+  if (call.deadline.has_value() && Clock::now() > *call.deadline) {
+    return absl::DeadlineExceededError(absl::StrCat(what, " after the call's deadline; it was not kept"));
+  }
+  return absl::OkStatus();
+}
+
+namespace {
+
+// The solver of a spec (no admission: BuildSession does that first).
+absl::Status BuildSolver(const v1::ProblemSpec& spec, const SizeLimits& limits, GpModelCache* gp_models,
+                         const CallContext* call, BuiltSession* built);
+
+}  // namespace
+
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits,
-                                          GpModelCache* gp_models, const CallContext* call) {
+                                          GpModelCache* gp_models, const CallContext* call, MemoryBudget* budget) {
+  NUPMPC_ASSIGN_OR_RETURN(const SessionCost cost, SpecCost(spec, limits));
+  MemoryBudget::Reservation reserved;
+  if (budget != nullptr) {
+    NUPMPC_ASSIGN_OR_RETURN(reserved, budget->Reserve(std::max(cost.build_bytes, cost.session_bytes()),
+                                                      "spec (the session's problem, solver scratch and GP factors)"));
+  }
   BuiltSession built;
+  NUPMPC_RETURN_IF_ERROR(BuildSolver(spec, limits, gp_models, call, &built));
+  reserved.ShrinkTo(cost.session_bytes());
+  built.memory.scratch = reserved.Split(cost.scratch_bytes);
+  built.memory.scratch_bytes = built.memory.scratch.bytes();
+  built.memory.resident = std::move(reserved);
+  return built;
+}
+
+absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::ProblemSpec& spec, const SizeLimits& limits,
+                                                                GpModelCache* gp_models, MemoryBudget* budget,
+                                                                SessionRegistry* registry, const CallContext& call,
+                                                                bool owned_by_stream) {
+  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, limits, gp_models, &call, budget));
+  NUPMPC_RETURN_IF_ERROR(CheckCallStillWanted(call, "the session was built"));
+  return registry->Add(std::move(built.solver), built.default_time_limit_ms, owned_by_stream,
+                       std::move(built.transform), std::move(built.memory));
+}
+
+namespace {
+
+absl::Status BuildSolver(const v1::ProblemSpec& spec, const SizeLimits& limits, GpModelCache* gp_models,
+                         const CallContext* call, BuiltSession* out) {
+  BuiltSession& built = *out;
   if (spec.has_gp()) {
     NUPMPC_ASSIGN_OR_RETURN(const gp::FitOptions fit, FitLimits(call));
     NUPMPC_ASSIGN_OR_RETURN(built.solver, GpSessionFromSpec(spec, limits, gp_models, fit));
     built.default_time_limit_ms = spec.options().time_limit_ms();
-    return built;
+    return absl::OkStatus();
   }
   NUPMPC_ASSIGN_OR_RETURN(core::Problem base, ProblemFromSpec(spec, limits));
   NUPMPC_ASSIGN_OR_RETURN(core::Problem problem, TransformProblem(spec, std::move(base), &built.transform));
@@ -110,8 +158,10 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
   }
   built.solver = *std::move(solver);
   built.default_time_limit_ms = spec.options().time_limit_ms();
-  return built;
+  return absl::OkStatus();
 }
+
+}  // namespace
 
 absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallContext& call, v1::SolveResult* out) {
   std::lock_guard<std::mutex> lock(entry.mu);
@@ -123,6 +173,11 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     return absl::InvalidArgumentError("step.max_iterations: too large");
   }
 
+  if (entry.compacted) {
+    // Its scratch was given back while idle: take the budget's share again first.
+    NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(entry.memory.scratch_bytes,
+                                                       "session_id (allocating the idle session's solver scratch again)"));
+  }
   core::MpcSession& solver = *entry.solver;
   InputTransform& transform = entry.transform;
   // Everything but the update is checked before anything changes.
@@ -174,7 +229,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   entry.compacted = false;  // Solve() took its scratch back
   entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
-  if (transform.active()) {
+  if (transform.active() && summary.IsUsable()) {
     transform.MapBack(previous_input, &entry.solution);
     transform.RememberApplied(entry.solution);
   }
@@ -184,13 +239,13 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 }
 
 absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limits, const CallContext& call,
-                       v1::SolveResult* out, GpModelCache* gp_models) {
-  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits, gp_models, &call));
+                       v1::SolveResult* out, GpModelCache* gp_models, MemoryBudget* budget) {
+  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits, gp_models, &call, budget));
   core::SolveLimits limits;
   NUPMPC_RETURN_IF_ERROR(MakeLimits(built.default_time_limit_ms, nullptr, call, &limits));
   core::Solution solution;
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, built.solver->Solve(limits, &solution));
-  built.transform.MapBack(built.transform.previous_input, &solution);
+  if (summary.IsUsable()) built.transform.MapBack(built.transform.previous_input, &solution);
   ResultToProto(summary, solution, out);
   return absl::OkStatus();
 }

@@ -24,9 +24,10 @@ struct CallContext {
 // start, solves, and fills `out`. Holds the session's lock for the duration.
 absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallContext& call, v1::SolveResult* out);
 
-// Stateless: builds a session for the spec, solves cold once, fills `out`.
+// Stateless: builds a session for the spec, solves cold once, fills `out`. With a budget,
+// the session's estimated memory is reserved in it for the duration.
 absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& limits, const CallContext& call,
-                       v1::SolveResult* out, GpModelCache* gp_models = nullptr);
+                       v1::SolveResult* out, GpModelCache* gp_models = nullptr, MemoryBudget* budget = nullptr);
 
 // The limits of a kernel fit made for a call: the time to its deadline and its cancel flag
 // (DEADLINE_EXCEEDED when the deadline already passed). No call: no limits.
@@ -38,11 +39,28 @@ struct BuiltSession {
   std::unique_ptr<core::MpcSession> solver;  ///< a core::Session, or a KeepOutSession
   InputTransform transform;
   double default_time_limit_ms = 0.0;
+  SessionMemory memory;  ///< its share of the budget (empty without one)
 };
-// GP specs take their factorised model from `gp_models` when given (shared between sessions);
-// a kernel fit on creation stops at `call`'s deadline or cancellation.
+// Admission first: the spec's cost (server/session_cost.h) is checked against the
+// per-session limits and, with a budget, reserved in it before anything is converted or
+// allocated. GP specs take their factorised model from `gp_models` when given (shared
+// between sessions); a kernel fit or factorisation on creation stops at `call`'s deadline
+// or cancellation.
 absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const SizeLimits& limits,
-                                          GpModelCache* gp_models = nullptr, const CallContext* call = nullptr);
+                                          GpModelCache* gp_models = nullptr, const CallContext* call = nullptr,
+                                          MemoryBudget* budget = nullptr);
+
+// CreateSession and a Control stream's spec: BuildSession, then registers the session
+// unless the call's deadline passed or its client cancelled meanwhile (nobody could reach
+// a session registered then).
+absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::ProblemSpec& spec, const SizeLimits& limits,
+                                                                GpModelCache* gp_models, MemoryBudget* budget,
+                                                                SessionRegistry* registry, const CallContext& call,
+                                                                bool owned_by_stream);
+
+// DEADLINE_EXCEEDED / CANCELLED when the call's deadline passed or its client went away
+// (`what` names the work that finished too late, e.g. "the session was built").
+absl::Status CheckCallStillWanted(const CallContext& call, const char* what);
 
 }  // namespace nupmpc::server
 

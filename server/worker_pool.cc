@@ -1,9 +1,11 @@
 #include "server/worker_pool.h"
 
 #include <chrono>
+#include <exception>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
 
@@ -67,7 +69,15 @@ void WorkerPool::Run() {
       queued_ms_ = queue_.empty() ? 0.0 : queued_ms_ - task.expected_ms;  // no drift when empty
     }
     const auto start = std::chrono::steady_clock::now();
-    task.run();
+    // Requests catch their own exceptions (RunCatchingExceptions) and answer with them;
+    // this only keeps a worker alive should a task's bookkeeping throw anyway.
+    try {
+      task.run();
+    } catch (const std::exception& e) {
+      spdlog::error("worker: a task ended with an exception: {}", e.what());
+    } catch (...) {
+      spdlog::error("worker: a task ended with an unknown exception");
+    }
     const double took_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     std::lock_guard<std::mutex> lock(mu_);
     average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;

@@ -252,7 +252,14 @@ TEST_F(ServiceValidationTest, BadStepsLeaveTheSessionAsItWas) {
 TEST_F(ServiceValidationTest, UnknownClosedAndForeignSessionsAreRefused) {
   EXPECT_EQ(client_->Solve("00000000000000000000000000000000", StateStep(0)).status().code(),
             absl::StatusCode::kNotFound);
-  EXPECT_EQ(client_->GetSession("nope").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(client_->GetSession("0123456789abcdef0123456789abcdef").status().code(), absl::StatusCode::kNotFound);
+  // Malformed ids are refused before any lookup, and never echoed beyond a short prefix.
+  const std::string long_id(20000, 'a');
+  const absl::Status malformed = client_->CloseSession(long_id);
+  EXPECT_EQ(malformed.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(malformed.message()), HasSubstr("32 hex digits"));
+  EXPECT_LT(malformed.message().size(), 200u);
+  EXPECT_EQ(client_->GetSession("nope").status().code(), absl::StatusCode::kInvalidArgument);
   auto created = client_->CreateSession(spec_);
   ASSERT_TRUE(created.ok());
   EXPECT_EQ(created->session_id().size(), 32u);  // 128 random bits in hex

@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <future>
+#include <stdexcept>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -61,6 +62,20 @@ TEST(WorkerPool, WithoutAWaitBoundOnlyTheCapacityCounts) {
   Blocker blocker(pool);
   for (int i = 0; i < 50; ++i) EXPECT_TRUE(pool.TrySubmit([] {}, 1000.0).ok()) << i;
   blocker.Release();
+}
+
+}  // namespace
+}  // namespace nupmpc::server
+
+namespace nupmpc::server {
+namespace {
+
+TEST(WorkerPool, ATaskThatThrowsDoesNotTakeItsWorkerWithIt) {
+  WorkerPool pool(1, 4);
+  ASSERT_TRUE(pool.TrySubmit([] { throw std::runtime_error("escaped"); }).ok());
+  std::promise<void> ran;
+  ASSERT_TRUE(pool.TrySubmit([&] { ran.set_value(); }).ok());
+  EXPECT_EQ(ran.get_future().wait_for(std::chrono::seconds(30)), std::future_status::ready);
 }
 
 }  // namespace

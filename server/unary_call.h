@@ -1,0 +1,91 @@
+#ifndef NUPMPC_SERVER_UNARY_CALL_H_
+#define NUPMPC_SERVER_UNARY_CALL_H_
+
+#include <atomic>
+#include <functional>
+#include <string>
+
+#include "absl/status/status.h"
+#include "grpcpp/grpcpp.h"
+#include "server/catch_exceptions.h"
+#include "server/raw_messages.h"
+#include "server/server_context.h"
+#include "server/step_solver.h"
+
+namespace nupmpc::server {
+
+// One unary call of MpcService, taken as raw bytes (server/raw_messages.h): bytes that do
+// not parse are answered with INVALID_ARGUMENT naming the expected type. The call owns its
+// request and response and deletes itself when gRPC is done with it.
+template <class Request, class Response>
+class UnaryCall final : public grpc::ServerUnaryReactor {
+ public:
+  // A new call; when the bytes do not parse it has already finished, and Parsed() is false.
+  static UnaryCall* Start(ServerState* state, grpc::CallbackServerContext* context, const grpc::ByteBuffer* raw_request,
+                          grpc::ByteBuffer* raw_response) {
+    auto* call = new UnaryCall(state, context, raw_response);
+    grpc::ByteBuffer bytes(*raw_request);  // parsing consumes its buffer
+    const absl::Status parsed = ParseRaw(&bytes, &call->request_);
+    call->parsed_ = parsed.ok();
+    if (!call->parsed_) call->Reply(parsed);
+    return call;
+  }
+
+  bool Parsed() const { return parsed_; }
+  const Request& request() const { return request_; }
+  Response* response() { return &response_; }
+
+  // Sends the response (when `status` is OK) or the error.
+  void Reply(const absl::Status& status) {
+    Finish(state_->ToGrpc(status.ok() ? SerializeRaw(response_, raw_response_) : status));
+  }
+
+  // Runs `work` on the worker pool (RESOURCE_EXHAUSTED when the queue is full), through
+  // `session`'s strand when given (one at a time per session), catching what escapes it.
+  // `is_solve`: counted in the solve counters and latency histogram. A client that cancels
+  // raises the flag the solver checks.
+  void RunOnPool(const char* name, bool is_solve, std::function<absl::Status(const CallContext&)> work,
+                 const SessionEntry* session = nullptr) {
+    if (state_->draining.load()) {
+      Reply(absl::UnavailableError("the server is shutting down"));
+      return;
+    }
+    call_.deadline = SteadyDeadline(*context_);
+    call_.cancel = &cancelled_;
+    const auto queued_at = Clock::now();
+    auto run = [this, name, is_solve, work = std::move(work), queued_at] {
+      const absl::Status status = RunCatchingExceptions(name, [&] { return work(call_); });
+      if (status.ok() && is_solve) {
+        state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+      }
+      Reply(status);
+    };
+    const absl::Status queued =
+        session == nullptr
+            ? state_->pool.TrySubmit(std::move(run))
+            : SessionStrand::Submit(session->strand, state_->pool,
+                                    {std::move(run), [this](absl::Status s) { Reply(s); },
+                                     session->last_solve_ms.load(std::memory_order_relaxed)});
+    if (!queued.ok()) Reply(queued);
+  }
+
+  void OnCancel() override { cancelled_.store(true); }
+  void OnDone() override { delete this; }
+
+ private:
+  UnaryCall(ServerState* state, grpc::CallbackServerContext* context, grpc::ByteBuffer* raw_response)
+      : state_(state), context_(context), raw_response_(raw_response) {}
+
+  ServerState* const state_;
+  grpc::CallbackServerContext* const context_;
+  grpc::ByteBuffer* const raw_response_;
+  Request request_;
+  Response response_;
+  bool parsed_ = false;
+  CallContext call_;
+  std::atomic<bool> cancelled_{false};
+};
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_UNARY_CALL_H_
