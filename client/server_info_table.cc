@@ -58,6 +58,8 @@ std::string Latency(const v1::GetServerInfoResponse& info) {
   return parts.empty() ? "no solves yet" : absl::StrJoin(parts, ", ");
 }
 
+std::string Mib(std::uint64_t bytes) { return absl::StrFormat("%.1f MiB", static_cast<double>(bytes) / (1 << 20)); }
+
 std::string Seconds(double s, const char* zero_means) { return s > 0 ? absl::StrFormat("%g s", s) : zero_means; }
 
 }  // namespace
@@ -73,7 +75,10 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
       {"solves", absl::StrCat(info.solves())},
       {"errors by code", Errors(info)},
       {"solve latency", Latency(info)},
-      {"resident memory", absl::StrFormat("%.1f MiB", static_cast<double>(info.resident_memory_bytes()) / (1 << 20))},
+      {"resident memory", Mib(info.resident_memory_bytes())},
+      {"memory budget", absl::StrCat(Mib(info.memory_reserved_bytes()), " reserved of ", Mib(l.memory_budget_bytes()))},
+      {"control streams", absl::StrCat(info.control_streams(), " open (max ", l.max_control_streams(), "), ",
+                                       info.control_stream_read_pauses(), " read pauses")},
       {"draining", info.draining() ? "yes" : "no"},
       {"worker threads", absl::StrCat(l.worker_threads())},
       {"queue capacity", absl::StrCat(l.queue_capacity())},
@@ -87,7 +92,13 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
       {"max outputs", absl::StrCat(l.max_outputs())},
       {"max iterations", absl::StrCat(l.max_iterations())},
       {"max GP points", absl::StrCat(l.max_gp_points())},
-      {"max message", absl::StrFormat("%.1f MiB", static_cast<double>(l.max_message_bytes()) / (1 << 20))},
+      {"max input levels", absl::StrCat(l.max_input_levels())},
+      {"max keep-out regions", absl::StrCat(l.max_keep_out_regions())},
+      {"max session memory", Mib(l.max_session_bytes())},
+      {"max pass work", absl::StrFormat("%g GFLOP", l.max_pass_flops() * 1e-9)},
+      {"max message", Mib(l.max_message_bytes())},
+      {"stream answers unread", absl::StrCat("at most ", l.max_stream_answers())},
+      {"calls per connection", absl::StrCat("at most ", l.max_streams_per_connection())},
   };
   std::size_t width = 0;
   for (const auto& [key, value] : rows) width = std::max(width, key.size());
