@@ -414,6 +414,7 @@ void CopyRows(const Eigen::MatrixXd& m, google::protobuf::RepeatedField<double>*
 
 void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, v1::SolveResult* out) {
   out->set_status(StatusToProto(s.status));
+  out->set_has_plan(s.IsUsable());  // stand-in until the server sets has_plan itself (issue 18)
   out->set_iterations(static_cast<unsigned>(s.iterations));
   out->set_objective(s.objective);
   out->set_max_violation(s.max_violation);
