@@ -190,7 +190,7 @@ void ExpectRodeThrough(const CliRun& run, int steps, double down_s) {
   // than the back-off's reach (2 s ± 20 %; generous: a slow shared machine).
   const double without_plan = run.summary["longest_without_plan_s"].get<double>();
   EXPECT_GE(without_plan, down_s) << run.summary.dump();
-  EXPECT_LT(without_plan, down_s + 5.0) << run.summary.dump();
+  EXPECT_LT(without_plan, down_s + 6.0) << run.summary.dump();
   EXPECT_GE(run.summary["reconnect_s"].get<double>(), 0.9 * down_s) << run.summary.dump();
   // Each attempt was logged, and the reconnect.
   EXPECT_NE(run.stderr_text.find("the Control stream broke"), std::string::npos) << run.stderr_text;
@@ -225,6 +225,40 @@ TEST(ClosedLoopRestart, GivesUpWhenTheBudgetIsSpent) {
   EXPECT_NE(run.stderr_text.find("gave up reconnecting after"), std::string::npos) << run.stderr_text;
   EXPECT_NE(run.stderr_text.find("giving up"), std::string::npos) << run.stderr_text;
   EXPECT_LT(run.took.count(), 20.0);
+}
+
+// Issue 18, item 5: a step with x0 = [-1e300, 0, ...] after a normal one comes back
+// NUMERICAL_ERROR without a plan (the server used to return the previous step's plan with
+// it). The CLI, replaying recorded states, must hold the input it applied before and say
+// so; the next normal step applies its own plan again.
+TEST(ClosedLoopNoPlan, AStepWithoutAPlanHoldsTheLastInput) {
+  std::ifstream in(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  nlohmann::json instance = nlohmann::json::parse(in);
+  nlohmann::json& recorded = instance["closed_loop"];
+  std::vector<double> bad(recorded["x1"][0].size(), 0.0);
+  bad[0] = -1e300;
+  recorded["x1"] = nlohmann::json::array({recorded["x1"][0], bad, recorded["x1"][2]});
+  recorded["w"] = nlohmann::json::array({recorded["w"][0], recorded["w"][1], recorded["w"][2]});
+  recorded["u_applied"] =
+      nlohmann::json::array({recorded["u_applied"][0], recorded["u_applied"][1], recorded["u_applied"][2]});
+  recorded["T"] = 3;
+  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / "masses_N30_bad_state.json";
+  std::ofstream(path) << instance.dump();
+
+  const int port = FreePort();
+  ServerProcess server(port);
+  ASSERT_TRUE(WaitUntilServing(port));
+  const CliRun run = RunCli(port, path.string(), {}, [](int) {});
+  EXPECT_EQ(run.exit_code, 0) << run.stderr_text;
+  ASSERT_EQ(run.steps.size(), 3u) << run.stderr_text;
+  EXPECT_TRUE(run.steps[0]["has_plan"].get<bool>()) << run.steps[0].dump();
+  EXPECT_EQ(run.steps[1]["status"], "numerical_error") << run.steps[1].dump();
+  EXPECT_FALSE(run.steps[1]["has_plan"].get<bool>()) << run.steps[1].dump();
+  EXPECT_EQ(run.steps[1]["u0"], run.steps[0]["u0"]);  // held, not the result's inputs
+  EXPECT_TRUE(run.steps[2]["has_plan"].get<bool>()) << run.steps[2].dump();
+  EXPECT_EQ(run.summary["held_steps"], 1) << run.summary.dump();
+  EXPECT_EQ(run.summary["held"]["numerical_error"], 1) << run.summary.dump();
+  EXPECT_EQ(run.summary["not_converged"]["numerical_error"], 1) << run.summary.dump();
 }
 
 }  // namespace
