@@ -231,6 +231,12 @@ absl::Status Session::BrokenStreamStatusLocked(const char* what) {
   const grpc::Status s = stream_->Finish();
   TearDownLocked();
   if (s.ok()) return absl::UnavailableError(absl::StrCat("the Control stream ended (", what, ")"));
+  // This session never cancels a live stream: CANCELLED here is the server dropping the
+  // call (e.g. shutting down past its grace period), as retryable as a lost connection.
+  if (s.error_code() == grpc::StatusCode::CANCELLED) {
+    return absl::UnavailableError(absl::StrCat("the Control stream was cancelled by the server (", what, "): ",
+                                               s.error_message()));
+  }
   return absl::Status(static_cast<absl::StatusCode>(s.error_code()),
                       absl::StrCat("the Control stream broke (", what, "): ", s.error_message()));
 }
