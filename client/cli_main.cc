@@ -137,12 +137,15 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   reconnect.budget = std::chrono::milliseconds(std::llround(1e3 * std::max(0.0, absl::GetFlag(FLAGS_reconnect_budget_s))));
   reconnect.max_backoff = std::chrono::milliseconds(std::max(1, absl::GetFlag(FLAGS_reconnect_max_backoff_ms)));
   reconnect.on_attempt = [](const nupmpc::ReconnectAttempt& a) {
-    if (a.attempt == 1 || a.attempt == 0) {
+    if (a.attempt == 0) {  // a zero budget: no attempt at all
+      std::fprintf(stderr, "nupmpc: the Control stream broke (%s); not reconnecting (--reconnect_budget_s 0)\n",
+                   a.cause.ToString().c_str());
+      return;
+    }
+    if (a.attempt == 1) {
       std::fprintf(stderr, "nupmpc: the Control stream broke (%s); reconnecting\n", a.cause.ToString().c_str());
     }
-    if (a.attempt == 0) {
-      std::fprintf(stderr, "nupmpc: not reconnecting (--reconnect_budget_s 0)\n");
-    } else if (a.result.ok()) {
+    if (a.result.ok()) {
       std::fprintf(stderr, "nupmpc: reconnected at attempt %d, %.3f s after the break; session re-created\n",
                    a.attempt, 1e-3 * static_cast<double>(a.elapsed.count()));
     } else {

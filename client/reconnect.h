@@ -29,7 +29,7 @@ namespace nupmpc {
 
 // One reconnect attempt, as reported to ReconnectOptions::on_attempt.
 struct ReconnectAttempt {
-  int attempt = 0;                          // 1, 2, ... within this outage
+  int attempt = 0;  // 1, 2, ... within this outage; 0: none was made (a zero budget), gave_up
   std::chrono::milliseconds waited{0};      // the back-off slept before this attempt
   std::chrono::milliseconds elapsed{0};     // since the stream broke, after this attempt
   absl::Status cause;                       // what broke the stream (attempt 1) or the previous attempt
