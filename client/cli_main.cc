@@ -11,8 +11,15 @@
 //
 // FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.
 // --format table|json; with json, closed-loop prints one object per step and line with
-// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, u0, then
-// one summary object ("summary": true); with table, a summary after the steps.
+// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, has_plan,
+// u0 (the input applied: the plan's u[0], or the held one when the result has no plan),
+// then one summary object ("summary": true); with table, a summary after the steps.
+//
+// closed-loop rides through a server restart: a broken stream is re-attached with
+// exponential back-off (50 ms doubling to --reconnect_max_backoff_ms, ±20 % jitter) for
+// at most --reconnect_budget_s per outage; each attempt is logged on stderr.
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <random>
 #include <string>
@@ -34,6 +41,9 @@ ABSL_FLAG(int, steps, 0, "closed-loop: number of steps (0: the instance's sequen
 ABSL_FLAG(double, noise, 0.0, "closed-loop simulation: std. dev. of additive state noise");
 ABSL_FLAG(int, seed, 1, "closed-loop simulation: noise seed");
 ABSL_FLAG(int, deadline_ms, 0, "deadline of unary calls (0: none)");
+ABSL_FLAG(double, reconnect_budget_s, 30.0,
+          "closed-loop: how long to keep trying to re-attach after the stream broke (per outage; 0: not at all)");
+ABSL_FLAG(int, reconnect_max_backoff_ms, 2000, "closed-loop: the longest wait between two reconnect attempts");
 
 namespace {
 
@@ -46,7 +56,9 @@ const nupmpc::cli::ProgramInfo kProgram{
                "  solve FILE        one stateless solve (SolveOnce)\n"
                "  closed-loop FILE  a receding-horizon run through a Control stream: the instance's recorded\n"
                "                    closed-loop states if it has them, else the model simulated locally\n"
-               "                    (--noise); ends with a summary (convergence, solve and round-trip times)\n"
+               "                    (--noise); ends with a summary (convergence, steps without a plan,\n"
+               "                    reconnects, solve and round-trip times); rides through a server restart\n"
+               "                    (--reconnect_budget_s)\n"
                "  fit-gp FILE       GP hyper-parameters by maximum likelihood (FitGpModel); FILE is a\n"
                "                    FitGpModelRequest in proto JSON\n"
                "  info              server version, CPU baseline, limits, counters\n"
@@ -64,16 +76,24 @@ std::string U0(const v1::SolveResult& r, int L) {
   return absl::StrCat("[", absl::StrJoin(parts, ","), "]");
 }
 
+std::string Vector(const std::vector<double>& v) {
+  std::vector<std::string> parts;
+  for (const double value : v) parts.push_back(absl::StrCat(value));
+  return absl::StrCat("[", absl::StrJoin(parts, ","), "]");
+}
+
 void PrintResult(const v1::SolveResult& r, int L, bool json) {
+  // A result without a plan has no inputs to show (SolveResult.has_plan).
+  const std::string u0 = nupmpc::HasPlan(r) ? U0(r, L) : (json ? "null" : "none (no plan)");
   if (json) {
     std::printf("{\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%.6g,"
-                "\"u0\":%s}\n",
+                "\"has_plan\":%s,\"u0\":%s}\n",
                 SolveStatusName(r.status()).c_str(), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
-                U0(r, L).c_str());
+                nupmpc::HasPlan(r) ? "true" : "false", u0.c_str());
   } else {
     std::printf("status %s, %u iterations, %.4f ms, J = %.12g, max violation %.3g\nu[0] = %s\n",
                 SolveStatusName(r.status()).c_str(), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
-                U0(r, L).c_str());
+                u0.c_str());
   }
 }
 
@@ -91,15 +111,15 @@ int Fail(const absl::Status& s) {
   return 1;
 }
 
-// x ← A x + B u0 (+ c) (+ noise), from the spec's first (time-invariant) matrices.
-std::vector<double> Simulate(const v1::ProblemSpec& spec, const std::vector<double>& x, const v1::SolveResult& r,
+// x ← A x + B u (+ c) (+ noise), from the spec's first (time-invariant) matrices.
+std::vector<double> Simulate(const v1::ProblemSpec& spec, const std::vector<double>& x, const std::vector<double>& u,
                              std::normal_distribution<double>& noise, std::mt19937_64& rng) {
   const v1::Model& m = spec.model();
   const int M = static_cast<int>(m.num_states()), L = static_cast<int>(m.num_inputs());
   std::vector<double> next(M, 0.0);
   for (int i = 0; i < M; ++i) {
     for (int j = 0; j < M; ++j) next[i] += m.a(0).data(i * M + j) * x[j];
-    for (int l = 0; l < L; ++l) next[i] += m.b(0).data(i * L + l) * r.inputs(l);
+    for (int l = 0; l < L; ++l) next[i] += m.b(0).data(i * L + l) * u[l];
     if (m.state_offset_size() >= M) next[i] += m.state_offset(i);
     if (noise.stddev() > 0) next[i] += noise(rng);
   }
@@ -113,7 +133,28 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
         "closed-loop: a GP spec has no plant model to simulate; drive a GP session from your own loop (Control "
         "stream or Solve, the past window as Step.state)"));
   }
-  absl::StatusOr<std::unique_ptr<nupmpc::Session>> session = client.OpenSession(problem.spec);
+  nupmpc::ReconnectOptions reconnect;
+  reconnect.budget = std::chrono::milliseconds(std::llround(1e3 * std::max(0.0, absl::GetFlag(FLAGS_reconnect_budget_s))));
+  reconnect.max_backoff = std::chrono::milliseconds(std::max(1, absl::GetFlag(FLAGS_reconnect_max_backoff_ms)));
+  reconnect.on_attempt = [](const nupmpc::ReconnectAttempt& a) {
+    if (a.attempt == 0) {  // a zero budget: no attempt at all
+      std::fprintf(stderr, "nupmpc: the Control stream broke (%s); not reconnecting (--reconnect_budget_s 0)\n",
+                   a.cause.ToString().c_str());
+      return;
+    }
+    if (a.attempt == 1) {
+      std::fprintf(stderr, "nupmpc: the Control stream broke (%s); reconnecting\n", a.cause.ToString().c_str());
+    }
+    if (a.result.ok()) {
+      std::fprintf(stderr, "nupmpc: reconnected at attempt %d, %.3f s after the break; session re-created\n",
+                   a.attempt, 1e-3 * static_cast<double>(a.elapsed.count()));
+    } else {
+      std::fprintf(stderr, "nupmpc: reconnect attempt %d (after %lld ms back-off, %.3f s after the break): %s%s\n",
+                   a.attempt, static_cast<long long>(a.waited.count()), 1e-3 * static_cast<double>(a.elapsed.count()),
+                   a.result.ToString().c_str(), a.gave_up ? "; giving up" : "");
+    }
+  };
+  absl::StatusOr<std::unique_ptr<nupmpc::Session>> session = client.OpenSession(problem.spec, reconnect);
   if (!session.ok()) return Fail(session.status());
   const int L = static_cast<int>(problem.spec.model().num_inputs());
   const bool recorded = !problem.closed_loop_states.empty();
@@ -126,6 +167,12 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   if (!json) std::printf("%5s %-16s %6s %10s %10s %18s %10s  %s\n", "step", "status", "iter", "solve_ms", "rtt_ms",
                          "objective", "max_viol", "u0");
   std::vector<nupmpc::ClosedLoopStep> record;
+  // The input applied to the plant: the plan's u[0] when the result has one, else the
+  // last one applied (zero before the first plan).
+  std::vector<double> u(L, 0.0);
+  using Clock = std::chrono::steady_clock;
+  Clock::time_point last_plan = Clock::now();
+  double longest_without_plan_s = 0.0;
   for (int t = 0; t < steps; ++t) {
     if (recorded) x = problem.closed_loop_states[t];
     v1::Step step;
@@ -134,21 +181,37 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
     absl::StatusOr<v1::SolveResult> r = (*session)->Step(step);
     const double rtt_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     if (!r.ok()) return Fail(r.status());
-    record.push_back({r->status(), r->solve_ms(), rtt_ms, r->max_violation()});
+    const bool has_plan = nupmpc::HasPlan(*r) && r->inputs_size() >= L;
+    if (has_plan) {
+      u.assign(r->inputs().begin(), r->inputs().begin() + L);
+      longest_without_plan_s =
+          std::max(longest_without_plan_s, std::chrono::duration<double>(Clock::now() - last_plan).count());
+      last_plan = Clock::now();
+    }
+    record.push_back({r->status(), r->solve_ms(), rtt_ms, r->max_violation(), has_plan});
     if (json) {
       std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,"
-                  "\"round_trip_ms\":%.6f,\"max_violation\":%.6g,\"warm_started\":%s,\"u0\":%s}\n",
+                  "\"round_trip_ms\":%.6f,\"max_violation\":%.6g,\"warm_started\":%s,\"has_plan\":%s,\"u0\":%s}\n",
                   t, SolveStatusName(r->status()).c_str(), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
-                  r->max_violation(), r->warm_started() ? "true" : "false", U0(*r, L).c_str());
+                  r->max_violation(), r->warm_started() ? "true" : "false", has_plan ? "true" : "false",
+                  Vector(u).c_str());
     } else {
-      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s\n", t, SolveStatusName(r->status()).c_str(),
-                  r->iterations(), r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), U0(*r, L).c_str());
+      std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s%s\n", t, SolveStatusName(r->status()).c_str(),
+                  r->iterations(), r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), Vector(u).c_str(),
+                  has_plan ? "" : " (no plan: held)");
     }
     std::fflush(stdout);
-    if (!recorded) x = Simulate(problem.spec, x, *r, noise, rng);
+    if (!recorded) x = Simulate(problem.spec, x, u, noise, rng);
   }
+  longest_without_plan_s =
+      std::max(longest_without_plan_s, std::chrono::duration<double>(Clock::now() - last_plan).count());
   if (absl::Status s = (*session)->Close(); !s.ok()) return Fail(s);
-  const nupmpc::ClosedLoopSummary summary = nupmpc::SummariseClosedLoop(record);
+  nupmpc::ClosedLoopSummary summary = nupmpc::SummariseClosedLoop(record);
+  const nupmpc::ReconnectStats reconnects = (*session)->reconnect_stats();
+  summary.reconnects = reconnects.reconnects;
+  summary.reconnect_attempts = reconnects.attempts;
+  summary.reconnect_s = 1e-3 * static_cast<double>(reconnects.total.count());
+  summary.longest_without_plan_s = longest_without_plan_s;
   // Not `"\n" + text`: GCC 12 warns about it (-Wrestrict, a false positive fixed in GCC 13).
   if (json) {
     std::fputs(nupmpc::SummaryJson(summary).c_str(), stdout);

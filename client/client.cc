@@ -1,5 +1,8 @@
 #include "client/client.h"
 
+#include <condition_variable>
+#include <thread>
+
 #include "absl/strings/str_cat.h"
 
 namespace nupmpc {
@@ -40,17 +43,23 @@ void ApplyUpdateToSpec(const v1::Step& step, v1::ProblemSpec* spec) {
 }
 
 namespace {
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target) {
+// `own_subchannel`: a connection of this channel's own, not shared through gRPC's global
+// subchannel pool with other channels to the same address (and so not sharing their
+// reconnect back-off either).
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target, bool own_subchannel = false) {
   grpc::ChannelArguments args;
   // Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
   args.SetMaxReceiveMessageSize(-1);
   args.SetMaxSendMessageSize(-1);
+  if (own_subchannel) args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
 }
 }  // namespace
 
 Client::Client(const std::string& target, std::chrono::milliseconds default_deadline)
-    : Client(MakeChannel(target), default_deadline) {}
+    : Client(MakeChannel(target), default_deadline) {
+  target_ = target;
+}
 
 Client::Client(std::shared_ptr<grpc::Channel> channel, std::chrono::milliseconds default_deadline)
     : channel_(std::move(channel)), stub_(v1::MpcService::NewStub(channel_)), default_deadline_(default_deadline) {}
@@ -122,10 +131,10 @@ absl::Status Client::CloseSession(const std::string& session_id) {
   return Unary(&v1::MpcService::Stub::CloseSession, request).status();
 }
 
-absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession(const v1::ProblemSpec& spec) {
-  std::unique_ptr<Session> session(new Session(this, spec));
+absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession(const v1::ProblemSpec& spec, ReconnectOptions reconnect) {
+  std::unique_ptr<Session> session(new Session(this, spec, std::move(reconnect)));
   std::lock_guard<std::mutex> lock(session->mu_);
-  if (absl::Status s = session->ConnectLocked(); !s.ok()) return s;
+  if (absl::Status s = session->ConnectLocked(session->reconnect_.attempt_timeout); !s.ok()) return s;
   return session;
 }
 
@@ -136,14 +145,66 @@ std::string Session::id() const {
   return id_;
 }
 
-absl::Status Session::ConnectLocked() {
+int Session::reconnects() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return stats_.reconnects;
+}
+
+ReconnectStats Session::reconnect_stats() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return stats_;
+}
+
+namespace {
+
+// Cancels a call that has not finished within `timeout` (an attach to a server that
+// accepts the connection but does not answer, or a connect that hangs).
+class CancelAfter {
+ public:
+  CancelAfter(grpc::ClientContext* context, std::chrono::milliseconds timeout)
+      : thread_([this, context, timeout] {
+          std::unique_lock<std::mutex> lock(mu_);
+          if (!done_changed_.wait_for(lock, timeout, [this] { return done_; })) {
+            fired_ = true;
+            context->TryCancel();
+          }
+        }) {}
+  // Stops the timer; true if it had already cancelled the call.
+  bool Stop() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      done_ = true;
+    }
+    done_changed_.notify_all();
+    if (thread_.joinable()) thread_.join();
+    return fired_;
+  }
+  ~CancelAfter() { Stop(); }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable done_changed_;
+  bool done_ = false;
+  bool fired_ = false;
+  std::thread thread_;
+};
+
+}  // namespace
+
+absl::Status Session::ConnectLocked(std::chrono::milliseconds timeout) {
   context_ = std::make_unique<grpc::ClientContext>();
-  stream_ = client_->stub_->Control(context_.get());
+  CancelAfter watchdog(context_.get(), timeout);
+  stream_ = stub_->Control(context_.get());
   v1::ControlRequest hello;
   *hello.mutable_spec() = spec_;
   hello.set_sequence(next_sequence_++);
   v1::ControlResponse response;
-  if (!stream_->Write(hello) || !stream_->Read(&response)) {
+  const bool attached = stream_->Write(hello) && stream_->Read(&response);
+  if (watchdog.Stop()) {
+    TearDownLocked();
+    return absl::UnavailableError(absl::StrCat("no session within the attempt timeout of ", timeout.count(), " ms"));
+  }
+  if (!attached) {
     const grpc::Status s = stream_->Finish();
     TearDownLocked();
     return s.ok() ? absl::UnavailableError("the Control stream closed while attaching") : FromGrpc(s);
@@ -162,13 +223,31 @@ void Session::TearDownLocked() {
   context_.reset();
 }
 
+absl::Status Session::BrokenStreamStatusLocked(const char* what) {
+  // The call is over (or about to be): read what is left, then its status.
+  v1::ControlResponse ignored;
+  while (stream_->Read(&ignored)) {
+  }
+  const grpc::Status s = stream_->Finish();
+  TearDownLocked();
+  if (s.ok()) return absl::UnavailableError(absl::StrCat("the Control stream ended (", what, ")"));
+  // This session never cancels a live stream: CANCELLED here is the server dropping the
+  // call (e.g. shutting down past its grace period), as retryable as a lost connection.
+  if (s.error_code() == grpc::StatusCode::CANCELLED) {
+    return absl::UnavailableError(absl::StrCat("the Control stream was cancelled by the server (", what, "): ",
+                                               s.error_message()));
+  }
+  return absl::Status(static_cast<absl::StatusCode>(s.error_code()),
+                      absl::StrCat("the Control stream broke (", what, "): ", s.error_message()));
+}
+
 absl::StatusOr<v1::SolveResult> Session::StepOnceLocked(const v1::Step& step) {
   if (stream_ == nullptr) return absl::UnavailableError("not connected");
   v1::ControlRequest request;
   const std::uint64_t sequence = next_sequence_++;
   request.set_sequence(sequence);
   *request.mutable_step() = step;
-  if (!stream_->Write(request)) return absl::UnavailableError("the Control stream broke (write)");
+  if (!stream_->Write(request)) return BrokenStreamStatusLocked("write");
   v1::ControlResponse response;
   while (stream_->Read(&response)) {
     if (response.sequence() != sequence) continue;  // an older step superseded by this one
@@ -177,20 +256,51 @@ absl::StatusOr<v1::SolveResult> Session::StepOnceLocked(const v1::Step& step) {
     }
     return std::move(*response.mutable_result());
   }
-  return absl::UnavailableError("the Control stream broke (read)");
+  return BrokenStreamStatusLocked("read");
 }
 
 absl::StatusOr<v1::SolveResult> Session::Step(const v1::Step& step) {
   std::lock_guard<std::mutex> lock(mu_);
   absl::StatusOr<v1::SolveResult> result = StepOnceLocked(step);
-  if (!result.ok() && absl::IsUnavailable(result.status())) {
-    // The stream (or the server) went away: re-create the session from the spec and retry.
+  if (!result.ok() && IsRetryable(result.status())) {
+    // The stream (or the server) went away: re-create the session from the spec and
+    // resend the step, with back-off, until the budget is spent.
+    const auto clock = [this] { return reconnect_.now ? reconnect_.now() : std::chrono::steady_clock::now(); };
+    const auto start = clock();
     TearDownLocked();
-    if (absl::Status s = ConnectLocked(); !s.ok()) {
-      return absl::UnavailableError(absl::StrCat("reconnect failed: ", s.message()));
+    int attempts = 0;
+    bool reattached = false;
+    const absl::Status outage = RetryWithBackoff(
+        reconnect_, result.status(),
+        [&](std::chrono::milliseconds timeout) -> absl::Status {
+          // A channel whose connection attempts were refused while the server was down
+          // keeps failing calls at once until its own back-off (1 s growing ×1.6 to 2 min)
+          // lets it try again: seconds after the server is back. So every attempt is made
+          // on a new channel with a connection of its own, which connects now; the session
+          // keeps the one that worked. (Built from a channel, the client has no target to
+          // open another: then its channel is told to retry now, which gRPC may honour late.)
+          if (!client_->target_.empty()) {
+            channel_ = MakeChannel(client_->target_, /*own_subchannel=*/true);
+            stub_ = v1::MpcService::NewStub(channel_);
+          } else {
+            grpc::experimental::ChannelResetConnectionBackoff(channel_.get());
+          }
+          if (absl::Status s = ConnectLocked(timeout); !s.ok()) return s;
+          result = StepOnceLocked(step);
+          reattached = result.ok() || !IsRetryable(result.status());
+          return result.status();
+        },
+        &attempts);
+    const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(clock() - start);
+    stats_.attempts += attempts;
+    stats_.total += took;
+    stats_.longest = std::max(stats_.longest, took);
+    if (reattached) {
+      ++stats_.reconnects;  // `result` is the resent step's answer (or its own error)
+    } else {
+      if (IsRetryable(outage)) ++stats_.failed_outages;
+      result = outage;
     }
-    ++reconnects_;
-    result = StepOnceLocked(step);
   }
   if (result.ok()) ApplyUpdateToSpec(step, &spec_);
   return result;

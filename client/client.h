@@ -8,9 +8,18 @@
 //   v1::Step step;  step.add_state(...);               // measured x[0]
 //   auto result = (*session)->Step(step);              // u = result->inputs() (N×L)
 //
-// A Session survives a server restart: when its stream breaks it reconnects, re-creates
-// the session from the spec it holds (with every update sent so far applied), and resends
-// the step, so the caller's next Step() succeeds (the warm start is lost, nothing else).
+// A Session survives a server restart: when its stream breaks (a retryable error, see
+// client/reconnect.h) it reconnects with exponential back-off and jitter within a budget
+// (ReconnectOptions, default 50 ms doubling to 2 s, ±20 %, 30 s), re-creates the session
+// from the spec it holds (with every update sent so far applied), and resends the step,
+// so Step() returns that step's result (the warm start is lost, nothing else). Only when
+// the budget is spent does Step() fail, with UNAVAILABLE.
+//
+// Apply a result's inputs only when HasPlan(result): a result without a plan (CANCELLED,
+// SUPERSEDED, or a TIME_LIMIT / NUMERICAL_ERROR before any finite iterate) carries no
+// inputs for this step's state; hold the last applied input (or a safe one) instead.
+// A result with a plan but another status than CONVERGED (ITERATION_LIMIT, INFEASIBLE,
+// ...) is still this step's plan: apply it and look at the status.
 
 #include <chrono>
 #include <future>
@@ -20,10 +29,15 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "client/reconnect.h"
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 
 namespace nupmpc {
+
+// Whether `result` carries a plan for the state of its step (SolveResult.has_plan): the
+// only results whose inputs a controller may apply.
+inline bool HasPlan(const v1::SolveResult& result) { return result.has_plan(); }
 
 class Session;
 
@@ -45,8 +59,11 @@ class Client {
   absl::StatusOr<std::vector<v1::SessionInfo>> ListSessions();
   absl::Status CloseSession(const std::string& session_id);
 
-  // Opens a Control stream that creates (and owns) a session for `spec`.
-  absl::StatusOr<std::unique_ptr<Session>> OpenSession(const v1::ProblemSpec& spec);
+  // Opens a Control stream that creates (and owns) a session for `spec`. The first attach
+  // is tried once (a wrong address or spec fails at once); `reconnect` governs what
+  // happens when the stream breaks later.
+  absl::StatusOr<std::unique_ptr<Session>> OpenSession(const v1::ProblemSpec& spec,
+                                                       ReconnectOptions reconnect = {});
 
   v1::MpcService::Stub& stub() { return *stub_; }
 
@@ -57,39 +74,64 @@ class Client {
   absl::StatusOr<Response> Unary(
       grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
       const Request& request);
+  std::string target_;  // empty when built from a channel
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::MpcService::Stub> stub_;
   std::chrono::milliseconds default_deadline_;
   friend class Session;
 };
 
+// What a Session's reconnects cost so far.
+struct ReconnectStats {
+  int reconnects = 0;  // outages ridden through (session re-created, step answered)
+  int attempts = 0;    // attempts made, successful or not
+  int failed_outages = 0;  // outages that spent the budget (Step returned UNAVAILABLE)
+  std::chrono::milliseconds total{0};    // from each break to its step's answer (or giving up)
+  std::chrono::milliseconds longest{0};  // the longest such outage
+};
+
 class Session {
  public:
   ~Session();
-  // One control period (blocking). Reconnects once if the stream broke.
+  // One control period (blocking). If the stream broke, reconnects with back-off (see
+  // the top of this file) and resends the step.
   absl::StatusOr<v1::SolveResult> Step(const v1::Step& step);
   // The same on a separate thread; steps of one session still run one at a time.
   std::future<absl::StatusOr<v1::SolveResult>> StepAsync(v1::Step step);
   // Ends the stream (the server closes the session).
   absl::Status Close();
   std::string id() const;
-  int reconnects() const { return reconnects_; }
+  int reconnects() const;
+  ReconnectStats reconnect_stats() const;
 
  private:
   friend class Client;
-  Session(Client* client, v1::ProblemSpec spec) : client_(client), spec_(std::move(spec)) {}
-  absl::Status ConnectLocked();
+  Session(Client* client, v1::ProblemSpec spec, ReconnectOptions reconnect)
+      : client_(client),
+        channel_(client->channel_),
+        stub_(v1::MpcService::NewStub(channel_)),
+        spec_(std::move(spec)),
+        reconnect_(std::move(reconnect)) {}
+  // Opens a stream and creates the session, cancelled after `timeout`.
+  absl::Status ConnectLocked(std::chrono::milliseconds timeout);
+  // The stream's final status after a failed read or write.
+  absl::Status BrokenStreamStatusLocked(const char* what);
   absl::StatusOr<v1::SolveResult> StepOnceLocked(const v1::Step& step);
   void TearDownLocked();
 
   Client* client_;
+  // The client's channel, until a reconnect replaces it with one of the session's own
+  // (see Session::Step).
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::MpcService::Stub> stub_;
   v1::ProblemSpec spec_;  // kept current with every update sent, for reconnects
   mutable std::mutex mu_;
   std::unique_ptr<grpc::ClientContext> context_;
   std::unique_ptr<grpc::ClientReaderWriter<v1::ControlRequest, v1::ControlResponse>> stream_;
   std::string id_;
   std::uint64_t next_sequence_ = 1;
-  int reconnects_ = 0;
+  ReconnectOptions reconnect_;
+  ReconnectStats stats_;
 };
 
 // Applies a step's update to a spec the way the server applies it to its session

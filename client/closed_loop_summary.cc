@@ -36,10 +36,15 @@ ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps) 
       ++s.not_converged;
       ++s.not_converged_by_status[SolveStatusName(step.status)];
     }
+    if (!step.has_plan) {
+      ++s.held;
+      ++s.held_by_status[SolveStatusName(step.status)];
+    }
     solve_ms.push_back(step.solve_ms);
     round_trip_ms.push_back(step.round_trip_ms);
     s.max_solve_ms = std::max(s.max_solve_ms, step.solve_ms);
-    s.max_violation = std::max(s.max_violation, step.max_violation);
+    // A result without a plan has no violation to speak of (NaN).
+    if (step.has_plan && std::isfinite(step.max_violation)) s.max_violation = std::max(s.max_violation, step.max_violation);
   }
   s.median_solve_ms = Median(solve_ms);
   s.median_round_trip_ms = Median(round_trip_ms);
@@ -47,30 +52,46 @@ ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps) 
   return s;
 }
 
+namespace {
+std::string ByStatusText(const std::map<std::string, int>& by_status) {
+  std::vector<std::string> parts;
+  for (const auto& [status, count] : by_status) parts.push_back(absl::StrCat(status, " ", count));
+  return absl::StrJoin(parts, ", ");
+}
+std::string ByStatusJson(const std::map<std::string, int>& by_status) {
+  std::vector<std::string> parts;
+  for (const auto& [status, count] : by_status) parts.push_back(absl::StrCat("\"", status, "\":", count));
+  return absl::StrJoin(parts, ",");
+}
+}  // namespace
+
 std::string SummaryText(const ClosedLoopSummary& s) {
   std::string convergence = "all converged";
   if (s.not_converged > 0) {
-    std::vector<std::string> parts;
-    for (const auto& [status, count] : s.not_converged_by_status) parts.push_back(absl::StrCat(status, " ", count));
-    convergence = absl::StrCat(s.not_converged, " not converged (", absl::StrJoin(parts, ", "), ")");
+    convergence = absl::StrCat(s.not_converged, " not converged (", ByStatusText(s.not_converged_by_status), ")");
   }
+  const std::string held =
+      s.held == 0 ? "0 steps" : absl::StrCat(s.held, " steps (", ByStatusText(s.held_by_status), "), last input held");
   return absl::StrFormat(
       "summary: %d steps, %s\n"
+      "  without a plan       %s\n"
+      "  reconnects           %d (%d attempts, %.3f s), longest without a fresh plan %.3f s\n"
       "  solve time (server)  median %.4f ms, max %.4f ms\n"
       "  round trip           median %.4f ms, p90 %.4f ms\n"
       "  max violation        %.3g\n",
-      s.steps, convergence, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms,
-      s.max_violation);
+      s.steps, convergence, held, s.reconnects, s.reconnect_attempts, s.reconnect_s, s.longest_without_plan_s,
+      s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms, s.max_violation);
 }
 
 std::string SummaryJson(const ClosedLoopSummary& s) {
-  std::vector<std::string> by_status;
-  for (const auto& [status, count] : s.not_converged_by_status) by_status.push_back(absl::StrCat("\"", status, "\":", count));
   return absl::StrFormat(
-      "{\"summary\":true,\"steps\":%d,\"all_converged\":%s,\"not_converged\":{%s},\"median_solve_ms\":%.6f,"
+      "{\"summary\":true,\"steps\":%d,\"all_converged\":%s,\"not_converged\":{%s},\"held_steps\":%d,"
+      "\"held\":{%s},\"reconnects\":%d,\"reconnect_attempts\":%d,\"reconnect_s\":%.6f,"
+      "\"longest_without_plan_s\":%.6f,\"median_solve_ms\":%.6f,"
       "\"max_solve_ms\":%.6f,\"median_round_trip_ms\":%.6f,\"p90_round_trip_ms\":%.6f,\"max_violation\":%.6g}\n",
-      s.steps, s.not_converged == 0 ? "true" : "false", absl::StrJoin(by_status, ","), s.median_solve_ms,
-      s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms, s.max_violation);
+      s.steps, s.not_converged == 0 ? "true" : "false", ByStatusJson(s.not_converged_by_status), s.held,
+      ByStatusJson(s.held_by_status), s.reconnects, s.reconnect_attempts, s.reconnect_s, s.longest_without_plan_s,
+      s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms, s.max_violation);
 }
 
 }  // namespace nupmpc

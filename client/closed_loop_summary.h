@@ -2,7 +2,8 @@
 #define NUPMPC_CLIENT_CLOSED_LOOP_SUMMARY_H_
 
 // What `nupmpc closed-loop` concludes after its per-step lines: did every step converge,
-// how long the server's solves and the round trips took, and the worst bound violation.
+// how many steps had no plan (the input was held), how long the server's solves and the
+// round trips took, the worst bound violation, and what reconnects there were.
 
 #include <map>
 #include <string>
@@ -17,15 +18,24 @@ struct ClosedLoopStep {
   double solve_ms = 0.0;       // the server's SolveResult.solve_ms
   double round_trip_ms = 0.0;  // measured by the client around Session::Step
   double max_violation = 0.0;
+  // SolveResult.has_plan: false means the step's input was held, not taken from the result.
+  bool has_plan = true;
 };
 
 struct ClosedLoopSummary {
   int steps = 0;
   int not_converged = 0;
-  std::map<std::string, int> not_converged_by_status;  // status name → steps
+  std::map<std::string, int> not_converged_by_status;  // status name → steps (with or without a plan)
+  int held = 0;                                // steps without a plan: the last input held
+  std::map<std::string, int> held_by_status;  // status name → such steps
   double median_solve_ms = 0.0, max_solve_ms = 0.0;
   double median_round_trip_ms = 0.0, p90_round_trip_ms = 0.0;
-  double max_violation = 0.0;
+  double max_violation = 0.0;  // over steps with a plan
+  // Filled in by the caller (not from the steps): the session's reconnects, their
+  // attempts and time, and the longest wall-clock time between two fresh plans (or from
+  // the start to the first, or from the last to the end).
+  int reconnects = 0, reconnect_attempts = 0;
+  double reconnect_s = 0.0, longest_without_plan_s = 0.0;
 };
 
 // Median: the mean of the two middle values for an even count. p90: the nearest-rank

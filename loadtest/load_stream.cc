@@ -18,6 +18,7 @@ void StreamTally::MergeFrom(const StreamTally& other) {
   iterations += other.iterations;
   sent += other.sent;
   superseded += other.superseded;
+  no_plan += other.no_plan;
   for (const auto& [code, n] : other.errors) errors[code] += n;
 }
 
@@ -155,6 +156,7 @@ void LoadStream::RecordLocked(const v1::ControlResponse& response, Clock::time_p
     tally_.service_ms.push_back(std::chrono::duration<double, std::milli>(now - sent).count());
     tally_.solve_ms.push_back(response.result().solve_ms());
     tally_.iterations += response.result().iterations();
+    if (!response.result().has_plan()) ++tally_.no_plan;
   }
 }
 

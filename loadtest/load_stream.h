@@ -39,6 +39,10 @@ struct StreamTally {
   std::uint64_t iterations = 0;    ///< summed over answered solves
   std::uint64_t sent = 0;
   std::uint64_t superseded = 0;
+  // Answers without SolveResult.has_plan (superseded ones aside): a controller holds its
+  // last input through them. Counted in latency_ms like the others; the load test applies
+  // no input at all (its states are recorded), so nothing is ever applied from them.
+  std::uint64_t no_plan = 0;
   std::map<std::string, std::uint64_t> errors;  ///< canonical code name → count
 
   void MergeFrom(const StreamTally& other);

@@ -21,7 +21,7 @@ double OverheadUs(const RunHeader& h, const LevelReport& l) { return (l.p50_ms -
 nlohmann::json PeerJson(const LevelReport& e) {
   return {{"solves_per_s", e.solves_per_s}, {"p50_ms", e.p50_ms},   {"p90_ms", e.p90_ms},
           {"p99_ms", e.p99_ms},             {"p999_ms", e.p999_ms}, {"max_ms", e.max_ms},
-          {"superseded", e.tally.superseded}, {"errors", e.tally.errors}};
+          {"superseded", e.tally.superseded}, {"no_plan", e.tally.no_plan}, {"errors", e.tally.errors}};
 }
 
 // One table row; the server's and the peers' rows differ in the label, the iterations and
@@ -29,10 +29,10 @@ nlohmann::json PeerJson(const LevelReport& e) {
 void PrintRow(const char* label, const LevelReport& l, const std::string& iterations, double overhead_us,
               const std::string& capacity) {
   const std::string offered = l.config.closed_loop ? "-" : absl::StrCat(static_cast<long long>(l.config.rate_per_s));
-  std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6s %10llu %8.0f\xc2\xb5s %9s  %s\n",
+  std::printf("%5d %-6s %10s %10.0f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6s %10llu %7llu %8.0f\xc2\xb5s %9s  %s\n",
               l.config.concurrency, label, offered.c_str(), l.solves_per_s, l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms,
               l.max_ms, l.service_p99_ms, iterations.c_str(), static_cast<unsigned long long>(l.tally.superseded),
-              overhead_us, capacity.c_str(), Errors(l.tally).c_str());
+              static_cast<unsigned long long>(l.tally.no_plan), overhead_us, capacity.c_str(), Errors(l.tally).c_str());
   std::fflush(stdout);
 }
 
@@ -61,9 +61,11 @@ void PrintHeader(const RunHeader& h) {
     std::printf("(inline rows: the same echo, busy for the core median inside its reaction before it answers: a "
                 "server that solves where the request arrives, with no hand-over; overhead = its p50 - core median)\n");
   }
-  std::printf("%5s %-6s %10s %10s %8s %8s %8s %8s %8s %8s %6s %10s %10s %9s  %s\n", "C", "mode", "offered/s",
+  std::printf("(no plan: answers without SolveResult.has_plan, whose inputs a controller must not apply; the load "
+              "test sends recorded states and applies no input)\n");
+  std::printf("%5s %-6s %10s %10s %8s %8s %8s %8s %8s %8s %6s %10s %7s %10s %9s  %s\n", "C", "mode", "offered/s",
               "solves/s", "p50 ms", "p90 ms", "p99 ms", "p99.9 ms", "max ms", "svc p99", "iter", "superseded",
-              "overhead", "capacity", "errors");
+              "no plan", "overhead", "capacity", "errors");
 }
 
 void PrintLevel(const RunHeader& h, const LevelReport& l) {
@@ -106,6 +108,7 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                             {"server_solve_p50_ms", l.solve_p50_ms},
                             {"mean_iterations", l.mean_iterations},
                             {"superseded", l.tally.superseded},
+                            {"no_plan", l.tally.no_plan},
                             {"errors", l.tally.errors},
                             {"overhead_p50_us", OverheadUs(h, l)},
                             {"fraction_of_capacity", l.solves_per_s / h.capacity_per_s}};

@@ -1,6 +1,8 @@
 // The summary `nupmpc closed-loop` prints after its steps.
 #include "client/closed_loop_summary.h"
 
+#include <limits>
+
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 
@@ -45,13 +47,40 @@ TEST(ClosedLoopSummary, CountsStepsThatDidNotConvergeByStatus) {
   EXPECT_DOUBLE_EQ(s.max_violation, 0.5);
   EXPECT_EQ(SummaryText(s),
             "summary: 4 steps, 3 not converged (iteration_limit 2, time_limit 1)\n"
+            "  without a plan       0 steps\n"
+            "  reconnects           0 (0 attempts, 0.000 s), longest without a fresh plan 0.000 s\n"
             "  solve time (server)  median 4.5000 ms, max 9.0000 ms\n"
             "  round trip           median 5.5000 ms, p90 10.0000 ms\n"
             "  max violation        0.5\n");
   EXPECT_EQ(SummaryJson(s),
             "{\"summary\":true,\"steps\":4,\"all_converged\":false,\"not_converged\":{\"iteration_limit\":2,"
-            "\"time_limit\":1},\"median_solve_ms\":4.500000,\"max_solve_ms\":9.000000,\"median_round_trip_ms\":5.500000,"
+            "\"time_limit\":1},\"held_steps\":0,\"held\":{},\"reconnects\":0,\"reconnect_attempts\":0,"
+            "\"reconnect_s\":0.000000,\"longest_without_plan_s\":0.000000,\"median_solve_ms\":4.500000,\"max_solve_ms\":9.000000,\"median_round_trip_ms\":5.500000,"
             "\"p90_round_trip_ms\":10.000000,\"max_violation\":0.5}\n");
+}
+
+TEST(ClosedLoopSummary, StepsWithoutAPlanAreHeldAndCountedByStatus) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  ClosedLoopSummary s = SummariseClosedLoop({Converged(1, 1, 0.125),
+                                             {v1::SOLVE_STATUS_NUMERICAL_ERROR, 2, 2, nan, /*has_plan=*/false},
+                                             {v1::SOLVE_STATUS_TIME_LIMIT, 3, 3, 0.25, /*has_plan=*/true},
+                                             {v1::SOLVE_STATUS_NUMERICAL_ERROR, 2, 2, 7.0, /*has_plan=*/false}});
+  EXPECT_EQ(s.held, 2);
+  EXPECT_THAT(s.held_by_status, ElementsAre(Pair("numerical_error", 2)));
+  // With or without a plan, a step that did not converge counts by its status.
+  EXPECT_EQ(s.not_converged, 3);
+  EXPECT_THAT(s.not_converged_by_status, ElementsAre(Pair("numerical_error", 2), Pair("time_limit", 1)));
+  EXPECT_DOUBLE_EQ(s.max_violation, 0.25);  // only plans that were applied
+  s.reconnects = 1;
+  s.reconnect_attempts = 6;
+  s.reconnect_s = 1.5;
+  s.longest_without_plan_s = 1.75;
+  EXPECT_THAT(SummaryText(s), ::testing::HasSubstr(
+                                  "  without a plan       2 steps (numerical_error 2), last input held\n"
+                                  "  reconnects           1 (6 attempts, 1.500 s), longest without a fresh plan 1.750 s\n"));
+  EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"held_steps\":2,\"held\":{\"numerical_error\":2},\"reconnects\":1,"
+                                                   "\"reconnect_attempts\":6,\"reconnect_s\":1.500000,"
+                                                   "\"longest_without_plan_s\":1.750000"));
 }
 
 TEST(ClosedLoopSummary, AllConvergedAndNoSteps) {

@@ -61,6 +61,7 @@ TEST_F(LoadTest, ClosedLoopLevelAnswersEveryRequestWithoutErrors) {
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_TRUE(r->tally.errors.empty());
   EXPECT_EQ(r->tally.superseded, 0u);  // closed loop never has two requests in flight
+  EXPECT_EQ(r->tally.no_plan, 0u);     // the recorded masses states all get a plan (has_plan)
   EXPECT_GT(r->tally.latency_ms.size(), 30u);
   // Every counted request was answered (the streams drain before they stop).
   EXPECT_EQ(r->tally.sent, r->tally.latency_ms.size());

@@ -1,0 +1,265 @@
+// `nupmpc closed-loop` rides through a server restart: the real CLI binary drives a
+// simulated masses_N30 plant through the real nupmpc-server binary, which is killed with
+// SIGKILL mid-run and started again on the same port 1 s (and 5 s) later. The run must
+// finish every step with exit 0 and its summary must report the reconnect and how long
+// the plant went without a fresh plan. And a step whose result carries no plan
+// (SolveResult.has_plan false) is never applied: the CLI holds the last input.
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <arpa/inet.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/problem_file.h"
+#include "google/protobuf/util/json_util.h"
+#include "grpcpp/grpcpp.h"
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+
+namespace nupmpc::testing {
+namespace {
+
+// A free loopback port: bind to port 0 and ask which one the kernel chose.
+int FreePort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof(address);
+  if (bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) != 0 ||
+      getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) != 0) {
+    close(fd);
+    return 0;
+  }
+  close(fd);
+  return ntohs(address.sin_port);
+}
+
+std::string Target(int port) { return "127.0.0.1:" + std::to_string(port); }
+
+// nupmpc-server on 127.0.0.1:port; killed (SIGKILL) when destroyed if still running.
+class ServerProcess {
+ public:
+  explicit ServerProcess(int port) {
+    pid_ = fork();
+    if (pid_ == 0) {
+      const std::string address = "--address=" + Target(port);
+      execl(NUPMPC_SERVER_BINARY, NUPMPC_SERVER_BINARY, address.c_str(), "--log_level=warn", "--threads=1",
+            static_cast<char*>(nullptr));
+      _exit(127);
+    }
+  }
+  ~ServerProcess() { Kill(); }
+  void Kill() {
+    if (pid_ <= 0) return;
+    kill(pid_, SIGKILL);
+    waitpid(pid_, nullptr, 0);
+    pid_ = -1;
+  }
+
+ private:
+  pid_t pid_ = -1;
+};
+
+bool WaitUntilServing(int port) {
+  auto channel = grpc::CreateChannel(Target(port), grpc::InsecureChannelCredentials());
+  return channel->WaitForConnected(std::chrono::system_clock::now() + std::chrono::seconds(30));
+}
+
+// masses_N30 as a ProblemSpec file: no recorded states, so the CLI simulates the plant
+// with the inputs it applies. `initial_state` replaces x[0] when given.
+std::string WriteSpec(const std::string& name, const std::vector<double>& initial_state = {}) {
+  absl::StatusOr<ProblemFile> problem = LoadProblemFile(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  EXPECT_TRUE(problem.ok()) << problem.status();
+  if (!problem.ok()) return "";
+  if (!initial_state.empty()) {
+    problem->spec.mutable_initial_state()->mutable_mean()->Assign(initial_state.begin(), initial_state.end());
+  }
+  std::string text;
+  EXPECT_TRUE(google::protobuf::util::MessageToJsonString(problem->spec, &text).ok());
+  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / name;
+  std::ofstream(path) << text;
+  return path.string();
+}
+
+struct CliRun {
+  int exit_code = -1;
+  std::vector<nlohmann::json> steps;  // one object per step line
+  nlohmann::json summary;
+  std::string stderr_text;
+  std::chrono::duration<double> took{};
+};
+
+// Runs `nupmpc --format=json closed-loop spec`; `on_step(step)` is called for each step
+// line as it is read. The CLI's stdout is a pipe of one page, so the CLI cannot run more
+// than a few steps ahead of this reader.
+template <typename OnStep>
+CliRun RunCli(int port, const std::string& spec, std::vector<std::string> flags, OnStep on_step) {
+  CliRun run;
+  const std::filesystem::path err_path = std::filesystem::path(::testing::TempDir()) / "closed_loop_stderr";
+  int out[2];
+  if (pipe(out) != 0) return run;
+  (void)fcntl(out[1], F_SETPIPE_SZ, 4096);
+  const auto start = std::chrono::steady_clock::now();
+  const pid_t pid = fork();
+  if (pid == 0) {
+    alarm(120);  // never hang the test run
+    const int err = open(err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(out[1], STDOUT_FILENO);
+    dup2(err, STDERR_FILENO);
+    close(out[0]);
+    std::vector<std::string> args = {NUPMPC_CLI_BINARY, "--server=" + Target(port), "--format=json"};
+    args.insert(args.end(), flags.begin(), flags.end());
+    args.push_back("closed-loop");
+    args.push_back(spec);
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv(NUPMPC_CLI_BINARY, argv.data());
+    _exit(127);
+  }
+  close(out[1]);
+  FILE* in = fdopen(out[0], "r");
+  char* line = nullptr;
+  size_t capacity = 0;
+  while (getline(&line, &capacity, in) > 0) {
+    nlohmann::json object = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (object.is_discarded()) continue;
+    if (object.contains("summary")) {
+      run.summary = object;
+    } else {
+      run.steps.push_back(object);
+      on_step(object["step"].get<int>());
+    }
+  }
+  free(line);
+  fclose(in);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  run.took = std::chrono::steady_clock::now() - start;
+  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  std::ifstream err(err_path);
+  std::stringstream text;
+  text << err.rdbuf();
+  run.stderr_text = text.str();
+  return run;
+}
+
+// Kills the server when the CLI has printed step `kill_at`, waits `down_for`, starts it
+// again on the same port, and lets the run finish.
+CliRun RunThroughRestart(std::chrono::milliseconds down_for, int steps, int kill_at) {
+  const int port = FreePort();
+  auto server = std::make_unique<ServerProcess>(port);
+  EXPECT_TRUE(WaitUntilServing(port));
+  const std::string spec = WriteSpec("masses_N30_spec.json");
+  bool restarted = false;
+  CliRun run = RunCli(port, spec, {"--steps=" + std::to_string(steps), "--reconnect_budget_s=25"}, [&](int step) {
+    if (restarted || step < kill_at) return;
+    server->Kill();
+    std::this_thread::sleep_for(down_for);
+    server = std::make_unique<ServerProcess>(port);
+    restarted = true;
+  });
+  EXPECT_TRUE(restarted) << "the run ended before step " << kill_at;
+  return run;
+}
+
+void ExpectRodeThrough(const CliRun& run, int steps, double down_s) {
+  EXPECT_EQ(run.exit_code, 0) << run.stderr_text;
+  ASSERT_EQ(static_cast<int>(run.steps.size()), steps) << run.stderr_text;
+  ASSERT_TRUE(run.summary.is_object()) << run.stderr_text;
+  EXPECT_EQ(run.summary["steps"], steps);
+  EXPECT_EQ(run.summary["reconnects"], 1) << run.summary.dump();
+  EXPECT_GE(run.summary["reconnect_attempts"].get<int>(), 2) << run.summary.dump();
+  // Every step after the restart got a plan (the interrupted one was resent): none held.
+  EXPECT_EQ(run.summary["held_steps"], 0) << run.summary.dump();
+  for (const nlohmann::json& step : run.steps) EXPECT_TRUE(step["has_plan"].get<bool>()) << step.dump();
+  // The plant went without a fresh plan for at least the outage, and not for much longer
+  // than the back-off's reach (2 s ± 20 %; generous: a slow shared machine).
+  const double without_plan = run.summary["longest_without_plan_s"].get<double>();
+  EXPECT_GE(without_plan, down_s) << run.summary.dump();
+  EXPECT_LT(without_plan, down_s + 6.0) << run.summary.dump();
+  EXPECT_GE(run.summary["reconnect_s"].get<double>(), 0.9 * down_s) << run.summary.dump();
+  // Each attempt was logged, and the reconnect.
+  EXPECT_NE(run.stderr_text.find("the Control stream broke"), std::string::npos) << run.stderr_text;
+  EXPECT_NE(run.stderr_text.find("reconnect attempt 1 "), std::string::npos) << run.stderr_text;
+  EXPECT_NE(run.stderr_text.find("reconnected at attempt"), std::string::npos) << run.stderr_text;
+}
+
+TEST(ClosedLoopRestart, ServerKilledAndBackAfter1s) {
+  const CliRun run = RunThroughRestart(std::chrono::milliseconds(1000), /*steps=*/400, /*kill_at=*/100);
+  ExpectRodeThrough(run, 400, 1.0);
+  std::printf("1 s outage: %s (%.2f s in all)\n", run.summary.dump().c_str(), run.took.count());
+}
+
+TEST(ClosedLoopRestart, ServerKilledAndBackAfter5s) {
+  const CliRun run = RunThroughRestart(std::chrono::milliseconds(5000), /*steps=*/400, /*kill_at=*/100);
+  ExpectRodeThrough(run, 400, 5.0);
+  std::printf("5 s outage: %s (%.2f s in all)\n", run.summary.dump().c_str(), run.took.count());
+}
+
+// The budget bounds the wait: with the server gone for good, the CLI gives up after about
+// --reconnect_budget_s and exits 1 naming the attempts.
+TEST(ClosedLoopRestart, GivesUpWhenTheBudgetIsSpent) {
+  const int port = FreePort();
+  auto server = std::make_unique<ServerProcess>(port);
+  ASSERT_TRUE(WaitUntilServing(port));
+  const std::string spec = WriteSpec("masses_N30_spec.json");
+  const CliRun run = RunCli(port, spec, {"--steps=400", "--reconnect_budget_s=1"}, [&](int step) {
+    if (step == 20) server->Kill();
+  });
+  EXPECT_EQ(run.exit_code, 1);
+  EXPECT_LT(static_cast<int>(run.steps.size()), 400);
+  EXPECT_NE(run.stderr_text.find("gave up reconnecting after"), std::string::npos) << run.stderr_text;
+  EXPECT_NE(run.stderr_text.find("giving up"), std::string::npos) << run.stderr_text;
+  EXPECT_LT(run.took.count(), 20.0);
+}
+
+// Issue 18, item 5: a step with x0 = [-1e300, 0, ...] after a normal one comes back
+// NUMERICAL_ERROR without a plan (the server used to return the previous step's plan with
+// it). The CLI, replaying recorded states, must hold the input it applied before and say
+// so; the next normal step applies its own plan again.
+TEST(ClosedLoopNoPlan, AStepWithoutAPlanHoldsTheLastInput) {
+  std::ifstream in(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  nlohmann::json instance = nlohmann::json::parse(in);
+  nlohmann::json& recorded = instance["closed_loop"];
+  std::vector<double> bad(recorded["x1"][0].size(), 0.0);
+  bad[0] = -1e300;
+  recorded["x1"] = nlohmann::json::array({recorded["x1"][0], bad, recorded["x1"][2]});
+  recorded["w"] = nlohmann::json::array({recorded["w"][0], recorded["w"][1], recorded["w"][2]});
+  recorded["u_applied"] =
+      nlohmann::json::array({recorded["u_applied"][0], recorded["u_applied"][1], recorded["u_applied"][2]});
+  recorded["T"] = 3;
+  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / "masses_N30_bad_state.json";
+  std::ofstream(path) << instance.dump();
+
+  const int port = FreePort();
+  ServerProcess server(port);
+  ASSERT_TRUE(WaitUntilServing(port));
+  const CliRun run = RunCli(port, path.string(), {}, [](int) {});
+  EXPECT_EQ(run.exit_code, 0) << run.stderr_text;
+  ASSERT_EQ(run.steps.size(), 3u) << run.stderr_text;
+  EXPECT_TRUE(run.steps[0]["has_plan"].get<bool>()) << run.steps[0].dump();
+  EXPECT_EQ(run.steps[1]["status"], "numerical_error") << run.steps[1].dump();
+  EXPECT_FALSE(run.steps[1]["has_plan"].get<bool>()) << run.steps[1].dump();
+  EXPECT_EQ(run.steps[1]["u0"], run.steps[0]["u0"]);  // held, not the result's inputs
+  EXPECT_TRUE(run.steps[2]["has_plan"].get<bool>()) << run.steps[2].dump();
+  EXPECT_EQ(run.summary["held_steps"], 1) << run.summary.dump();
+  EXPECT_EQ(run.summary["held"]["numerical_error"], 1) << run.summary.dump();
+  EXPECT_EQ(run.summary["not_converged"]["numerical_error"], 1) << run.summary.dump();
+}
+
+}  // namespace
+}  // namespace nupmpc::testing
