@@ -18,7 +18,7 @@ namespace nupmpc::gp {
 
 // Panel and strip width of the blocked algorithms below: wide enough for GEMM speed, narrow
 // enough that the work between two checks stays small at the largest admissible P.
-inline constexpr int kCholeskyBlock = 128;
+inline constexpr int kCholeskyBlock = 64;
 
 // In-place lower Cholesky factor of the symmetric matrix whose lower triangle is in `a`
 // (the strict upper triangle is neither read nor written): right-looking, Eigen's LLT on
