@@ -58,8 +58,8 @@ class GpModel {
   static absl::StatusOr<GpModel> Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel,
                                         const Interrupt& stop = {});
 
-  // The low-rank factor K ≈ L Lᵀ stops when the trace of what it leaves out, K - L Lᵀ (PSD),
-  // is below this fraction of σ_n²: every eigenvalue it drops is then that small.
+  // The low-rank factor K ≈ L Lᵀ stops when every diagonal entry of what it leaves out,
+  // K - L Lᵀ (PSD), is below this fraction of σ_n² (Linearise() says what that bounds).
   static constexpr double kDroppedEigenvalue = 1e-10;
   // Largest power p(x) / prior variance of a column for which Linearise() takes the fast
   // path (tested against a dense linGP to 1e-9, inside and outside the training data).
@@ -87,9 +87,10 @@ class GpModel {
   // regressors has numerically low rank r. With Q an orthonormal basis of L's columns,
   // R = QᵀL and W = Q A + W⊥ (A = QᵀW),
   //   Wᵀ(L Lᵀ + σ_n² I)⁻¹W = Aᵀ(R Rᵀ + σ_n² I)⁻¹A + W⊥ᵀW⊥ / σ_n²,
-  // exact for K except for what L leaves out (trace ≤ kDroppedEigenvalue·σ_n², at
-  // rounding level): an error of at most that factor. O(N r) per column instead of
-  // O(N²). When no such factor of rank ≤ kMaxPivots (and ≤ N/4) exists, the exact
+  // exact for K except for what L leaves out: K - L Lᵀ is PSD with every diagonal entry
+  // ≤ kDroppedEigenvalue·σ_n² (at rounding level), so its norm is at most N times that, a
+  // relative error of at most N·kDroppedEigenvalue in the data term. O(N r) per column
+  // instead of O(N²). When no such factor of rank ≤ kMaxPivots (and ≤ N/4) exists, the exact
   // O(N²) path through the Cholesky factor runs instead (basis_rank() = 0). No
   // eigendecomposition of K: it is O(N³) with a large constant and cannot be interrupted.
   //
