@@ -273,6 +273,9 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
     NUPMPC_ASSIGN_OR_RETURN(gp::GpModel built, make_model());
     model = std::make_shared<const gp::GpModel>(std::move(built));
   }
+  // The SCP's set-up linearises the GP along a first plan: O(P²) per column when K has no
+  // low-rank factor. Not started for a caller who has gone (the model stays cached).
+  if (stop.Requested()) return stop.Stopped("setting up the SCP (the GP model is built)");
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<gp::GpMpcSession> session,
                           gp::GpMpcSession::Create(std::move(model), problem, options, reference));
   NUPMPC_RETURN_IF_ERROR(session->SetInitialState(x0));
@@ -303,7 +306,12 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
   if (!model.ok())
     return absl::Status(model.status().code(), absl::StrCat("model (fitted): ", model.status().message()));
   double squared_error = 0.0;
-  for (Eigen::Index i = 0; i < training.data.targets.size(); ++i) {
+  const Eigen::Index points = training.data.targets.size();
+  for (Eigen::Index i = 0; i < points; ++i) {
+    // O(P) per point without the low-rank fast path: checked every few hundred.
+    if (i % 256 == 0 && stop.Requested()) {
+      return stop.Stopped(absl::StrCat("computing the training error (point ", i, " of ", points, ")"));
+    }
     const double e = training.data.targets(i) - model->Mean(training.data.regressors.row(i).transpose());
     squared_error += e * e;
   }
