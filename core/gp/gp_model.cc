@@ -151,7 +151,16 @@ absl::StatusOr<Eigen::MatrixXd> GpModel::FactorPivots(const Eigen::MatrixXd& k, 
     pivot_factor_.row(i) = l.row(pivots[i]);
   }
   pivot_factor_ = pivot_factor_.triangularView<Eigen::Lower>();  // above: rounding noise of exact zeros
-  Eigen::MatrixXd gram = l.transpose() * l;
+  // LᵀL + σ_n² I by column strips: O(N m²) in all, checked per strip.
+  constexpr int kColumns = 16;
+  Eigen::MatrixXd gram(m, m);
+  for (int j0 = 0; j0 < m; j0 += kColumns) {
+    if (stop.Requested()) {
+      return stop.Stopped(absl::StrCat("computing the low-rank factor's Gram matrix (column ", j0, " of ", m, ")"));
+    }
+    const int w = std::min(kColumns, m - j0);
+    gram.middleCols(j0, w).noalias() = l.transpose() * l.middleCols(j0, w);
+  }
   gram.diagonal().array() += kernel_.noise_variance;
   pivot_data_term_ = -kernel_.noise_variance * gram.llt().solve(Eigen::MatrixXd::Identity(m, m));
   pivot_data_term_.diagonal().array() += 1.0;
@@ -161,7 +170,7 @@ absl::StatusOr<Eigen::MatrixXd> GpModel::FactorPivots(const Eigen::MatrixXd& k, 
 
 absl::Status GpModel::FactorBasis(const Eigen::MatrixXd& l, const Interrupt& stop) {
   const Eigen::Index m = l.cols();
-  constexpr Eigen::Index kColumns = 32;  // per check: O(N m kColumns)
+  constexpr Eigen::Index kColumns = 16;  // per check: O(N m kColumns)
   const auto where = [&](Eigen::Index column) {
     return absl::StrCat("orthonormalising the low-rank factor (column ", column, " of ", m, ")");
   };
