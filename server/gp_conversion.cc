@@ -213,8 +213,20 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   NUPMPC_RETURN_IF_ERROR(
       optional_positive(s.initial_trust_radius(), &options.initial_trust_radius, "initial_trust_radius"));
   NUPMPC_RETURN_IF_ERROR(optional_positive(s.tolerance(), &options.tolerance, "tolerance"));
+  // The SCP stops when its radius falls below min_trust_radius: a smaller start is no start.
+  if (options.initial_trust_radius < options.min_trust_radius) {
+    return Invalid("spec.gp.scp.initial_trust_radius = ", s.initial_trust_radius(), ": must be >= ",
+                   options.min_trust_radius, " (the radius at which the SCP stops)");
+  }
   options.max_trust_radius = std::max(options.max_trust_radius, options.initial_trust_radius);
-  options.min_trust_radius = std::min(options.min_trust_radius, options.initial_trust_radius);
+  // Every rule of the SCP options here, before the O(P³) set-up (LinGpScp::Create checks
+  // them again, after it).
+  if (absl::Status valid = gp::Validate(options); !valid.ok()) {
+    std::string message(valid.message());
+    const std::string prefix = "ScpOptions.";
+    if (message.rfind(prefix, 0) == 0) message = "spec.gp.scp." + message.substr(prefix.size());
+    return absl::InvalidArgumentError(message);
+  }
 
   Eigen::VectorXd reference = Eigen::VectorXd::Zero(1);
   if (g.reference_size() > 0) {
@@ -239,9 +251,15 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
     }
   }
 
+  // Everything above is O(P) or less and checks every rule of the spec; from here on the
+  // O(P³) set-up runs (kernel fit, factorisation), stopped by the call's deadline or
+  // cancellation: a stopped set-up returns DEADLINE_EXCEEDED or CANCELLED saying how far it
+  // got, and nothing is cached.
+  const gp::Interrupt stop = gp::Interrupt::After(fit_options.max_seconds, fit_options.cancel);
   const auto make_model = [&]() -> absl::StatusOr<gp::GpModel> {
     NUPMPC_ASSIGN_OR_RETURN(const gp::SeArdKernel kernel, KernelFor(g.model(), training, "spec.gp.model", fit_options));
-    absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, kernel);
+    absl::StatusOr<gp::GpModel> model =
+        gp::GpModel::Create(training.data.regressors, training.data.targets, kernel, stop);
     if (!model.ok())
       return absl::Status(model.status().code(), absl::StrCat("spec.gp.model: ", model.status().message()));
     return model;
@@ -255,6 +273,9 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
     NUPMPC_ASSIGN_OR_RETURN(gp::GpModel built, make_model());
     model = std::make_shared<const gp::GpModel>(std::move(built));
   }
+  // The SCP's set-up linearises the GP along a first plan: O(P²) per column when K has no
+  // low-rank factor. Not started for a caller who has gone (the model stays cached).
+  if (stop.Requested()) return stop.Stopped("setting up the SCP (the GP model is built)");
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<gp::GpMpcSession> session,
                           gp::GpMpcSession::Create(std::move(model), problem, options, reference));
   NUPMPC_RETURN_IF_ERROR(session->SetInitialState(x0));
@@ -274,15 +295,23 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
   gp::FitOptions options = fit_limits;
   if (request.max_iterations() > 0) options.max_iterations = static_cast<int>(request.max_iterations());
   const auto start_time = std::chrono::steady_clock::now();
+  const gp::Interrupt stop = gp::Interrupt::After(options.max_seconds, options.cancel);
   absl::StatusOr<gp::FitResult> fit =
       gp::FitHyperparameters(training.data.regressors, training.data.targets, start, options);
   if (!fit.ok()) return absl::Status(fit.status().code(), absl::StrCat("model: ", fit.status().message()));
   if (fit->stopped) return StoppedFit(*fit, options, static_cast<int>(training.data.targets.size()));
-  absl::StatusOr<gp::GpModel> model = gp::GpModel::Create(training.data.regressors, training.data.targets, fit->kernel);
+  // The training error needs the model: its O(P³) set-up stops at the same deadline.
+  absl::StatusOr<gp::GpModel> model =
+      gp::GpModel::Create(training.data.regressors, training.data.targets, fit->kernel, stop);
   if (!model.ok())
     return absl::Status(model.status().code(), absl::StrCat("model (fitted): ", model.status().message()));
   double squared_error = 0.0;
-  for (Eigen::Index i = 0; i < training.data.targets.size(); ++i) {
+  const Eigen::Index points = training.data.targets.size();
+  for (Eigen::Index i = 0; i < points; ++i) {
+    // O(P) per point without the low-rank fast path: checked every few hundred.
+    if (i % 256 == 0 && stop.Requested()) {
+      return stop.Stopped(absl::StrCat("computing the training error (point ", i, " of ", points, ")"));
+    }
     const double e = training.data.targets(i) - model->Mean(training.data.regressors.row(i).transpose());
     squared_error += e * e;
   }

@@ -13,10 +13,12 @@
 namespace nupmpc::server {
 
 // Factorised GP models shared by the sessions built from the same training data and kernel.
-// A model costs O(P²) memory (Cholesky factor and eigenbasis: about 18 MB at P = 1500) and
-// O(P³) time to build, and many sessions use the same one (a controller per unit of one
-// plant type, sessions re-created after a reconnect). A model lives as long as a session
-// holds it. A GpModel is immutable after creation and safe to share between threads.
+// A model costs O(P²) memory (its Cholesky factor, P² doubles) and O(P³) time to build, and
+// many sessions use the same one (a controller per unit of one plant type, sessions
+// re-created after a reconnect). A model lives as long as a session holds it. A GpModel is
+// immutable after creation and safe to share between threads. A build that fails or is
+// stopped (the caller's deadline or cancellation) is not cached, and no request waits for
+// another's build: each runs its own, so a stopped build holds up nobody.
 class GpModelCache {
  public:
   // The model for `key` (canonical bytes of the data, lags and kernel), built by `make` when

@@ -3,9 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
-#include "Eigen/Eigenvalues"
-
+#include "Eigen/Cholesky"
 #include "absl/strings/str_cat.h"
+#include "core/gp/blocked_cholesky.h"
+#include "core/util/status_macros.h"
 
 namespace nupmpc::gp {
 
@@ -42,19 +43,37 @@ double LinGp::Variance(const Eigen::VectorXd& delta) const {
 }
 
 Eigen::MatrixXd KernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs) {
-  const Eigen::Index n = inputs.rows();
-  const Eigen::RowVectorXd scale = kernel.length_scales.cwiseInverse().transpose();
-  const Eigen::MatrixXd scaled = inputs.array().rowwise() * scale.array();
-  const Eigen::VectorXd norms = scaled.rowwise().squaredNorm();
-  Eigen::MatrixXd k = scaled * scaled.transpose();  // r² = |a|² + |b|² - 2 a·b
-  for (Eigen::Index j = 0; j < n; ++j) {
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const double r2 = std::max(0.0, norms(i) + norms(j) - 2.0 * k(i, j));
-      k(i, j) = kernel.signal_variance * std::exp(-0.5 * r2);
-    }
-    k(j, j) = kernel.signal_variance;
-  }
+  Eigen::MatrixXd k, scaled;
+  FillKernelMatrix(kernel, inputs, Interrupt{}, &k, &scaled).IgnoreError();  // no interrupt: cannot fail
   return k;
+}
+
+absl::Status FillKernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs, const Interrupt& stop,
+                              Eigen::MatrixXd* k, Eigen::MatrixXd* scaled) {
+  const Eigen::Index n = inputs.rows(), d = inputs.cols();
+  if (k->rows() != n || k->cols() != n) k->resize(n, n);
+  // The scaled regressors x_i/ℓ_i, and in the last column their squared norms.
+  if (scaled->rows() != n || scaled->cols() != d + 1) scaled->resize(n, d + 1);
+  for (Eigen::Index i = 0; i < d; ++i) scaled->col(i) = inputs.col(i) / kernel.length_scales(i);
+  scaled->col(d) = scaled->leftCols(d).rowwise().squaredNorm();
+  const auto points = scaled->leftCols(d);
+  const auto norms = scaled->col(d).array();
+  // A block of columns per check: r² = |a|² + |b|² - 2 a·b, then σ_f² exp(-r²/2).
+  constexpr Eigen::Index kColumns = 256;
+  for (Eigen::Index j0 = 0; j0 < n; j0 += kColumns) {
+    if (stop.Requested()) {
+      return stop.Stopped(absl::StrCat("building the kernel matrix (column ", j0, " of ", n, ")"));
+    }
+    const Eigen::Index w = std::min(kColumns, n - j0);
+    auto block = k->middleCols(j0, w);
+    block.noalias() = points * points.middleRows(j0, w).transpose();
+    for (Eigen::Index j = 0; j < w; ++j) {
+      block.col(j) = kernel.signal_variance *
+                     (-0.5 * (norms + norms(j0 + j) - 2.0 * block.col(j).array()).max(0.0)).exp().matrix();
+      block(j0 + j, j) = kernel.signal_variance;
+    }
+  }
+  return absl::OkStatus();
 }
 
 GpModel::GpModel(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel)
@@ -62,7 +81,8 @@ GpModel::GpModel(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel ke
   inverse_squared_lengths_ = kernel_.length_scales.array().square().inverse().matrix();
 }
 
-absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel) {
+absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel,
+                                        const Interrupt& stop) {
   if (inputs.rows() < 1 || inputs.cols() < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("inputs: need at least one point of dimension ≥ 1, got ", inputs.rows(), "x", inputs.cols()));
@@ -76,31 +96,36 @@ absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd 
   if (absl::Status valid = Validate(kernel, static_cast<int>(inputs.cols())); !valid.ok()) return valid;
 
   GpModel model(std::move(inputs), std::move(targets), std::move(kernel));
-  Eigen::MatrixXd k = KernelMatrix(model.kernel_, model.inputs_);
-  {
-    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(k);
-    if (eigen.info() != Eigen::Success) return absl::InternalError("eigendecomposition of K failed");
-    const double cut = kDroppedEigenvalue * model.kernel_.noise_variance;
-    const Eigen::VectorXd& s = eigen.eigenvalues();  // ascending
-    Eigen::Index kept = 0;
-    while (kept < s.size() && s(s.size() - 1 - kept) > cut) ++kept;
-    model.basis_ = eigen.eigenvectors().rightCols(kept);
-    model.basis_weights_ = (s.tail(kept).array() + model.kernel_.noise_variance).inverse().matrix();
+  // Three steps, each checking `stop` between blocks; a stopped set-up says which.
+  const auto stopped = [&](int step, const absl::Status& status) {
+    return absl::Status(status.code(), absl::StrCat("GP set-up stopped in step ", step,
+                                                    " of 3 (kernel matrix, low-rank factor, Cholesky factor) on ",
+                                                    model.num_points(), " points: ", status.message()));
+  };
+  Eigen::MatrixXd k, scaled;
+  if (absl::Status s = FillKernelMatrix(model.kernel_, model.inputs_, stop, &k, &scaled); !s.ok()) {
+    return stopped(1, s);
   }
-  const Eigen::MatrixXd pivot_columns = model.FactorPivots(k);
+  absl::StatusOr<Eigen::MatrixXd> pivot_columns = model.FactorPivots(k, stop);
+  if (!pivot_columns.ok()) return stopped(2, pivot_columns.status());
   k.diagonal().array() += model.kernel_.noise_variance;
-  model.cholesky_.compute(k);
-  if (model.cholesky_.info() != Eigen::Success) {
-    return absl::FailedPreconditionError("K + noise_variance·I is not positive definite (raise noise_variance)");
+  if (absl::Status s = BlockedCholesky(k, stop, "K + σ_n² I"); !s.ok()) {
+    if (s.code() == absl::StatusCode::kFailedPrecondition) {
+      return absl::FailedPreconditionError("K + noise_variance·I is not positive definite (raise noise_variance)");
+    }
+    return stopped(3, s);
   }
-  model.alpha_ = model.cholesky_.solve(model.targets_);
-  if (model.num_pivots() > 0) model.pivot_mean_weights_ = pivot_columns.transpose() * model.alpha_;
+  model.factor_ = std::move(k);
+  auto l = model.factor_.triangularView<Eigen::Lower>();
+  model.alpha_ = l.solve(model.targets_);
+  l.transpose().solveInPlace(model.alpha_);
+  if (model.num_pivots() > 0) model.pivot_mean_weights_ = pivot_columns->transpose() * model.alpha_;
   return model;
 }
 
-Eigen::MatrixXd GpModel::FactorPivots(const Eigen::MatrixXd& k) {
+absl::StatusOr<Eigen::MatrixXd> GpModel::FactorPivots(const Eigen::MatrixXd& k, const Interrupt& stop) {
   // Greedy pivoted Cholesky (the largest residual diagonal first) until every residual
-  // diagonal is at the eigenvalue cut.
+  // diagonal is at the eigenvalue cut. O(N m) per pivot, checked per pivot.
   const int n = num_points(), max_pivots = std::min(kMaxPivots, static_cast<int>(kMaxPivotFraction * n));
   const double cut = kDroppedEigenvalue * kernel_.noise_variance;
   Eigen::VectorXd residual = k.diagonal();
@@ -109,7 +134,8 @@ Eigen::MatrixXd GpModel::FactorPivots(const Eigen::MatrixXd& k) {
   for (int j = 0;; ++j) {
     Eigen::Index p = 0;
     if (residual.maxCoeff(&p) <= cut) break;
-    if (j == max_pivots) return {};  // no fast path: not low-rank enough to pay off
+    if (j == max_pivots) return Eigen::MatrixXd();  // not low-rank enough to pay off: the exact path
+    if (stop.Requested()) return stop.Stopped(absl::StrCat("computing the low-rank factor of K (pivot ", j, ")"));
     factor.col(j) = k.col(p) - factor.leftCols(j) * factor.row(p).head(j).transpose();
     factor.col(j) /= std::sqrt(residual(p));
     residual -= factor.col(j).cwiseAbs2();
@@ -117,7 +143,7 @@ Eigen::MatrixXd GpModel::FactorPivots(const Eigen::MatrixXd& k) {
     pivots.push_back(static_cast<int>(p));
   }
   const int m = static_cast<int>(pivots.size());
-  const auto l = factor.leftCols(m);
+  Eigen::MatrixXd l = factor.leftCols(m);
   pivot_inputs_.resize(m, dimension());
   pivot_factor_.resize(m, m);
   for (int i = 0; i < m; ++i) {
@@ -125,11 +151,67 @@ Eigen::MatrixXd GpModel::FactorPivots(const Eigen::MatrixXd& k) {
     pivot_factor_.row(i) = l.row(pivots[i]);
   }
   pivot_factor_ = pivot_factor_.triangularView<Eigen::Lower>();  // above: rounding noise of exact zeros
-  Eigen::MatrixXd gram = l.transpose() * l;
+  // LᵀL + σ_n² I by column strips: O(N m²) in all, checked per strip.
+  constexpr int kColumns = 16;
+  Eigen::MatrixXd gram(m, m);
+  for (int j0 = 0; j0 < m; j0 += kColumns) {
+    if (stop.Requested()) {
+      return stop.Stopped(absl::StrCat("computing the low-rank factor's Gram matrix (column ", j0, " of ", m, ")"));
+    }
+    const int w = std::min(kColumns, m - j0);
+    gram.middleCols(j0, w).noalias() = l.transpose() * l.middleCols(j0, w);
+  }
   gram.diagonal().array() += kernel_.noise_variance;
   pivot_data_term_ = -kernel_.noise_variance * gram.llt().solve(Eigen::MatrixXd::Identity(m, m));
   pivot_data_term_.diagonal().array() += 1.0;
+  NUPMPC_RETURN_IF_ERROR(FactorBasis(l, stop));
   return l;
+}
+
+absl::Status GpModel::FactorBasis(const Eigen::MatrixXd& l, const Interrupt& stop) {
+  const Eigen::Index m = l.cols();
+  constexpr Eigen::Index kColumns = 16;  // per check: O(N m kColumns)
+  const auto where = [&](Eigen::Index column) {
+    return absl::StrCat("orthonormalising the low-rank factor (column ", column, " of ", m, ")");
+  };
+  basis_ = l;
+  Eigen::MatrixXd coefficients(m, kColumns);
+  for (Eigen::Index j0 = 0; j0 < m; j0 += kColumns) {
+    const Eigen::Index w = std::min(kColumns, m - j0);
+    auto block = basis_.middleCols(j0, w);
+    // Twice (classical Gram-Schmidt against the earlier blocks, modified within the block):
+    // one pass leaves errors of order ε·cond(L), and L's columns decay to the cut.
+    for (int pass = 0; pass < 2; ++pass) {
+      if (stop.Requested()) return stop.Stopped(where(j0));
+      if (j0 > 0) {
+        auto c = coefficients.topLeftCorner(j0, w);
+        c.noalias() = basis_.leftCols(j0).transpose() * block;
+        block.noalias() -= basis_.leftCols(j0) * c;
+      }
+      for (Eigen::Index c = 0; c < w; ++c) {
+        for (Eigen::Index b = 0; b < c; ++b) block.col(c) -= block.col(b).dot(block.col(c)) * block.col(b);
+        const double norm = block.col(c).norm();
+        if (norm > 0.0) {
+          block.col(c) /= norm;
+        } else {
+          block.col(c).setZero();  // exactly dependent: contributes nothing
+        }
+      }
+    }
+  }
+  // R = Qᵀ L by column strips, then the factor of R Rᵀ + σ_n² I (m × m, eigenvalues ≥ σ_n²).
+  Eigen::MatrixXd r(m, m);
+  for (Eigen::Index j0 = 0; j0 < m; j0 += kColumns) {
+    if (stop.Requested()) return stop.Stopped(where(m));
+    const Eigen::Index w = std::min(kColumns, m - j0);
+    r.middleCols(j0, w).noalias() = basis_.transpose() * l.middleCols(j0, w);
+  }
+  basis_factor_.noalias() = r * r.transpose();
+  basis_factor_.diagonal().array() += kernel_.noise_variance;
+  Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>> llt(basis_factor_);  // in place
+  if (llt.info() != Eigen::Success) return absl::InternalError("R Rᵀ + σ_n² I is not positive definite");
+  basis_factor_ = basis_factor_.triangularView<Eigen::Lower>();
+  return absl::OkStatus();
 }
 
 void GpModel::KernelValues(int first, int count, const Eigen::VectorXd& x, KernelBlock* k) const {
@@ -237,7 +319,7 @@ void GpModel::Predict(const Eigen::VectorXd& x, double* mean, double* variance) 
   Eigen::MatrixXd w(num_points(), dimension() + 1);
   CrossCovariances(x, &w, 0);
   *mean = w.col(0).dot(alpha_);
-  const Eigen::VectorXd z = cholesky_.matrixL().solve(w.col(0));
+  const Eigen::VectorXd z = factor_.triangularView<Eigen::Lower>().solve(w.col(0));
   *variance = std::max(0.0, kernel_.signal_variance - z.squaredNorm());
 }
 
@@ -261,22 +343,30 @@ int GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
   Eigen::MatrixXd& projection = scratch->projection;
   w.resize(num_points(), P * c);
   for (int p = 0; p < P; ++p) CrossCovariances(points.row(full[p]).transpose(), &w, p * c);
-  const Eigen::VectorXd means = w.transpose() * alpha_;  // [μ; ∇μ] per point, stacked
-  projection.noalias() = basis_.transpose() * w;        // A = U_rᵀ W
-  w.noalias() -= basis_ * projection;                   // W⊥ = W - U_r A
-  const double inverse_noise = 1.0 / kernel_.noise_variance;
+  Eigen::VectorXd& means = scratch->means;
+  means.noalias() = w.transpose() * alpha_;  // [μ; ∇μ] per point, stacked
+  const bool low_rank = basis_.cols() > 0;
+  double inverse_noise = 1.0;
+  if (low_rank) {
+    projection.noalias() = basis_.transpose() * w;                     // A = Qᵀ W
+    w.noalias() -= basis_ * projection;                                // W⊥ = W - Q A
+    basis_factor_.triangularView<Eigen::Lower>().solveInPlace(projection);  // L_G⁻¹ A
+    inverse_noise = 1.0 / kernel_.noise_variance;
+  } else {
+    // No low-rank factor: the exact data term is the Gram matrix of L⁻¹ W (O(N²) per column).
+    factor_.triangularView<Eigen::Lower>().solveInPlace(w);
+  }
   for (int p = 0; p < P; ++p) {
     LinGp& lin = (*out)[full[p]];
     lin.mean = means.segment(p * c, c);
-    const auto a = projection.middleCols(p * c, c);
     const auto residual = w.middleCols(p * c, c);
-    // V̂ = prior - aᵀ diag(basis_weights) a - W⊥ᵀW⊥/σ_n², entry by entry: (d+1)² dot
-    // products, no temporaries (a product expression per point allocated).
+    // V̂ = prior - (L_G⁻¹A)ᵀ(L_G⁻¹A) - W⊥ᵀW⊥/σ_n² (or - (L⁻¹W)ᵀ(L⁻¹W)), entry by entry:
+    // (d+1)² dot products, no temporaries (a product expression per point allocated).
     lin.covariance.resize(c, c);
     for (int i = 0; i < c; ++i) {
       for (int k = i; k < c; ++k) {
-        const double v = -a.col(i).cwiseProduct(basis_weights_).dot(a.col(k)) -
-                         inverse_noise * residual.col(i).dot(residual.col(k));
+        double v = -inverse_noise * residual.col(i).dot(residual.col(k));
+        if (low_rank) v -= projection.col(p * c + i).dot(projection.col(p * c + k));
         lin.covariance(i, k) = v;
         lin.covariance(k, i) = v;
       }

@@ -7,7 +7,8 @@
 //   k(x, x') = σ_f² exp(-½ Σ_i (x_i - x'_i)² / ℓ_i²),   y = f(x) + ε,  ε ~ N(0, σ_n²)
 //
 // The Cholesky factor of K + σ_n² I and α = (K + σ_n² I)⁻¹ Y are computed once per model
-// (Create) and reused by every prediction. Predictions are of the latent f (no noise
+// (Create, stoppable by a deadline or cancel flag: core/gp/interrupt.h) and reused by every
+// prediction. Predictions are of the latent f (no noise
 // term), as in [Nghiem] (1).
 //
 // The linGP ([Nghiem] (3)–(6)): at a point x, f̂ = [f(x); ∇f(x)] is Gaussian with mean
@@ -17,9 +18,9 @@
 
 #include <vector>
 
-#include "Eigen/Cholesky"
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
+#include "core/gp/interrupt.h"
 
 namespace nupmpc::gp {
 
@@ -36,6 +37,7 @@ struct LinearisationScratch {
   Eigen::MatrixXd cross, projection;
   Eigen::MatrixXd pivot_cross;     ///< the fast path's [k, ∇k](Z, x) columns, then Φ: m × (d+1)
   Eigen::MatrixXd pivot_weighted;  ///< M Φ
+  Eigen::VectorXd means;           ///< [μ; ∇μ] of the O(N r) path's points, stacked
   std::vector<int> full_path;   ///< the points that need the O(N r) path
 };
 
@@ -51,10 +53,13 @@ class GpModel {
  public:
   // inputs: N×d (one training regressor per row), targets: N. INVALID_ARGUMENT naming the
   // field for bad sizes or values; FAILED_PRECONDITION when K + σ_n² I is not positive
-  // definite in floating point.
-  static absl::StatusOr<GpModel> Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel);
+  // definite in floating point; DEADLINE_EXCEEDED / CANCELLED when `stop` fires, saying in
+  // which step (each O(N²) or O(N³) step is checked in blocks: core/gp/blocked_cholesky.h).
+  static absl::StatusOr<GpModel> Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel,
+                                        const Interrupt& stop = {});
 
-  // Eigenvalues of K below this fraction of σ_n² are treated as 0 by Linearise().
+  // The low-rank factor K ≈ L Lᵀ stops when every diagonal entry of what it leaves out,
+  // K - L Lᵀ (PSD), is below this fraction of σ_n² (Linearise() says what that bounds).
   static constexpr double kDroppedEigenvalue = 1e-10;
   // Largest power p(x) / prior variance of a column for which Linearise() takes the fast
   // path (tested against a dense linGP to 1e-9, inside and outside the training data).
@@ -77,13 +82,17 @@ class GpModel {
   // Predictive mean and variance of f(x) (O(N² ) for the variance).
   void Predict(const Eigen::VectorXd& x, double* mean, double* variance) const;
   // The linGP at each row of `points` (P×d), batched over P·(d+1) cross-covariance
-  // columns W. The data term Wᵀ(K + σ_n² I)⁻¹W uses the eigendecomposition of K computed
-  // in Create(): K of a smooth kernel on low-dimensional regressors has numerically low
-  // rank r (about 70 at N = 1500 on the tanh example), so with W = U_r A + W⊥,
-  //   Wᵀ(K + σ_n² I)⁻¹W = Aᵀ(S_r + σ_n² I)⁻¹A + W⊥ᵀW⊥ / σ_n²,
-  // exact except that the dropped eigenvalues (≤ kDroppedEigenvalue·σ_n², at rounding
-  // level) count as 0: an error of at most that factor times the W⊥ term. O(N r) per
-  // column instead of O(N²).
+  // columns W. The data term Wᵀ(K + σ_n² I)⁻¹W uses the pivoted low-rank factor
+  // K ≈ L Lᵀ (N × r) computed in Create(): K of a smooth kernel on low-dimensional
+  // regressors has numerically low rank r. With Q an orthonormal basis of L's columns,
+  // R = QᵀL and W = Q A + W⊥ (A = QᵀW),
+  //   Wᵀ(L Lᵀ + σ_n² I)⁻¹W = Aᵀ(R Rᵀ + σ_n² I)⁻¹A + W⊥ᵀW⊥ / σ_n²,
+  // exact for K except for what L leaves out: K - L Lᵀ is PSD with every diagonal entry
+  // ≤ kDroppedEigenvalue·σ_n² (at rounding level), so its norm is at most N times that, a
+  // relative error of at most N·kDroppedEigenvalue in the data term. O(N r) per column
+  // instead of O(N²). When no such factor of rank ≤ kMaxPivots (and ≤ N/4) exists, the exact
+  // O(N²) path through the Cholesky factor runs instead (basis_rank() = 0). No
+  // eigendecomposition of K: it is O(N³) with a large constant and cannot be interrupted.
   //
   // Fast path, O(m²) per column and independent of N: a pivoted Cholesky factor
   // K ≈ L Lᵀ on m pivot points Z (residual diagonal ≤ kDroppedEigenvalue·σ_n², so m ≈ r)
@@ -119,10 +128,14 @@ class GpModel {
   // The fast path's power check for one column: its prior variance minus the part the
   // pivots capture (|Φ_i|²) is at most kFastPathPower of the prior.
   static bool WellReproduced(double prior, double captured) { return prior - captured <= kFastPathPower * prior; }
-  // The pivoted factor of K (Create()): sets Z, L_Z and M and returns L (N × m), or leaves
-  // no fast path and returns an empty matrix when it needs more than kMaxPivotFraction·N
-  // pivots (then the O(N r) path is as cheap).
-  Eigen::MatrixXd FactorPivots(const Eigen::MatrixXd& k);
+  // The pivoted factor of K (Create()): sets Z, L_Z, M, the basis Q and the factor of
+  // R Rᵀ + σ_n² I and returns L (N × m), or leaves no low-rank path and returns an empty
+  // matrix when it needs more than min(kMaxPivots, kMaxPivotFraction·N) pivots (then the
+  // exact Cholesky path is about as cheap).
+  absl::StatusOr<Eigen::MatrixXd> FactorPivots(const Eigen::MatrixXd& k, const Interrupt& stop);
+  // Q, an orthonormal basis of the columns of `l` (block Gram-Schmidt, twice), and the
+  // Cholesky factor of R Rᵀ + σ_n² I, R = Qᵀ l.
+  absl::Status FactorBasis(const Eigen::MatrixXd& l, const Interrupt& stop);
   // The fast path at one point; false (nothing written) when a column's power is too large.
   bool LineariseFromPivots(const Eigen::VectorXd& x, LinGp* lin, LinearisationScratch* scratch) const;
   static constexpr double kMaxPivotFraction = 0.25;
@@ -133,10 +146,10 @@ class GpModel {
   Eigen::VectorXd targets_;
   SeArdKernel kernel_;
   Eigen::VectorXd inverse_squared_lengths_;  ///< 1/ℓ_i²
-  Eigen::LLT<Eigen::MatrixXd> cholesky_;     ///< of K + σ_n² I (mean weights, Predict)
+  Eigen::MatrixXd factor_;                   ///< lower Cholesky factor of K + σ_n² I (upper: unused)
   Eigen::VectorXd alpha_;                    ///< (K + σ_n² I)⁻¹ Y
-  Eigen::MatrixXd basis_;                    ///< U_r: K's eigenvectors with eigenvalue > the cut
-  Eigen::VectorXd basis_weights_;            ///< 1/(s_i + σ_n²) for those
+  Eigen::MatrixXd basis_;                    ///< Q: orthonormal basis of the low-rank factor's columns
+  Eigen::MatrixXd basis_factor_;             ///< lower Cholesky factor of R Rᵀ + σ_n² I
   Eigen::MatrixXd pivot_inputs_;             ///< Z: m × d
   Eigen::MatrixXd pivot_factor_;             ///< L_Z: the factor's rows at Z, lower triangular m × m
   Eigen::VectorXd pivot_mean_weights_;       ///< Lᵀ α
@@ -146,6 +159,10 @@ class GpModel {
 
 // The covariance matrix K(X, X) (without noise) of a kernel on the rows of `inputs`.
 Eigen::MatrixXd KernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs);
+// The same into *k (resized only if its size differs), a block of columns per interrupt
+// check; `scaled` is scratch (N × d, same rule).
+absl::Status FillKernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs, const Interrupt& stop,
+                              Eigen::MatrixXd* k, Eigen::MatrixXd* scaled);
 
 }  // namespace nupmpc::gp
 

@@ -3,8 +3,9 @@
 
 // A receding-horizon GP-MPC session behind the same interface as the linear sessions
 // (core::MpcSession), so that the service holds, steps, shifts and limits it like any
-// other: it owns the factorised GP model (Cholesky, eigenbasis and pivot factor computed
-// once, at creation) and a linGP-SCP solver on it, and each Solve() only re-runs the SCP.
+// other: it owns the factorised GP model (Cholesky factor, pivoted low-rank factor and its
+// basis, computed once, at creation) and a linGP-SCP solver on it, and each Solve() only
+// re-runs the SCP.
 //
 // The session in the MpcSession's terms (N = H, one input, one output):
 // * state x[0] = the NARX past window [y[t-l..t-1], u[t-m-1..t-1]] (l + m + 1 values,

@@ -9,6 +9,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/gp/blocked_cholesky.h"
+#include "core/util/status_macros.h"
 #include "lbfgs.h"
 
 namespace nupmpc::gp {
@@ -37,36 +39,63 @@ SeArdKernel FromLog(const double* theta, int d, double min_noise) {
 
 absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& kernel, Eigen::VectorXd* log_gradient) {
+  LikelihoodWorkspace workspace;
+  return NegativeLogLikelihood(inputs, targets, kernel, log_gradient, Interrupt{}, &workspace);
+}
+
+absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
+                                             const SeArdKernel& kernel, Eigen::VectorXd* log_gradient,
+                                             const Interrupt& stop, LikelihoodWorkspace* workspace) {
   const int n = static_cast<int>(inputs.rows()), d = static_cast<int>(inputs.cols());
   if (absl::Status valid = Validate(kernel, d); !valid.ok()) return valid;
   if (targets.size() != n) return absl::InvalidArgumentError("targets: one value per input row");
-  const Eigen::MatrixXd k_f = KernelMatrix(kernel, inputs);
-  Eigen::MatrixXd k_y = k_f;
-  k_y.diagonal().array() += kernel.noise_variance;
-  const Eigen::LLT<Eigen::MatrixXd> llt(k_y);
-  if (llt.info() != Eigen::Success) return absl::FailedPreconditionError("K + σ_n² I is not positive definite");
-  const Eigen::VectorXd alpha = llt.solve(targets);
-  const double log_det = 2.0 * llt.matrixLLT().diagonal().array().log().sum();
-  const double nll = 0.5 * targets.dot(alpha) + 0.5 * log_det + 0.5 * n * std::log(2.0 * std::numbers::pi);
-  if (log_gradient != nullptr) {
-    // Q = α αᵀ - K_y⁻¹; ∂NLL/∂θ = -½ Σ_ij Q_ij (∂K_y/∂θ)_ij.
-    Eigen::MatrixXd q = -llt.solve(Eigen::MatrixXd::Identity(n, n));
-    q.noalias() += alpha * alpha.transpose();
-    log_gradient->resize(d + 2);
-    (*log_gradient)(0) = -0.5 * q.cwiseProduct(k_f).sum();                  // ∂K/∂log σ_f² = K_f
-    (*log_gradient)(d + 1) = -0.5 * kernel.noise_variance * q.trace();      // ∂K/∂log σ_n² = σ_n² I
-    for (int i = 0; i < d; ++i) {
-      // ∂K_f/∂log ℓ_i = K_f ⊙ (x_i - x'_i)²/ℓ_i²
-      const double inv = 1.0 / (kernel.length_scales(i) * kernel.length_scales(i));
-      double sum = 0.0;
-      for (int b = 0; b < n; ++b) {
-        for (int a = 0; a < n; ++a) {
-          const double diff = inputs(a, i) - inputs(b, i);
-          sum += q(a, b) * k_f(a, b) * diff * diff * inv;
-        }
-      }
-      (*log_gradient)(1 + i) = -0.5 * sum;
+  LikelihoodWorkspace& w = *workspace;
+  NUPMPC_RETURN_IF_ERROR(FillKernelMatrix(kernel, inputs, stop, &w.kernel, &w.scaled));
+  if (w.factor.rows() != n || w.factor.cols() != n) w.factor.resize(n, n);
+  w.factor.triangularView<Eigen::Lower>() = w.kernel;
+  w.factor.diagonal().array() += kernel.noise_variance;
+  if (absl::Status s = BlockedCholesky(w.factor, stop, "K + σ_n² I"); !s.ok()) {
+    if (s.code() == absl::StatusCode::kFailedPrecondition) {
+      return absl::FailedPreconditionError("K + σ_n² I is not positive definite");
     }
+    return s;
+  }
+  auto l = w.factor.triangularView<Eigen::Lower>();
+  w.alpha = targets;
+  l.solveInPlace(w.alpha);
+  l.transpose().solveInPlace(w.alpha);
+  const double log_det = 2.0 * w.factor.diagonal().array().log().sum();
+  const double nll = 0.5 * targets.dot(w.alpha) + 0.5 * log_det + 0.5 * n * std::log(2.0 * std::numbers::pi);
+  if (log_gradient == nullptr) return nll;
+
+  // ∂NLL/∂θ = -½ Σ_ab Q_ab (∂K_y/∂θ)_ab with Q = α αᵀ - K_y⁻¹, both symmetric: the sums run
+  // over the lower triangle (off-diagonal terms twice). ∂K/∂log σ_f² = K_f,
+  // ∂K/∂log σ_n² = σ_n² I, ∂K_f/∂log ℓ_i = K_f ⊙ (x_i - x'_i)²/ℓ_i².
+  if (w.row_block.rows() != kCholeskyBlock || w.row_block.cols() != n + kCholeskyBlock) {
+    w.row_block.resize(kCholeskyBlock, n + kCholeskyBlock);
+  }
+  NUPMPC_RETURN_IF_ERROR(InverseFromCholesky(w.factor, &w.row_block, stop, "K + σ_n² I"));
+  log_gradient->setZero(d + 2);
+  double trace = 0.0;
+  constexpr int kColumns = 64;  // per check: O(N d kColumns)
+  for (int b = 0; b < n; ++b) {
+    if (b % kColumns == 0 && stop.Requested()) {
+      return stop.Stopped(absl::StrCat("summing the likelihood gradient (column ", b, " of ", n, ")"));
+    }
+    const int rows = n - b;
+    const auto q = w.alpha.segment(b, rows).array() * w.alpha(b) - w.factor.col(b).tail(rows).array();
+    const auto qk = q * w.kernel.col(b).tail(rows).array();
+    trace += q(0);
+    (*log_gradient)(0) += 2.0 * qk.sum() - qk(0);
+    for (int i = 0; i < d; ++i) {
+      // The diagonal term has x_i - x'_i = 0: no correction for counting it twice.
+      (*log_gradient)(1 + i) += 2.0 * (qk * (inputs.col(i).tail(rows).array() - inputs(b, i)).square()).sum();
+    }
+  }
+  (*log_gradient)(0) *= -0.5;
+  (*log_gradient)(d + 1) = -0.5 * kernel.noise_variance * trace;
+  for (int i = 0; i < d; ++i) {
+    (*log_gradient)(1 + i) *= -0.5 / (kernel.length_scales(i) * kernel.length_scales(i));
   }
   return nll;
 }
@@ -76,12 +105,18 @@ namespace {
 // One fit's state, reached from liblbfgs' C callbacks through their `instance` pointer.
 struct FitRun {
   FitRun(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets, const FitOptions& options)
-      : inputs(inputs), targets(targets), options(options), start(std::chrono::steady_clock::now()) {}
+      : inputs(inputs),
+        targets(targets),
+        options(options),
+        start(std::chrono::steady_clock::now()),
+        stop(Interrupt::After(options.max_seconds, options.cancel)) {}
 
   const Eigen::MatrixXd& inputs;
   const Eigen::VectorXd& targets;
   const FitOptions& options;
   std::chrono::steady_clock::time_point start;
+  Interrupt stop;  // max_seconds from the start, and the cancel flag
+  LikelihoodWorkspace workspace;
   Eigen::VectorXd gradient;  // NegativeLogLikelihood's output, reused across evaluations
   double previous_nll = std::numeric_limits<double>::infinity();
   // The NLL and gradient max-norm at the iterate liblbfgs will return (the last one it
@@ -100,10 +135,10 @@ struct FitRun {
     accepted_gradient_max = gradient_max;
   }
 
-  bool MustStop() const {
-    if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed)) return true;
-    return options.max_seconds > 0.0 &&
-           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= options.max_seconds;
+  bool MustStop() const { return stop.Requested(); }
+  // The status of an evaluation `stop` ended (it then stops the fit).
+  static bool Interrupted(const absl::Status& status) {
+    return status.code() == absl::StatusCode::kDeadlineExceeded || status.code() == absl::StatusCode::kCancelled;
   }
 };
 
@@ -120,8 +155,13 @@ lbfgsfloatval_t EvaluateNll(void* instance, const lbfgsfloatval_t* theta, lbfgsf
     run.stopped = true;
     return std::numeric_limits<double>::infinity();
   }
-  const absl::StatusOr<double> nll = NegativeLogLikelihood(
-      run.inputs, run.targets, FromLog(theta, n - 2, run.options.min_noise_variance), &run.gradient);
+  const absl::StatusOr<double> nll =
+      NegativeLogLikelihood(run.inputs, run.targets, FromLog(theta, n - 2, run.options.min_noise_variance),
+                            &run.gradient, run.stop, &run.workspace);
+  if (!nll.ok() && FitRun::Interrupted(nll.status())) {
+    run.stopped = true;  // inside the evaluation: the line search gives up as above
+    return std::numeric_limits<double>::infinity();
+  }
   if (!nll.ok() || !std::isfinite(*nll) || !run.gradient.allFinite()) return std::numeric_limits<double>::infinity();
   g = run.gradient;
   if (run.evaluations++ == 0) run.Accept(*nll, run.gradient.cwiseAbs().maxCoeff());  // the start
@@ -183,7 +223,23 @@ absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, cons
   }
   FitRun run(inputs, targets, options);
   FitResult result;
-  absl::StatusOr<double> first = NegativeLogLikelihood(inputs, targets, initial, nullptr);
+  const auto finish = [&](std::string_view outcome) {
+    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - run.start).count();
+    result.report = absl::StrFormat("L-BFGS: %d iterations, NLL %.6g -> %.6g, |gradient|max %.3g, %s (%.3f s)",
+                                    result.iterations, result.initial_negative_log_likelihood,
+                                    result.negative_log_likelihood, result.gradient_norm, outcome, result.seconds);
+    return result;
+  };
+  absl::StatusOr<double> first =
+      NegativeLogLikelihood(inputs, targets, initial, nullptr, run.stop, &run.workspace);
+  if (!first.ok() && FitRun::Interrupted(first.status())) {
+    // Stopped inside the first evaluation: the start, with what is known of it.
+    result.kernel = initial;
+    result.initial_negative_log_likelihood = result.negative_log_likelihood = std::numeric_limits<double>::quiet_NaN();
+    result.gradient_norm = std::numeric_limits<double>::quiet_NaN();
+    result.stopped = true;
+    return finish("stopped (time or cancel) in the first evaluation");
+  }
   if (!first.ok()) return first.status();
   result.initial_negative_log_likelihood = *first;
 
@@ -202,24 +258,18 @@ absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, cons
   const int code = lbfgs(n, theta.get(), &last_nll, EvaluateNll, AfterIteration, &run, &parameters);
 
   result.kernel = FromLog(theta.get(), d, options.min_noise_variance);
-  if (!run.accepted_known) {  // stopped before liblbfgs evaluated the start
-    Eigen::VectorXd gradient;
-    absl::StatusOr<double> nll = NegativeLogLikelihood(inputs, targets, result.kernel, &gradient);
-    if (!nll.ok()) return nll.status();
-    run.Accept(*nll, gradient.cwiseAbs().maxCoeff());
+  if (!run.accepted_known) {
+    // Stopped before liblbfgs evaluated the start (so the kernel is the start): its NLL is
+    // known, its gradient is not, and computing it now would hold the worker for another
+    // O(P³) evaluation after the stop.
+    run.Accept(result.initial_negative_log_likelihood, std::numeric_limits<double>::quiet_NaN());
   }
   result.negative_log_likelihood = run.accepted_nll;
   result.gradient_norm = run.accepted_gradient_max;
   result.iterations = run.iterations;
   result.converged = run.converged;
   result.stopped = !run.converged && run.stopped;
-  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - run.start).count();
-  result.report = absl::StrFormat(
-      "L-BFGS: %d iterations, NLL %.6g -> %.6g, |gradient|max %.3g, %s (%.3f s)", result.iterations,
-      result.initial_negative_log_likelihood, result.negative_log_likelihood, result.gradient_norm,
-      result.converged ? "converged" : result.stopped ? "stopped (time or cancel)" : LbfgsOutcome(code),
-      result.seconds);
-  return result;
+  return finish(result.converged ? "converged" : result.stopped ? "stopped (time or cancel)" : LbfgsOutcome(code));
 }
 
 }  // namespace nupmpc::gp

@@ -8,8 +8,8 @@
 //   ∂NLL/∂θ_j = -½ tr((α αᵀ - K_y⁻¹) ∂K_y/∂θ_j)          (Rasmussen & Williams (5.9))
 // by L-BFGS (liblbfgs, a C library: it shares no C++ or Eigen types with us, so no
 // inline Eigen code compiled with other alignment settings can enter our link). O(N³) per
-// evaluation: fit on a few hundred points; the model for more data reuses the
-// hyper-parameters.
+// evaluation (a Cholesky factor and an inverse from it, each about N³/3 multiply-adds):
+// fit on a few hundred points; the model for more data reuses the hyper-parameters.
 
 #include <atomic>
 #include <string>
@@ -17,6 +17,7 @@
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/gp/gp_model.h"
+#include "core/gp/interrupt.h"
 
 namespace nupmpc::gp {
 
@@ -27,7 +28,9 @@ struct FitOptions {
   // Lower bound on σ_n² (keeps K_y well conditioned on noise-free data).
   double min_noise_variance = 1e-8;
   // Wall time for the whole fit (0: none) and a flag, both checked before every likelihood
-  // evaluation: one costs O(P³) for P points, and a service must be able to stop the fit.
+  // evaluation and between the blocks of work inside one (kernel matrix, Cholesky factor,
+  // inverse, gradient sums): one evaluation costs O(P³) for P points, and a service must
+  // be able to stop the fit within a small fraction of one.
   double max_seconds = 0.0;
   const std::atomic<bool>* cancel = nullptr;
 };
@@ -39,14 +42,30 @@ struct FitResult {
   int iterations = 0;
   bool converged = false;  ///< a stopping test (gradient or function tolerance) was met
   bool stopped = false;    ///< max_seconds or the cancel flag ended it (kernel: the start's or the last step's)
-  double gradient_norm = 0.0;  ///< max-norm of the gradient in log parameters at the end
+  // Max-norm of the gradient in log parameters at the end; NaN when a stop came before it
+  // was known (then also the NLLs, if it came inside the first evaluation).
+  double gradient_norm = 0.0;
   double seconds = 0.0;
   std::string report;      ///< one line: iterations, NLL before and after, how it ended
+};
+
+// The buffers of one likelihood evaluation (three P × P matrices at most), reused by every
+// evaluation of a fit so that its iterations do not allocate.
+struct LikelihoodWorkspace {
+  Eigen::MatrixXd kernel;     ///< K_f
+  Eigen::MatrixXd factor;     ///< the Cholesky factor of K_y, then the lower triangle of K_y⁻¹
+  Eigen::MatrixXd scaled;     ///< FillKernelMatrix's scratch
+  Eigen::MatrixXd row_block;  ///< InverseFromCholesky's scratch
+  Eigen::VectorXd alpha;      ///< K_y⁻¹ Y
 };
 
 // NLL and its gradient with respect to log(σ_f², ℓ, σ_n²) (exposed for tests).
 absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& kernel, Eigen::VectorXd* log_gradient);
+// The same in `workspace`, stopped by `stop` (DEADLINE_EXCEEDED / CANCELLED saying where).
+absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
+                                             const SeArdKernel& kernel, Eigen::VectorXd* log_gradient,
+                                             const Interrupt& stop, LikelihoodWorkspace* workspace);
 
 absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& initial, const FitOptions& options = {});

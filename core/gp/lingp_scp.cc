@@ -15,6 +15,7 @@ using Clock = std::chrono::steady_clock;
 double SecondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 constexpr int kOutputs = 4;  // ȳ (tracking + trust), u (box ∩ trust), ȳ + κσ, ȳ - κσ
+constexpr double kMinRelativeRadius = 1e-12;  // of max(1, |nominal|): the narrowest trust box
 
 // Gradient of σ = sqrt(ξᵀ V̂ ξ) at ξ₀ = [1; 0] with respect to Δx: V̂[1:, 0] / σ.
 Eigen::VectorXd SigmaGradient(const LinGp& lin, double* sigma) {
@@ -229,13 +230,21 @@ void LinGpScp::BuildSubproblem(double rho) {
     offset(2) = p_.sigma_multiple * (sigma - gs.dot(x_star));
     offset(3) = -offset(2);
 
+    // The trust boxes are at least a few rounding units of the nominal wide: a radius below
+    // that would give lower == upper, which the core refuses.
     const double y_star = nominal_y_(n), u_star = nominal_u_(n);
-    problem_.mutable_output_prior(n + 1, 0) = core::ScalarPrior::Box(y_star - rho, y_star + rho)
+    const double rho_y = std::max(rho, kMinRelativeRadius * std::max(1.0, std::abs(y_star)));
+    const double rho_u = std::max(rho, kMinRelativeRadius * std::max(1.0, std::abs(u_star)));
+    problem_.mutable_output_prior(n + 1, 0) = core::ScalarPrior::Box(y_star - rho_y, y_star + rho_y)
                                                   .WithGaussian(reference_(n), 1.0 / (2.0 * p_.output_weight));
     problem_.mutable_output_prior(n + 1, 1) =
-        core::ScalarPrior::Box(std::max(p_.input_min, u_star - rho), std::min(p_.input_max, u_star + rho));
-    problem_.mutable_output_prior(n + 1, 2) = core::ScalarPrior::AtMost(UpperBound(n), options_.penalty);
-    problem_.mutable_output_prior(n + 1, 3) = core::ScalarPrior::AtLeast(LowerBound(n), options_.penalty);
+        core::ScalarPrior::Box(std::max(p_.input_min, u_star - rho_u), std::min(p_.input_max, u_star + rho_u));
+    // An infinite output bound is no constraint on that side (the .proto allows ±Infinity).
+    const double upper = UpperBound(n), lower = LowerBound(n);
+    problem_.mutable_output_prior(n + 1, 2) =
+        std::isfinite(upper) ? core::ScalarPrior::AtMost(upper, options_.penalty) : core::ScalarPrior::Free();
+    problem_.mutable_output_prior(n + 1, 3) =
+        std::isfinite(lower) ? core::ScalarPrior::AtLeast(lower, options_.penalty) : core::ScalarPrior::Free();
   }
 }
 

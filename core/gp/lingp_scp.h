@@ -44,7 +44,7 @@ struct GpMpcProblem {
   double input_change_weight = 0.1;  ///< R
   double input_min = -1.0, input_max = 1.0;
   double rate_min = -0.5, rate_max = 0.5;
-  double output_min = -1.2, output_max = 1.2;  ///< on ȳ ∓ κσ
+  double output_min = -1.2, output_max = 1.2;  ///< on ȳ ∓ κσ; -∞ / +∞: no constraint on that side
   double sigma_multiple = 2.0;                 ///< κ
   double terminal_tolerance = 0.075;           ///< δ; ≤ 0 or ∞: no terminal constraint
 };

@@ -9,8 +9,10 @@
 #include <cstdio>
 #include <random>
 
+#include "Eigen/Cholesky"
 #include "Eigen/Eigenvalues"
 #include "Eigen/LU"
+#include "core/gp/blocked_cholesky.h"
 #include "core/gp/gp_model.h"
 #include "core/gp/hyperparameter_fit.h"
 #include "core/gp/narx.h"
@@ -309,7 +311,93 @@ TEST(HyperparameterFit, ARaisedCancelFlagStopsTheFitBeforeItsFirstIteration) {
   ASSERT_TRUE(fit.ok()) << fit.status();
   EXPECT_TRUE(fit->stopped);
   EXPECT_EQ(fit->iterations, 0);
-  EXPECT_DOUBLE_EQ(fit->negative_log_likelihood, fit->initial_negative_log_likelihood);
+  // Stopped inside the first evaluation: the start is returned, its likelihood unknown.
+  EXPECT_EQ(fit->kernel.length_scales, TestKernel().length_scales);
+  EXPECT_TRUE(std::isnan(fit->negative_log_likelihood));
+}
+
+// The blocked factorisation and inverse against Eigen's, on a size that is not a multiple
+// of the block; a raised flag or a passed deadline stops them with the matching code.
+TEST(BlockedCholesky, MatchesEigenAndStopsWhenAsked) {
+  const int n = 2 * kCholeskyBlock + 37;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal;
+  Eigen::MatrixXd b(n, n);
+  for (Eigen::Index i = 0; i < b.size(); ++i) b.data()[i] = normal(rng);
+  Eigen::MatrixXd a = b * b.transpose();
+  a.diagonal().array() += n;
+  Eigen::MatrixXd f = a;
+  ASSERT_TRUE(BlockedCholesky(f, Interrupt{}, "A").ok());
+  const Eigen::MatrixXd reference = a.llt().matrixL();
+  const Eigen::MatrixXd lower = f.triangularView<Eigen::Lower>();
+  EXPECT_LT((lower - reference).norm(), 1e-12 * reference.norm());
+  Eigen::MatrixXd scratch(kCholeskyBlock, n + kCholeskyBlock);
+  ASSERT_TRUE(InverseFromCholesky(f, &scratch, Interrupt{}, "A").ok());
+  const Eigen::MatrixXd inverse = f.selfadjointView<Eigen::Lower>();
+  EXPECT_LT((inverse * a - Eigen::MatrixXd::Identity(n, n)).norm(), 1e-10);
+
+  Eigen::MatrixXd indefinite = a;
+  indefinite(n - 1, n - 1) = -1.0;
+  EXPECT_EQ(BlockedCholesky(indefinite, Interrupt{}, "A").code(), absl::StatusCode::kFailedPrecondition);
+  const std::atomic<bool> cancel{true};
+  Interrupt cancelled;
+  cancelled.cancel = &cancel;
+  f = a;
+  EXPECT_EQ(BlockedCholesky(f, cancelled, "A").code(), absl::StatusCode::kCancelled);
+  Interrupt passed;
+  passed.deadline = Interrupt::Clock::now();
+  f = a;
+  const absl::Status late = BlockedCholesky(f, passed, "A");
+  EXPECT_EQ(late.code(), absl::StatusCode::kDeadlineExceeded);
+  EXPECT_NE(late.message().find("factorising A (column 0 of"), absl::string_view::npos) << late;
+  EXPECT_EQ(InverseFromCholesky(f, &scratch, passed, "A").code(), absl::StatusCode::kDeadlineExceeded);
+}
+
+// A model's set-up and a likelihood evaluation stop at a raised flag or a passed deadline,
+// saying in which step.
+TEST(GpModel, SetUpAndLikelihoodStopWhenAsked) {
+  const Data d = SmoothData(600, 3);
+  const std::atomic<bool> cancel{true};
+  Interrupt cancelled;
+  cancelled.cancel = &cancel;
+  absl::StatusOr<GpModel> model = GpModel::Create(d.x, d.y, TestKernel(), cancelled);
+  EXPECT_EQ(model.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_NE(model.status().message().find("step 1 of 3"), absl::string_view::npos) << model.status();
+  Interrupt passed;
+  passed.deadline = Interrupt::Clock::now();
+  model = GpModel::Create(d.x, d.y, TestKernel(), passed);
+  EXPECT_EQ(model.status().code(), absl::StatusCode::kDeadlineExceeded);
+  LikelihoodWorkspace workspace;
+  Eigen::VectorXd gradient;
+  EXPECT_EQ(NegativeLogLikelihood(d.x, d.y, TestKernel(), &gradient, cancelled, &workspace).status().code(),
+            absl::StatusCode::kCancelled);
+  // The workspace is reusable after a stop, and gives what the plain evaluation gives.
+  Eigen::VectorXd plain_gradient;
+  const absl::StatusOr<double> reused = NegativeLogLikelihood(d.x, d.y, TestKernel(), &gradient, {}, &workspace);
+  const absl::StatusOr<double> plain = NegativeLogLikelihood(d.x, d.y, TestKernel(), &plain_gradient);
+  ASSERT_TRUE(reused.ok() && plain.ok());
+  EXPECT_EQ(*reused, *plain);
+  EXPECT_EQ(gradient, plain_gradient);
+}
+
+// Too few points for a low-rank factor to pay off: the linGP takes the exact path through
+// the Cholesky factor and agrees with Predict().
+TEST(GpModel, WithoutALowRankFactorTheExactPathMatchesPredict) {
+  const Data d = SmoothData(40, 8);
+  auto model = GpModel::Create(d.x, d.y, LowNoiseKernel());
+  ASSERT_TRUE(model.ok());
+  EXPECT_EQ(model->basis_rank(), 0);
+  EXPECT_EQ(model->num_pivots(), 0);
+  Eigen::MatrixXd points(3, 2);
+  points << 0.0, 0.0, 1.3, -1.7, -4.0, 1.0;
+  std::vector<LinGp> lin;
+  model->Linearise(points, &lin);
+  for (int p = 0; p < 3; ++p) {
+    double mean = 0.0, variance = 0.0;
+    model->Predict(Eigen::VectorXd(points.row(p).transpose()), &mean, &variance);
+    EXPECT_NEAR(lin[p].mean(0), mean, 1e-12);
+    EXPECT_NEAR(lin[p].covariance(0, 0), variance, 1e-12) << "point " << p;
+  }
 }
 
 TEST(Narx, RegressorsFollowTheLayout) {

@@ -3,9 +3,15 @@
 // gives, step by step, exactly the plans of a core linGP-SCP on the same model, with the
 // chance constraints met under the exact GP; references change per step; a spec without a
 // kernel is fitted on creation; bad specs and steps are refused naming the field and leave
-// the session as it was.
+// the session as it was, every spec rule before the O(P³) set-up; requests at the point
+// limit free their worker soon after their deadline; ±Infinity output bounds are solved.
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <functional>
+#include <limits>
+#include <utility>
 
 #include "core/examples/scenarios/gp_tanh.h"
 #include "core/gp/hyperparameter_fit.h"
@@ -227,6 +233,8 @@ TEST(GpModelCache, SessionsOfOneModelShareItWhileAnyHoldsIt) {
   EXPECT_EQ(builds, 3) << "a model nobody held is built again";
   const auto failing = []() -> absl::StatusOr<gp::GpModel> { return absl::InvalidArgumentError("bad data"); };
   EXPECT_EQ(cache.GetOrCreate("model d", failing).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(cache.live_models(), 1) << "a failed build is not cached (model c alone is held)";
+  ASSERT_TRUE(cache.GetOrCreate("model d", make).ok()) << "nor does it stop the next build of its key";
 }
 
 // Ten sessions on the same data and kernel hold one factorised GP between them: the
@@ -251,43 +259,144 @@ TEST_F(ServiceTest, GpSessionsOfTheSameModelShareItsFactorisation) {
                                   << " MB; the first took " << one / 1e6 << " MB";
 }
 
-// A fit nobody waits for any more does not hold the worker: with one worker, a solve sent
-// right after a FitGpModel call or a kernel-fitting CreateSession whose deadline passed is
-// answered long before the fit would end (2000 points: about 25 s run to the end here).
-// The fit checks the deadline before every O(P³) likelihood evaluation, so an abandoned
-// fit frees its worker within about one evaluation after the deadline. Stated in
-// evaluations measured in this run, not in seconds of a particular machine.
-TEST_F(ServiceTest, KernelFitsStopAtTheDeadline) {
+// At the server's point limit (5,000 training pairs) every O(P³) phase of a GP request
+// runs in blocks with a deadline check between them (kernel matrix, low-rank factor,
+// Cholesky factor, the likelihood's inverse and gradient, each L-BFGS evaluation), so an
+// abandoned request frees its worker within about one block: a SolveOnce queued behind it on
+// a one-worker server is answered soon after the deadline, although the work itself runs
+// for many seconds (an uninterrupted likelihood evaluation alone is about P³ multiply-adds).
+// The bound asserted, 2 s after the deadline, is generous for a shared or instrumented
+// machine; the message must say the set-up was stopped inside, not refused before it.
+TEST_F(ServiceTest, GpRequestsAtThePointLimitFreeTheirWorkerAtTheDeadline) {
   server_->Shutdown();
   server::ServerOptions options = DefaultOptions();
   options.worker_threads = 1;
   StartServer(options);
-  constexpr int kPoints = 2000;
-  constexpr double kDeadlineS = 0.3;
-  Client impatient(target_, std::chrono::milliseconds(static_cast<int>(kDeadlineS * 1000)));
+  const int points = options.size_limits.max_gp_points;
+  constexpr double kDeadlineS = 0.3, kAfterDeadlineS = 2.0;
   const v1::ProblemSpec quick = SpecOrDie(LoadInstanceOrDie("masses_N30").problem);
-  absl::StatusOr<gp::NarxData> data = examples::TanhTrainingData(kPoints, 1);
-  ASSERT_TRUE(data.ok()) << data.status();
-  const auto evaluation_start = std::chrono::steady_clock::now();
-  Eigen::VectorXd gradient;
-  ASSERT_TRUE(gp::NegativeLogLikelihood(data->regressors, data->targets, FittedKernel(), &gradient).ok());
-  const double evaluation =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - evaluation_start).count();
-  const auto solve_soon_after = [&](const std::function<absl::Status()>& abandoned) {
+  ASSERT_TRUE(client_->SolveOnce(quick).ok());  // warm: connection and code paths
+  const auto solve_soon_after = [&](const char* what, const std::function<absl::Status(Client&)>& abandoned) {
+    // The server sees the call's deadline; the client gets DEADLINE_EXCEEDED at it.
+    Client impatient(target_, std::chrono::milliseconds(static_cast<int>(kDeadlineS * 1000)));
     const auto start = std::chrono::steady_clock::now();
-    EXPECT_EQ(abandoned().code(), absl::StatusCode::kDeadlineExceeded);
+    const absl::Status status = abandoned(impatient);
+    EXPECT_EQ(status.code(), absl::StatusCode::kDeadlineExceeded) << what << ": " << status;
     absl::StatusOr<v1::SolveResult> solve = client_->SolveOnce(quick);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    ASSERT_TRUE(solve.ok()) << solve.status();
-    // The deadline, the evaluation under way then, and one more for the set-up before the
-    // fit (regressors, the first likelihood) and the solve.
-    EXPECT_LT(seconds, kDeadlineS + 3 * evaluation)
-        << "the solve waited for the abandoned fit; one evaluation takes " << evaluation << " s";
+    ASSERT_TRUE(solve.ok()) << what << ": " << solve.status();
+    EXPECT_LT(seconds, kDeadlineS + kAfterDeadlineS) << what << ": the solve waited for the abandoned request";
+    std::printf("%s at %d points: the next solve was answered %.3f s after the deadline\n", what, points,
+                seconds - kDeadlineS);
   };
+  const gp::SeArdKernel kernel = FittedKernel();
+  solve_soon_after("CreateSession, kernel given",
+                   [&](Client& c) { return c.CreateSession(TanhSpec(points, &kernel)).status(); });
+  solve_soon_after("CreateSession, kernel fitted",
+                   [&](Client& c) { return c.CreateSession(TanhSpec(points, nullptr)).status(); });
   v1::FitGpModelRequest request;
-  *request.mutable_model() = LoggedModel(kPoints, 1);
-  solve_soon_after([&] { return impatient.FitGpModel(request).status(); });
-  solve_soon_after([&] { return impatient.CreateSession(TanhSpec(kPoints, nullptr)).status(); });
+  *request.mutable_model() = LoggedModel(points, 1);
+  solve_soon_after("FitGpModel", [&](Client& c) { return c.FitGpModel(request).status(); });
+}
+
+// In process, the message of a stopped set-up says where it stopped (the client of an
+// abandoned call never sees it), and a set-up stopped by a deadline or cancellation caches
+// nothing: the next request for the same model builds it.
+TEST(GpSetUp, AStoppedSetUpSaysHowFarItGotAndCachesNothing) {
+  const server::SizeLimits limits;
+  const gp::SeArdKernel kernel = FittedKernel();
+  const v1::ProblemSpec spec = TanhSpec(limits.max_gp_points, &kernel);
+  server::GpModelCache cache;
+  gp::FitOptions deadline;
+  deadline.max_seconds = 0.2;
+  absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> session =
+      server::GpSessionFromSpec(spec, limits, &cache, deadline);
+  ASSERT_EQ(session.status().code(), absl::StatusCode::kDeadlineExceeded) << session.status();
+  EXPECT_THAT(std::string(session.status().message()), HasSubstr("spec.gp.model: GP set-up stopped in step"));
+  EXPECT_EQ(cache.live_models(), 0);
+  std::atomic<bool> cancel{true};
+  gp::FitOptions cancelled;
+  cancelled.cancel = &cancel;
+  session = server::GpSessionFromSpec(spec, limits, &cache, cancelled);
+  EXPECT_EQ(session.status().code(), absl::StatusCode::kCancelled) << session.status();
+  v1::FitGpModelRequest request;
+  *request.mutable_model() = LoggedModel(limits.max_gp_points, 1);
+  v1::FitGpModelResponse response;
+  const absl::Status fit = server::FitGpModel(request, limits, deadline, &response);
+  EXPECT_EQ(fit.code(), absl::StatusCode::kDeadlineExceeded) << fit;
+  EXPECT_THAT(std::string(fit.message()), HasSubstr("0 L-BFGS iterations on 5000 points"));
+  // Small data: the same cache builds and keeps the model.
+  const v1::ProblemSpec small = TanhSpec(60, &kernel);
+  ASSERT_TRUE(server::GpSessionFromSpec(small, limits, &cache).ok());
+}
+
+// Every rule of a GP spec is checked before the O(P³) set-up: with the cancel flag already
+// raised, a set-up step would answer CANCELLED, so INVALID_ARGUMENT naming the field shows
+// the rule came first. The initial trust radius and ±Infinity output bounds used to be
+// found (or refused) only by the SCP's set-up, after the factorisation, under an internal
+// field name.
+TEST(GpSetUp, EveryGpSpecRuleIsCheckedBeforeTheSetUp) {
+  const server::SizeLimits limits;
+  const gp::SeArdKernel kernel = FittedKernel();
+  const v1::ProblemSpec good = TanhSpec(limits.max_gp_points, &kernel);
+  std::atomic<bool> cancel{true};
+  gp::FitOptions cancelled;
+  cancelled.cancel = &cancel;
+  const auto refused_first = [&](const v1::ProblemSpec& spec, const std::string& field) {
+    const auto start = std::chrono::steady_clock::now();
+    absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> session =
+        server::GpSessionFromSpec(spec, limits, nullptr, cancelled);
+    EXPECT_EQ(session.status().code(), absl::StatusCode::kInvalidArgument) << field << ": " << session.status();
+    EXPECT_THAT(std::string(session.status().message()), HasSubstr(field));
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 2.0) << field;
+  };
+  v1::ProblemSpec s = good;
+  s.mutable_gp()->mutable_scp()->set_initial_trust_radius(1e-300);
+  refused_first(s, "spec.gp.scp.initial_trust_radius");
+  s = good;
+  s.mutable_gp()->set_sigma_multiple(-1.0);
+  refused_first(s, "spec.gp.sigma_multiple");
+  s = good;
+  s.mutable_gp()->set_output_max(std::nan(""));
+  refused_first(s, "spec.gp.output_max");
+  s = good;
+  s.mutable_gp()->set_input_min(-std::numeric_limits<double>::infinity());
+  refused_first(s, "spec.gp.input_m");
+  s = good;
+  s.mutable_gp()->set_terminal_tolerance(std::nan(""));
+  refused_first(s, "spec.gp.terminal_tolerance");
+  s = good;
+  s.mutable_gp()->mutable_model()->mutable_kernel()->set_signal_variance(0.0);
+  refused_first(s, "spec.gp.model.kernel.signal_variance");
+  // Infinite output bounds pass the rules: the set-up then starts (and is cancelled).
+  s = good;
+  s.mutable_gp()->set_output_min(-std::numeric_limits<double>::infinity());
+  s.mutable_gp()->set_output_max(std::numeric_limits<double>::infinity());
+  EXPECT_EQ(server::GpSessionFromSpec(s, limits, nullptr, cancelled).status().code(), absl::StatusCode::kCancelled);
+}
+
+// The .proto allows output_min/output_max of -Infinity/Infinity (no chance constraint on
+// that side): accepted, and solved like any other session.
+TEST_F(ServiceTest, InfiniteGpOutputBoundsAreAcceptedAndSolved) {
+  const gp::SeArdKernel kernel = FittedKernel();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const auto& [low, high] : {std::pair{-inf, inf}, std::pair{-1.2, inf}, std::pair{-inf, 1.2}}) {
+    v1::ProblemSpec spec = TanhSpec(100, &kernel);
+    spec.mutable_gp()->set_output_min(low);
+    spec.mutable_gp()->set_output_max(high);
+    absl::StatusOr<v1::CreateSessionResponse> created = client_->CreateSession(spec);
+    ASSERT_TRUE(created.ok()) << low << ".." << high << ": " << created.status();
+    for (int t = 0; t < 3; ++t) {
+      absl::StatusOr<v1::SolveResult> r = client_->Solve(created->session_id(), WindowStep(0.1 * t, 0.0));
+      ASSERT_TRUE(r.ok()) << r.status();
+      EXPECT_TRUE(r->status() == v1::SOLVE_STATUS_CONVERGED || r->status() == v1::SOLVE_STATUS_ITERATION_LIMIT)
+          << v1::SolveStatus_Name(r->status());
+      ASSERT_EQ(r->inputs_size(), 12);
+      for (int n = 0; n < r->inputs_size(); ++n) EXPECT_TRUE(std::isfinite(r->inputs(n)));
+      for (int n = 0; n < r->outputs_size(); ++n) EXPECT_TRUE(std::isfinite(r->outputs(n)));
+      EXPECT_TRUE(std::isfinite(r->objective()));
+    }
+  }
 }
 
 TEST_F(ServiceTest, BadGpSpecsAreRefusedNamingTheField) {
