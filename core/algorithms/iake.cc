@@ -107,8 +107,10 @@ int Iake::Iterate(PrimalIterate* out) {
                                                      : ScalarFactor::Pinned(pinned_value_[i]);
   }
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], row_nup_[r]);
-  RunForwardFilter(graph_, input_factor_.data(), row_factor_.data(), /*keep_edges=*/true, &fw_);
-  RunSmootherBackward(graph_, fw_, needs_variances_, &sm_);
+  RunForwardFilter(graph_, input_factor_.data(), row_factor_.data(), /*keep_edges=*/true, &fw_, interrupt_);
+  if (Interrupted()) return -1;  // incomplete: nothing updated
+  RunSmootherBackward(graph_, fw_, needs_variances_, &sm_, interrupt_);
+  if (Interrupted()) return -1;
   out->x0 = sm_.mX0;
   out->u = sm_.mU;
   for (int n = 0; n < graph_.N; ++n) {

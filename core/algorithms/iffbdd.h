@@ -25,6 +25,10 @@ class Iffbdd final : public ActiveSetIteration {
   Iffbdd(const Problem& problem, const SolverOptions& options);
 
   Algorithm algorithm() const override { return Algorithm::kIffbdd; }
+  void set_interrupt(Interrupt* interrupt) override {
+    OuterIteration::set_interrupt(interrupt);
+    if (input_polish_) input_polish_->set_interrupt(interrupt);
+  }
   void Refresh(const Problem& problem) override;
   void RefreshOutputPriors(const Problem& problem) override { RefreshFactorGraphOutputPriors(problem, &graph_); }
   void RefreshInitialState(const Problem& problem) override {

@@ -1,6 +1,7 @@
 #include "core/session/footprint.h"
 
 #include "core/priors/scalar_prior.h"
+#include "core/problem.h"
 
 namespace nupmpc::core {
 
@@ -21,6 +22,20 @@ Footprint EstimateFootprint(const ProblemShape& s) {
   f.flops_per_step = 12.0 * M * M * M + 8.0 * M * M * (L + K) + 8.0 * M * (L + K) + 32.0 * (L + K);
   f.flops_per_pass = f.flops_per_step * static_cast<double>(steps);
   return f;
+}
+
+ProblemShape ShapeOf(const Problem& p) {
+  ProblemShape s;
+  s.num_states = p.num_states;
+  s.num_inputs = p.num_inputs;
+  s.num_outputs = p.num_outputs;
+  s.horizon = p.horizon;
+  s.a_per_step = p.A.size() > 1;
+  s.b_per_step = p.B.size() > 1;
+  s.c_per_step = p.C.size() > 1;
+  s.uncertain_initial_state = !p.initial_state_fixed();
+  s.terminal_cost = p.terminal.has_value();
+  return s;
 }
 
 }  // namespace nupmpc::core

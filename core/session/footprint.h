@@ -31,6 +31,10 @@ struct Footprint {
 
 Footprint EstimateFootprint(const ProblemShape& shape);
 
+struct Problem;
+// The shape of an existing problem.
+ProblemShape ShapeOf(const Problem& problem);
+
 }  // namespace nupmpc::core
 
 #endif  // NUPMPC_CORE_SESSION_FOOTPRINT_H_
