@@ -456,7 +456,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
 
   SolveSummary summary;
   summary.status = SolveStatus::kIterationLimit;
-  bool have_finite = false;
+  bool have_finite = false;  ///< best_ holds a complete, finite iterate of this loop
 
   const auto stop_requested = [&]() { return StopNow(&summary); };
 
@@ -483,6 +483,18 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
           summary.has_plan = true;
           summary.status = SolveStatus::kConverged;
           return true;
+        }
+      }
+      if (!have_finite && AllFinite(candidate_)) {
+        // Not verified, but a complete pass of this solve for this x[0]: until a plain
+        // iterate exists, the solve's plan (a warm solve capped at one pass returns it).
+        const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
+        if (interrupt_->fired()) return false;
+        if (std::isfinite(r.objective) && std::isfinite(r.max_violation)) {
+          std::swap(best_, candidate_);
+          have_finite = true;
+          summary.objective = r.objective;
+          summary.max_violation = r.max_violation;
         }
       }
       const bool keep_going = round < options_.polish_rounds || (progress && round < options_.polish_max_rounds);
