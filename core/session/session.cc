@@ -81,7 +81,6 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Create(Problem problem, Solver
 
 absl::Status Session::Rebuild() {
   NUPMPC_ASSIGN_OR_RETURN(algorithm_, MakeOuterIteration(problem_, options_));
-  flops_per_step_ = EstimateFootprint(ShapeOf(problem_)).flops_per_step;
   evaluator_.Prepare(problem_);
   current_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   candidate_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
@@ -96,6 +95,7 @@ void Session::DerivePriorFlags() {
   has_nonconvex_priors_ = AnyNonconvexPrior(problem_);
   FindHardOutputBounds(problem_, &hard_bounds_);
   elastic_applies_ = options_.elastic_slope > 0.0 && ElasticFormApplies(hard_bounds_, algorithm_->algorithm());
+  flops_per_step_ = EstimateFootprint(ShapeOf(problem_, algorithm_->algorithm())).flops_per_step;
 }
 
 absl::Status Session::SetInitialState(const Eigen::VectorXd& x0) {
