@@ -97,8 +97,12 @@ class StopPoll {
   bool operator()() {
     if (interrupt_ == nullptr) return false;
     if (--left_ > 0) return false;
+    if (interrupt_->CheckNow()) {
+      left_ = 1;  // fired: every later call answers true
+      return true;
+    }
     left_ = interval_;
-    return interrupt_->CheckNow();
+    return false;
   }
 
  private:

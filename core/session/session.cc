@@ -505,7 +505,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
 
   // A warm start carries the previous active set: if it is still right, one exact pass
   // finishes the solve (restarting from the optimum takes one iteration).
-  if (warm && polish_enabled && algorithm_->has_regions()) {
+  if (warm && polish_enabled && algorithm_->has_regions() && !stop_requested()) {
     algorithm_->AdoptCarriedRegionsForPolish();
     if (try_polish()) return summary;
   }

@@ -3,9 +3,12 @@
 // machine is shared and may run under a sanitizer): never an absolute speed.
 #include <atomic>
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <thread>
 
+#include "core/algorithms/interrupt.h"
+#include "core/session/footprint.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/benchmark_instance.h"
@@ -73,6 +76,50 @@ void ExpectNoPlan(const SolveSummary& s, const Solution& solution) {
   EXPECT_EQ(solution.inputs.size(), 0);
   EXPECT_EQ(solution.states.size(), 0);
   EXPECT_EQ(solution.outputs.size(), 0);
+}
+
+// On a small problem the passes never read the clock: the interval (from the flops per
+// step) exceeds the horizon, so a limit costs one clock read per pass, in the driver.
+TEST(Interrupt, SmallProblemsPollOncePerPassAtMost) {
+  testing::RandomProblemSpec spec;
+  spec.M = 2;
+  spec.L = 1;
+  spec.K = 1;
+  spec.N = 20;
+  const Problem p = testing::RandomGaussianProblem(spec);
+  std::atomic<bool> cancel{false};
+  SolveLimits limits;
+  limits.time_limit_seconds = 10.0;
+  limits.cancel = &cancel;
+  for (const Algorithm a : {Algorithm::kIake, Algorithm::kIbffd, Algorithm::kIffbdd}) {
+    const Interrupt interrupt(limits, Clock::now(), EstimateFootprint(ShapeOf(p, a)).flops_per_step);
+    EXPECT_GT(interrupt.pass_interval(), 4 * spec.N) << AlgorithmName(a);
+  }
+  // Large ones poll every step.
+  const Problem large = LargeProblem();
+  const Interrupt interrupt(limits, Clock::now(), EstimateFootprint(ShapeOf(large)).flops_per_step);
+  EXPECT_EQ(interrupt.pass_interval(), 1);
+  // No limits: never armed.
+  EXPECT_EQ(Interrupt(SolveLimits{}, Clock::now(), 1e12).pass_interval(), INT_MAX);
+}
+
+TEST(Interrupt, StopPollReadsEveryIntervalAndStaysFired) {
+  std::atomic<bool> cancel{false};
+  SolveLimits limits;
+  limits.cancel = &cancel;
+  Interrupt interrupt(limits, Clock::now(), 0.0);
+  StopPoll poll(&interrupt, 3);
+  EXPECT_FALSE(poll());
+  cancel = true;
+  EXPECT_FALSE(poll());  // not read yet
+  EXPECT_TRUE(poll());   // third call reads the flag
+  cancel = false;
+  EXPECT_TRUE(poll());  // sticky
+  EXPECT_EQ(*interrupt.reason(), SolveStatus::kCancelled);
+  StopPoll later(&interrupt, 1000);
+  EXPECT_TRUE(later()) << "a new loop sees a fired interrupt at once";
+  StopPoll none(nullptr);
+  EXPECT_FALSE(none());
 }
 
 class LargeSolve : public ::testing::Test {
