@@ -28,7 +28,7 @@ Iake::Iake(const Problem& problem, const SolverOptions& options) : options_(opti
   row_nup_.resize(graph_.num_rows());
   row_factor_.resize(graph_.num_rows());
   pinned_value_.assign(graph_.input_prior.size(), std::numeric_limits<double>::quiet_NaN());
-  Refresh(problem);
+  RefreshDerived();  // the graph has the values already (no second O(M³) terminal decomposition)
   ColdStart();
 }
 
@@ -47,6 +47,10 @@ void Iake::AcquireWorkspace(const Problem& /*problem*/) {
 
 void Iake::Refresh(const Problem& problem) {
   RefreshFactorGraph(problem, &graph_);
+  RefreshDerived();
+}
+
+void Iake::RefreshDerived() {
   double scale = 0.0;
   for (const ScalarPrior& p : graph_.input_prior) {
     if (p.is_constraint()) scale = std::max({scale, std::abs(p.lower), std::abs(p.upper)});

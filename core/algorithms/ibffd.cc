@@ -58,7 +58,8 @@ Ibffd::Ibffd(const Problem& problem, const SolverOptions& options, bool check_ou
   D_.setZero(M, M * std::max(L, 1));
   d_.setZero(M, std::max(L, 1));
   x0_lu_ = Eigen::PartialPivLU<Eigen::MatrixXd>(M);
-  Refresh(problem);
+  // (BuildFactorGraph copied the values: a Refresh() here would redo a terminal weight's
+  // O(M³) eigen-decomposition.)
   ColdStart();
 }
 

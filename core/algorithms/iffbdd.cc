@@ -71,7 +71,7 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(
   for (int n = 0; n <= graph_.N; ++n) {
     for (int r = graph_.row_begin[n]; r < graph_.row_begin[n + 1]; ++r) row_step_[r] = n;
   }
-  Refresh(problem);
+  RefreshDerived();  // the graphs have the values already (no more O(M³) terminal decompositions)
   AcquireWorkspace(problem);
   ColdStart();
 }
@@ -101,6 +101,10 @@ void Iffbdd::AcquireWorkspace(const Problem& problem) {
 void Iffbdd::Refresh(const Problem& problem) {
   RefreshFactorGraph(problem, &graph_);
   if (input_polish_) input_polish_->Refresh(problem);
+  RefreshDerived();
+}
+
+void Iffbdd::RefreshDerived() {
   for (std::size_t i = 0; i < input_factor_.size(); ++i) {
     input_factor_[i] = ScalarFactor::GaussianPart(graph_.input_prior[i]);
   }

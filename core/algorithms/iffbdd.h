@@ -73,6 +73,8 @@ class Iffbdd final : public ActiveSetIteration {
   // constraint inside in region_); if so, hands it region_'s input regions.
   bool StartInputPolish(bool carried);
   bool OutputConstraintsInside() const;  ///< in region_
+  // What Refresh() derives from the graph: the inputs' Gaussian factors (and moments), γ.
+  void RefreshDerived();
   // The region (and polish factor) of constrained row r from its forward prediction and the
   // last pass's duals of the rows after it.
   ScalarFactor DecideRowForward(int row, double yhat, double s, const double* v);
