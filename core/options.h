@@ -112,8 +112,10 @@ absl::Status Validate(const SolverOptions& options);
 // Per-solve limits and control.
 struct SolveLimits {
   int max_iterations = 0;                ///< 0: use SolverOptions.max_iterations
-  double time_limit_seconds = 0.0;       ///< 0: none; wall time for the whole solve
-  const std::atomic<bool>* cancel = nullptr;  ///< checked once per iteration; may be null
+  // Both are polled between passes and inside them, every few time steps (a Session
+  // returns within about one time step of a pass: core/algorithms/interrupt.h).
+  double time_limit_seconds = 0.0;       ///< 0: none; wall time for the whole solve (Solve() to return)
+  const std::atomic<bool>* cancel = nullptr;  ///< may be null; a cancelled solve returns no plan
   bool warm_start = true;                ///< start from the session's carried state if any
 };
 

@@ -24,7 +24,8 @@ enum class SolveStatus {
 const char* SolveStatusName(SolveStatus status);
 
 // Whether a solve must stop now: kCancelled when the limits' flag is raised, kTimeLimit
-// when `elapsed_seconds` reached their time limit, else nothing. Checked once per pass.
+// when `elapsed_seconds` reached their time limit, else nothing. (Session polls the same
+// rule inside its passes too: core/algorithms/interrupt.h.)
 std::optional<SolveStatus> LimitReached(const SolveLimits& limits, double elapsed_seconds);
 
 struct SolveSummary {
@@ -49,10 +50,13 @@ struct SolveSummary {
   int linearisations = 0;
   double nonlinear_violation = 0.0;
 
-  // May u[0] be applied? True unless the solve broke down numerically before any
-  // finite iterate existed.
-  bool IsUsable() const { return status != SolveStatus::kNumericalError || usable_after_error; }
-  bool usable_after_error = false;
+  // Whether the Solution holds a plan computed by this solve for the problem's current
+  // x[0] (u[0] may be applied; the status says how far the solve got). False when the
+  // solve was cancelled, or stopped by its time limit or a numerical breakdown before its
+  // first complete pass with a finite iterate (an accepted polish counts): the Solution's
+  // matrices are then empty and objective and max_violation NaN. A previous solve's plan
+  // is never reported as one (it was computed for another state).
+  bool has_plan = false;
 
   // One line for logs and the CLI. Built on demand so that a solve allocates nothing.
   std::string Describe() const;

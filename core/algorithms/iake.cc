@@ -28,7 +28,7 @@ Iake::Iake(const Problem& problem, const SolverOptions& options) : options_(opti
   row_nup_.resize(graph_.num_rows());
   row_factor_.resize(graph_.num_rows());
   pinned_value_.assign(graph_.input_prior.size(), std::numeric_limits<double>::quiet_NaN());
-  Refresh(problem);
+  RefreshDerived();  // the graph has the values already (no second O(M³) terminal decomposition)
   ColdStart();
 }
 
@@ -47,6 +47,10 @@ void Iake::AcquireWorkspace(const Problem& /*problem*/) {
 
 void Iake::Refresh(const Problem& problem) {
   RefreshFactorGraph(problem, &graph_);
+  RefreshDerived();
+}
+
+void Iake::RefreshDerived() {
   double scale = 0.0;
   for (const ScalarPrior& p : graph_.input_prior) {
     if (p.is_constraint()) scale = std::max({scale, std::abs(p.lower), std::abs(p.upper)});
@@ -107,8 +111,10 @@ int Iake::Iterate(PrimalIterate* out) {
                                                      : ScalarFactor::Pinned(pinned_value_[i]);
   }
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], row_nup_[r]);
-  RunForwardFilter(graph_, input_factor_.data(), row_factor_.data(), /*keep_edges=*/true, &fw_);
-  RunSmootherBackward(graph_, fw_, needs_variances_, &sm_);
+  RunForwardFilter(graph_, input_factor_.data(), row_factor_.data(), /*keep_edges=*/true, &fw_, interrupt_);
+  if (Interrupted()) return -1;  // incomplete: nothing updated
+  RunSmootherBackward(graph_, fw_, needs_variances_, &sm_, interrupt_);
+  if (Interrupted()) return -1;
   out->x0 = sm_.mX0;
   out->u = sm_.mU;
   for (int n = 0; n < graph_.N; ++n) {

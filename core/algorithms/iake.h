@@ -43,6 +43,8 @@ class Iake final : public OuterIteration {
     return prior.is_hard() ? options_.iake_hard_slope : prior.slope;
   }
   ScalarFactor Update(const ScalarPrior& prior, double estimate, double posterior_variance) const;
+  // What Refresh() derives from the graph's priors (variance floor, EM variances).
+  void RefreshDerived();
 
   SolverOptions options_;
   FactorGraph graph_;

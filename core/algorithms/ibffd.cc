@@ -58,7 +58,8 @@ Ibffd::Ibffd(const Problem& problem, const SolverOptions& options, bool check_ou
   D_.setZero(M, M * std::max(L, 1));
   d_.setZero(M, std::max(L, 1));
   x0_lu_ = Eigen::PartialPivLU<Eigen::MatrixXd>(M);
-  Refresh(problem);
+  // (BuildFactorGraph copied the values: a Refresh() here would redo a terminal weight's
+  // O(M³) eigen-decomposition.)
   ColdStart();
 }
 
@@ -71,10 +72,11 @@ void Ibffd::ReleaseWorkspace() {
 }
 
 void Ibffd::AcquireWorkspace(const Problem& /*problem*/) {
-  if (xi_step_.size() > 0) return;
-  W_step_.setZero(graph_.M, graph_.M * (graph_.N + 1));
-  xi_step_.setZero(graph_.M, graph_.N + 1);
-  x_pred_.setZero(graph_.M, graph_.N + 1);
+  if (xi_step_.size() == 0) {
+    W_step_.setZero(graph_.M, graph_.M * (graph_.N + 1));
+    xi_step_.setZero(graph_.M, graph_.N + 1);
+    x_pred_.setZero(graph_.M, graph_.N + 1);
+  }
   if (policy_released_) RecomputePolicy();
 }
 
@@ -82,6 +84,12 @@ void Ibffd::RecomputePolicy() {
   // The same filter over the same regions, shifted as often as the dropped one was.
   LoadPieceFactors(policy_region_);
   BackwardFilter(Sweep::kFull);
+  if (Interrupted()) {
+    // Half a filter is no policy: the solve goes on without one (it is being stopped
+    // anyway); the next AcquireWorkspace() tries again unless a cold start forgets it.
+    has_policy_ = false;
+    return;
+  }
   ShiftPolicy(policy_shifts_);
   has_policy_ = true;
   policy_released_ = false;
@@ -204,7 +212,9 @@ void Ibffd::BackwardFilterImpl(Sweep sweep, const PrimalIterate* predicted) {
   VectorView<MS> xi(xi_.data(), M), z(z_.data(), M);
   W.setZero();
   xi.setZero();
+  StopPoll stop(interrupt_);
   for (int n = g.N; n >= 0; --n) {
+    if (stop()) return;
     for (int r = g.row_begin[n]; r < g.row_begin[n + 1]; ++r) {
       const ScalarPrior& prior = g.row_prior[r];
       if (!prior.has_gaussian()) continue;
@@ -293,7 +303,9 @@ double Ibffd::ForwardDecidingImpl(Pass pass, PrimalIterate* out) {
     outputs_outside_ |= outside > 0.0;
     residual = std::max(residual, outside);
   };
+  StopPoll stop(interrupt_);
   for (int j = 0; j < g.N; ++j) {
+    if (stop()) return pass == Pass::kIterate ? changed : kInfinity;  // incomplete: the driver discards it
     check_outputs(j);
     if (pass == Pass::kPredict) x_pred_.col(j) = x_;
     StateProduct<MS>(z, ConstView<MS, MS>(g.A(j).data(), M, M), x);
@@ -375,6 +387,7 @@ int Ibffd::Iterate(PrimalIterate* out) {
   for (std::size_t i = 0; i < nup_.size(); ++i) factor_[i] = WithGaussianPart(graph_.input_prior[i], nup_[i]);
   BackwardFilter(Sweep::kFull);
   has_policy_ = false;  // the NUP iterate's messages are no policy of an active set
+  if (Interrupted()) return -1;
   const int changed = static_cast<int>(ForwardDeciding(Pass::kIterate, out));
   has_regions_ = true;
   return changed;
@@ -406,12 +419,18 @@ double Ibffd::Polish(PrimalIterate* out) {
     predict_next_ = false;
     LoadShiftedPolicyFactors();
     BackwardFilter(Sweep::kOffsets);
+    if (Interrupted()) return kInfinity;
     LoadPieceFactors(polish_region_);
     ForwardDeciding(Pass::kPredict, out);
+    if (Interrupted()) return kInfinity;
     BackwardFilter(Sweep::kDeciding, out);
   } else {
     LoadPieceFactors(polish_region_);
     BackwardFilter(Sweep::kFull);
+  }
+  if (Interrupted()) {
+    has_policy_ = false;  // W_step_/xi_step_ are half overwritten
+    return kInfinity;
   }
   policy_region_ = polish_region_;  // what the filter integrated (before this pass's proposals)
   policy_shifts_ = 0;

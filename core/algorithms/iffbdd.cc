@@ -71,7 +71,7 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(
   for (int n = 0; n <= graph_.N; ++n) {
     for (int r = graph_.row_begin[n]; r < graph_.row_begin[n + 1]; ++r) row_step_[r] = n;
   }
-  Refresh(problem);
+  RefreshDerived();  // the graphs have the values already (no more O(M³) terminal decompositions)
   AcquireWorkspace(problem);
   ColdStart();
 }
@@ -88,6 +88,7 @@ void Iffbdd::ReleaseWorkspace() {
 void Iffbdd::AcquireWorkspace(const Problem& problem) {
   if (uses_input_polish_ && !input_polish_) {
     input_polish_ = Ibffd::ForInputSubproblem(problem, options_);
+    input_polish_->set_interrupt(interrupt_);
     input_polish_->RestorePolicy(std::move(released_policy_));
     released_policy_ = {};
   }
@@ -100,6 +101,10 @@ void Iffbdd::AcquireWorkspace(const Problem& problem) {
 void Iffbdd::Refresh(const Problem& problem) {
   RefreshFactorGraph(problem, &graph_);
   if (input_polish_) input_polish_->Refresh(problem);
+  RefreshDerived();
+}
+
+void Iffbdd::RefreshDerived() {
   for (std::size_t i = 0; i < input_factor_.size(); ++i) {
     input_factor_[i] = ScalarFactor::GaussianPart(graph_.input_prior[i]);
   }
@@ -143,7 +148,8 @@ void Iffbdd::ShiftWarmStart() {
 
 int Iffbdd::Iterate(PrimalIterate* out) {
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], nup_[r]);
-  RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_);
+  RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
+  if (Interrupted()) return -1;  // incomplete: the carried state is untouched so far
   const int changed = static_cast<int>(Backward(Pass::kIterate, out));
   has_regions_ = true;
   return changed;
@@ -243,10 +249,12 @@ double Iffbdd::Polish(PrimalIterate* out) {
     decide_forward_next_ = false;
     RunForwardFilterDeciding(
         graph_, row_factor_.data(),
-        [this](int r, double yhat, double s, const double* v) { return DecideRowForward(r, yhat, s, v); }, &fw_);
+        [this](int r, double yhat, double s, const double* v) { return DecideRowForward(r, yhat, s, v); }, &fw_,
+        interrupt_);
   } else {
-    RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_);
+    RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
   }
+  if (Interrupted()) return kInfinity;
   return Backward(Pass::kPolish, out);
 }
 
@@ -263,7 +271,11 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   xt.setZero();
   int changed = 0;
   double residual = 0.0;
+  // A step of this pass is cheap (Aᵀx̃ and one dot product per row): its own interval.
+  const double rows_per_step = static_cast<double>(g.num_rows()) / (g.N + 1);
+  StopPoll stop(interrupt_, interrupt_ != nullptr ? interrupt_->IntervalFor(2.0 * M * (M + rows_per_step + g.L)) : 1);
   for (int n = g.N; n >= 0; --n) {
+    if (stop()) return pass == Pass::kIterate ? changed : kInfinity;  // incomplete: the driver discards it
     View<MS, 1>(step_costate_.col(n).data(), M, 1) = xt;
     for (int r = g.row_begin[n + 1] - 1; r >= g.row_begin[n]; --r) {
       row_dual_(r) = 0.0;

@@ -25,6 +25,10 @@ class Iffbdd final : public ActiveSetIteration {
   Iffbdd(const Problem& problem, const SolverOptions& options);
 
   Algorithm algorithm() const override { return Algorithm::kIffbdd; }
+  void set_interrupt(Interrupt* interrupt) override {
+    OuterIteration::set_interrupt(interrupt);
+    if (input_polish_) input_polish_->set_interrupt(interrupt);
+  }
   void Refresh(const Problem& problem) override;
   void RefreshOutputPriors(const Problem& problem) override { RefreshFactorGraphOutputPriors(problem, &graph_); }
   void RefreshInitialState(const Problem& problem) override {
@@ -69,6 +73,8 @@ class Iffbdd final : public ActiveSetIteration {
   // constraint inside in region_); if so, hands it region_'s input regions.
   bool StartInputPolish(bool carried);
   bool OutputConstraintsInside() const;  ///< in region_
+  // What Refresh() derives from the graph: the inputs' Gaussian factors (and moments), γ.
+  void RefreshDerived();
   // The region (and polish factor) of constrained row r from its forward prediction and the
   // last pass's duals of the rows after it.
   ScalarFactor DecideRowForward(int row, double yhat, double s, const double* v);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/message_passing/fixed_size.h"
 #include "core/priors/scalar_rules.h"
@@ -30,11 +31,13 @@ void ObjectiveEvaluator::Prepare(const Problem& p) {
 // Evaluate() runs once per iteration: with dynamic sizes these small products cost as
 // much as the message passing itself (corridor, M = 3), hence the fixed-size kernels.
 template <int MS>
-void ObjectiveEvaluator::Simulate(const Problem& p, const PrimalIterate& it) {
+bool ObjectiveEvaluator::Simulate(const Problem& p, const PrimalIterate& it, Interrupt* interrupt) {
   const int M = p.num_states, N = p.horizon, L = p.num_inputs, K = p.num_outputs;
   const auto state = [&](int n) { return Eigen::Map<StateVector<MS>>(x_.col(n).data(), M); };
   state(0) = it.x0.head(M);
+  StopPoll stop(interrupt, interrupt != nullptr ? interrupt->IntervalFor(2.0 * M * (M + L + K)) : 1);
   for (int n = 0;; ++n) {
+    if (stop()) return false;
     if (K > 0) y_.col(n).noalias() = ConstView<Eigen::Dynamic, MS>(p.C_at(n).data(), K, M) * state(n);
     if (n == N) break;
     auto next = state(n + 1);
@@ -42,12 +45,16 @@ void ObjectiveEvaluator::Simulate(const Problem& p, const PrimalIterate& it) {
     next.noalias() += ConstView<MS, Eigen::Dynamic>(p.B_at(n).data(), M, L) * it.u.col(n);
     if (!p.state_offset.empty()) next += p.state_offset.size() == 1 ? p.state_offset[0] : p.state_offset[n];
   }
+  return true;
 }
 
-ObjectiveEvaluator::Result ObjectiveEvaluator::Evaluate(const Problem& p, const PrimalIterate& it) {
+ObjectiveEvaluator::Result ObjectiveEvaluator::Evaluate(const Problem& p, const PrimalIterate& it,
+                                                        Interrupt* interrupt) {
   Result r;
   const int N = p.horizon, L = p.num_inputs, K = p.num_outputs;
-  DispatchStateSize(p.num_states, [&]<int MS>() { Simulate<MS>(p, it); });
+  if (!DispatchStateSize(p.num_states, [&]<int MS>() { return Simulate<MS>(p, it, interrupt); })) {
+    return Result{std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  }
   if (x0_free_) {
     dx_ = x_.col(0) - p.initial_mean;
     tmp_ = dx_;

@@ -21,7 +21,9 @@ class ObjectiveEvaluator {
 
   // Allocates the trajectories and factors V0 (call again after the problem changes).
   void Prepare(const Problem& problem);
-  Result Evaluate(const Problem& problem, const PrimalIterate& iterate);
+  // `interrupt` (may be null) is polled along the horizon (interrupt.h); once it fired the
+  // result is {NaN, NaN} and the trajectories are partial.
+  Result Evaluate(const Problem& problem, const PrimalIterate& iterate, Interrupt* interrupt = nullptr);
 
   // Trajectories of the last Evaluate(): states M × (N+1), outputs K × (N+1).
   const Eigen::MatrixXd& states() const { return x_; }
@@ -31,8 +33,9 @@ class ObjectiveEvaluator {
   double bound_scale() const { return bound_scale_; }
 
  private:
+  // False if interrupted.
   template <int MS>
-  void Simulate(const Problem& problem, const PrimalIterate& iterate);
+  bool Simulate(const Problem& problem, const PrimalIterate& iterate, Interrupt* interrupt);
 
   Eigen::MatrixXd x_, y_;
   Eigen::VectorXd dx_, tmp_;

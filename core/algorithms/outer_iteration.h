@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "core/algorithms/interrupt.h"
 #include "core/options.h"
 #include "core/priors/scalar_rules.h"
 #include "core/problem.h"
@@ -26,10 +27,19 @@ struct PrimalIterate {
 //
 // Contract: construction allocates everything; Iterate(), Polish(), ShiftWarmStart()
 // and ColdStart() never allocate.
+//
+// Interruption (interrupt.h): while an Interrupt is set, every per-step loop of Iterate(),
+// Polish() and AcquireWorkspace() polls it and returns early once it fired. The pass is
+// then incomplete: its output iterate is garbage and so may be the carried state it was
+// updating; the driver must discard the iterate and ColdStart() before the next pass.
 class OuterIteration {
  public:
   virtual ~OuterIteration() = default;
   virtual Algorithm algorithm() const = 0;
+
+  // The interrupt the passes poll (null: none). Not owned; the driver clears it before
+  // the object it points to goes away.
+  virtual void set_interrupt(Interrupt* interrupt) { interrupt_ = interrupt; }
 
   // Copies new values (same shape) of the problem into the graph (x0, references, bounds,
   // matrices). Keeps the carried NUP state.
@@ -85,6 +95,12 @@ class OuterIteration {
   // problem (an algorithm may rebuild released parts from it). The driver calls it before
   // the iteration loop; Iterate() and Polish() need it.
   virtual void AcquireWorkspace(const Problem& problem) = 0;
+
+ protected:
+  // Whether the interrupt has fired (the pass under way is incomplete).
+  bool Interrupted() const { return interrupt_ != nullptr && interrupt_->fired(); }
+
+  Interrupt* interrupt_ = nullptr;
 };
 
 // The active-set bookkeeping shared by the algorithms that decide every scalar with an

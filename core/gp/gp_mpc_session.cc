@@ -1,6 +1,7 @@
 #include "core/gp/gp_mpc_session.h"
 
 #include <cmath>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
@@ -103,8 +104,20 @@ absl::StatusOr<core::SolveSummary> GpMpcSession::Solve(const core::SolveLimits& 
   summary.max_violation = scp.max_violation;
   summary.warm_started = solved_;
   summary.solve_seconds = scp.seconds;
+  // A plan for this step's state only if the SCP accepted an iterate in this solve or
+  // converged; a cancelled solve returns none.
+  summary.has_plan = scp.has_plan && scp.status != core::SolveStatus::kCancelled;
+  if (!summary.has_plan) {
+    summary.objective = summary.max_violation = std::numeric_limits<double>::quiet_NaN();
+  }
   solved_ = true;
-  if (solution != nullptr) FillSolution(plan_, solution);
+  if (solution != nullptr) {
+    if (summary.has_plan) {
+      FillSolution(plan_, solution);
+    } else {
+      *solution = core::Solution{};
+    }
+  }
   return summary;
 }
 

@@ -360,7 +360,7 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
       summary.status = inner->status;
       break;
     }
-    if (!inner->IsUsable()) {
+    if (!inner->has_plan) {
       rho *= options_.beta_fail;
       if (rho < options_.min_trust_radius) break;
       continue;
@@ -407,6 +407,9 @@ absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, 
   }
   summary.merit = Merit(nominal_u_, nominal_y_, sigmas_of(nominal_lin_), &summary.objective, &summary.max_violation);
   summary.trust_radius = rho;
+  // The nominal plan is this solve's only if a step was accepted or the SCP converged
+  // (else it is the previous plan shifted, or a constant guess).
+  summary.has_plan = summary.accepted > 0 || summary.converged;
   has_warm_ = true;
   if (plan != nullptr) *plan = ScpPlan{nominal_u_, nominal_y_, sigmas};
   summary.seconds = SecondsSince(start);

@@ -78,6 +78,9 @@ struct ScpSummary {
   core::SolveStatus status = core::SolveStatus::kIterationLimit;
   int iterations = 0;        ///< SCP iterations (subproblems solved)
   int accepted = 0;          ///< of which accepted
+  // The returned plan was computed in this solve: some step was accepted or the SCP
+  // converged (else it is the warm plan shifted, or the cold start's constant guess).
+  bool has_plan = false;
   int inner_passes = 0;      ///< NUP message-passing passes over all subproblems
   double merit = 0.0;        ///< exact-penalty cost ϕ of the returned plan (exact GP)
   double objective = 0.0;    ///< its tracking part J

@@ -28,14 +28,16 @@ struct FilterScratch<Eigen::Dynamic> {
 // prediction is known; rows of kind kNone use row_factor[r].
 template <int MS, typename FactorOf>
 void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, FactorOf&& factor_of, bool keep_edges,
-            ForwardFilterWorkspace* ws) {
+            ForwardFilterWorkspace* ws, Interrupt* interrupt) {
   const int M = graph.M, N = graph.N, L = graph.L;
   FilterScratch<MS> s(ws);
+  StopPoll stop(interrupt);
   auto& V = s.V;
   auto& m = s.m;
   V = ConstView<MS, MS>(graph.V0.data(), M, M);
   m = ConstView<MS, 1>(graph.m0.data(), M, 1);
   for (int n = 0; n <= N; ++n) {
+    if (stop()) return;
     // A pinned factor on a row whose prior variance is (numerically) zero carries no
     // information and would divide by ~0: skip it relative to the state's variance scale.
     const double variance_scale = std::max(V.diagonal().maxCoeff(), 0.0);
@@ -156,15 +158,17 @@ void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor
 }
 
 void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws) {
+                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws,
+                      Interrupt* interrupt) {
   if (input_factor != nullptr) LoadInputMoments(graph, input_factor, ws);
   const auto given = [row_factor](int r, double, double, const double*) { return row_factor[r]; };
-  DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, given, keep_edges, ws); });
+  DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, given, keep_edges, ws, interrupt); });
 }
 
 void RunForwardFilterDeciding(const FactorGraph& graph, const ScalarFactor* row_factor, RowDecider decide,
-                              ForwardFilterWorkspace* ws) {
-  DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, decide, /*keep_edges=*/false, ws); });
+                              ForwardFilterWorkspace* ws, Interrupt* interrupt) {
+  DispatchStateSize(graph.M,
+                    [&]<int MS>() { Filter<MS>(graph, row_factor, decide, /*keep_edges=*/false, ws, interrupt); });
 }
 
 }  // namespace nupmpc::core

@@ -5,6 +5,7 @@
 
 #include "Eigen/Core"
 #include "absl/functional/function_ref.h"
+#include "core/algorithms/interrupt.h"
 #include "core/model/factor_graph.h"
 #include "core/priors/scalar_factor.h"
 
@@ -33,8 +34,11 @@ struct ForwardFilterWorkspace {
 // Runs the filter with the given scalar factors: `input_factor` (N·L, must have a moment
 // form: Gaussian inputs) and `row_factor` (one per row; empty factors are skipped).
 // Degenerate rows (prior variance ≈ 0 with a pinned factor, §12.2) are skipped.
+// `interrupt` (may be null) is polled once per time step (interrupt.h); when it fires the
+// filter returns at once and the workspace holds a partial pass.
 void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws);
+                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws,
+                      Interrupt* interrupt = nullptr);
 
 // As RunForwardFilter (inputs as loaded last), but the factor of every row with a
 // constraint kind is chosen when the filter reaches it, from the row's prediction before
@@ -43,7 +47,7 @@ void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor
 // before it in this same pass (a forward Gauss-Seidel sweep).
 using RowDecider = absl::FunctionRef<ScalarFactor(int row, double yhat, double s, const double* v)>;
 void RunForwardFilterDeciding(const FactorGraph& graph, const ScalarFactor* row_factor, RowDecider decide,
-                              ForwardFilterWorkspace* ws);
+                              ForwardFilterWorkspace* ws, Interrupt* interrupt = nullptr);
 
 // Writes the moment form of the input factors into ws->mU / ws->VU. Separate because
 // IFFBDD's inputs stay fixed across iterations.

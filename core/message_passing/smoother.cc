@@ -22,13 +22,15 @@ void SmootherWorkspace::Resize(const FactorGraph& g) {
 }
 
 void RunSmootherBackward(const FactorGraph& g, const ForwardFilterWorkspace& fw, bool with_variances,
-                         SmootherWorkspace* ws) {
+                         SmootherWorkspace* ws, Interrupt* interrupt) {
   const int M = g.M, N = g.N;
+  StopPoll stop(interrupt);
   Eigen::VectorXd& xi = ws->xi;  // ξ̃ = W̃ (m_fwd - m_bwd)
   Eigen::MatrixXd& W = ws->W;    // W̃ = (V_fwd + V_bwd)⁻¹
   xi.setZero();
   W.setZero();
   for (int n = N; n >= 0; --n) {
+    if (stop()) return;
     const auto m_post = fw.m_post.col(n);
     const auto V_post = fw.V_post.middleCols(n * M, M);
     ws->mX.noalias() = m_post;

@@ -23,8 +23,10 @@ struct SmootherWorkspace {
   void Resize(const FactorGraph& graph);
 };
 
+// `interrupt` (may be null) is polled once per time step; when it fires the pass returns
+// at once with a partial result.
 void RunSmootherBackward(const FactorGraph& graph, const ForwardFilterWorkspace& fw, bool with_variances,
-                         SmootherWorkspace* ws);
+                         SmootherWorkspace* ws, Interrupt* interrupt = nullptr);
 
 }  // namespace nupmpc::core
 

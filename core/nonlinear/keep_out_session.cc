@@ -1,7 +1,9 @@
 #include "core/nonlinear/keep_out_session.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
@@ -40,17 +42,22 @@ absl::StatusOr<std::unique_ptr<KeepOutSession>> KeepOutSession::Create(Problem p
                                                             std::move(free_planner), solver_options.max_iterations));
 }
 
-absl::Status KeepOutSession::PlanWithoutRegions(const SolveLimits& limits) {
+absl::StatusOr<bool> KeepOutSession::PlanWithoutRegions(const SolveLimits& limits, SolveSummary* stopped) {
   SolveLimits cold = limits;
   cold.warm_start = false;
   NUPMPC_ASSIGN_OR_RETURN(const SolveSummary summary, free_planner_->Solve(cold, &guess_));
   free_planner_->ReleaseWorkspace();
-  if (!summary.IsUsable()) {
+  if (!summary.has_plan) {
+    if (summary.status == SolveStatus::kTimeLimit || summary.status == SolveStatus::kCancelled) {
+      // Stopped before a first plan: not the problem's fault, and nothing to return.
+      *stopped = summary;
+      return false;
+    }
     // Without regions the plant's problem is convex; failing it is the problem's fault.
     return absl::InvalidArgumentError(
         absl::StrCat("the problem without keep-out regions has no usable plan: ", summary.Describe()));
   }
-  return absl::OkStatus();
+  return true;
 }
 
 absl::Status KeepOutSession::SetInitialState(const Eigen::VectorXd& x0) {
@@ -74,12 +81,37 @@ void KeepOutSession::ShiftWarmStart() {
 }
 
 absl::StatusOr<SolveSummary> KeepOutSession::Solve(const SolveLimits& limits, Solution* solution) {
+  const auto start = std::chrono::steady_clock::now();
   const bool warm = limits.warm_start && has_plan_;
-  if (!warm) NUPMPC_RETURN_IF_ERROR(PlanWithoutRegions(limits));
+  if (!warm) {
+    SolveSummary stopped;
+    NUPMPC_ASSIGN_OR_RETURN(const bool planned, PlanWithoutRegions(limits, &stopped));
+    if (!planned) {
+      stopped.has_plan = false;
+      stopped.warm_started = false;
+      if (solution != nullptr) *solution = Solution{};
+      return stopped;
+    }
+  }
   // The plan starts at the measured state whatever the previous plan predicted.
   guess_.states.row(0) = problem().initial_mean.transpose();
   SolveLimits capped = limits;
   if (capped.max_iterations == 0) capped.max_iterations = max_iterations_;
+  if (limits.time_limit_seconds > 0.0) {
+    // One time limit for the whole solve: the cold start's plan took part of it.
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    capped.time_limit_seconds = limits.time_limit_seconds - elapsed;
+    if (capped.time_limit_seconds <= 0.0) {
+      SolveSummary stopped;
+      stopped.status = SolveStatus::kTimeLimit;
+      stopped.algorithm = algorithm();
+      stopped.has_plan = false;
+      stopped.objective = stopped.max_violation = std::numeric_limits<double>::quiet_NaN();
+      stopped.solve_seconds = elapsed;
+      if (solution != nullptr) *solution = Solution{};
+      return stopped;
+    }
+  }
   NUPMPC_ASSIGN_OR_RETURN(const SequentialSummary sequence, solver_->Solve(guess_, &plan_, capped));
 
   SolveSummary summary = sequence.last_inner;
@@ -91,15 +123,27 @@ absl::StatusOr<SolveSummary> KeepOutSession::Solve(const SolveLimits& limits, So
   if (all_regions_hard_) summary.max_violation = std::max(summary.max_violation, sequence.nonlinear_violation);
   if (!sequence.converged && summary.status == SolveStatus::kConverged) summary.status = SolveStatus::kIterationLimit;
 
-  if (summary.IsUsable()) {
+  // A plan of this solve for this x[0]: some linearised problem produced one (the last
+  // inner solve may have been stopped before its first pass), and the solve was not cancelled.
+  summary.has_plan = sequence.has_plan && summary.status != SolveStatus::kCancelled;
+  if (!summary.has_plan) {
+    summary.objective = summary.max_violation = std::numeric_limits<double>::quiet_NaN();
+    if (!sequence.has_plan) summary.nonlinear_violation = std::numeric_limits<double>::quiet_NaN();
+  }
+  if (sequence.has_plan) {
+    // The next linearisation point (also after a cancel: it is a plan for this state).
     guess_.states = plan_.states;
     guess_.inputs = plan_.inputs;
     has_plan_ = true;
   }
   if (solution != nullptr) {
-    solution->inputs = plan_.inputs;
-    solution->states = plan_.states;
-    solution->outputs = plan_.outputs.leftCols(problem().num_outputs);
+    if (summary.has_plan) {
+      solution->inputs = plan_.inputs;
+      solution->states = plan_.states;
+      solution->outputs = plan_.outputs.leftCols(problem().num_outputs);
+    } else {
+      *solution = Solution{};
+    }
   }
   return summary;
 }

@@ -49,7 +49,9 @@ class KeepOutSession final : public MpcSession {
   // The cold start: the plan without regions (straight through them). Linearising there
   // keeps the path's shape; linearising at rest (every point at x[0]) cut the plane with
   // tangents facing x[0] and took a hundred linearisations to settle on the test scene.
-  absl::Status PlanWithoutRegions(const SolveLimits& limits);
+  // True when it planned; false (with the free planner's summary in `stopped`) when the
+  // limits stopped it before a first plan.
+  absl::StatusOr<bool> PlanWithoutRegions(const SolveLimits& limits, SolveSummary* stopped);
 
   KeepOut keep_out_;
   bool all_regions_hard_ = true;

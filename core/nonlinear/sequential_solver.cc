@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <optional>
 
 #include "absl/strings/str_cat.h"
@@ -167,9 +168,13 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
       return absl::Status(updated.code(), absl::StrCat("linearisation ", k, " around the previous plan: ",
                                                        updated.message()));
     }
-    NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(inner, &plan_));
+    // Into trial_: an inner solve without a plan leaves plan_ (this sequence's last) as it was.
+    NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(inner, &trial_));
     ++summary.linearisations;
     summary.inner_iterations += summary.last_inner.iterations;
+    if (!summary.last_inner.has_plan) break;
+    std::swap(plan_, trial_);
+    summary.has_plan = true;
     const double violation = StepControlActive() ? linearisation_->NonlinearViolation(plan_) : 0.0;
     const double step = AbsoluteStep(point_, plan_);
     if (StepControlRejects(summary, violation, step, limits, accepted_violation)) {
@@ -179,7 +184,6 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
       linearisation_->SetProximalScale(proximal_scale);
       continue;
     }
-    if (!summary.last_inner.IsUsable()) break;
     if (StepControlActive()) {
       accepted = plan_;
       accepted_violation = violation;
@@ -215,8 +219,15 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
   // A rejected last step is not the answer.
   if (accepted.has_value()) plan_ = *std::move(accepted);
   summary.proximal_scale = proximal_scale;
-  summary.nonlinear_violation = linearisation_->NonlinearViolation(plan_);
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!summary.has_plan) {
+    // No linearised problem of this call produced a plan (stopped, or broke down, in the
+    // first one): nothing to return, the next call starts from the caller's guess again.
+    summary.nonlinear_violation = std::numeric_limits<double>::quiet_NaN();
+    if (plan != nullptr) *plan = Solution{};
+    return summary;
+  }
+  summary.nonlinear_violation = linearisation_->NonlinearViolation(plan_);
   if (plan != nullptr) *plan = plan_;
   return summary;
 }

@@ -90,6 +90,9 @@ struct SequentialSummary {
   double last_step = 0.0;          ///< relative plan change at the last linearisation
   double nonlinear_violation = 0.0;
   SolveSummary last_inner;         ///< the last linearised problem's summary
+  // Some linearised problem of this Solve() produced a plan (for the current x[0]): the
+  // returned plan is then the last such one (or the last the step control accepted).
+  bool has_plan = false;
   double solve_seconds = 0.0;
 };
 
@@ -130,7 +133,7 @@ class SequentialSolver {
   SequentialOptions options_;
   Problem problem_;  ///< the current linearisation
   std::unique_ptr<Session> session_;
-  Solution point_, plan_;
+  Solution point_, plan_, trial_;
 };
 
 }  // namespace nupmpc::core

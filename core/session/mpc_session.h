@@ -36,6 +36,10 @@ class MpcSession {
   // For idle sessions: frees scratch memory, keeps problem and warm start.
   virtual void ReleaseWorkspace() = 0;
 
+  // The limits' time limit and cancel flag are honoured inside the passes too (a solve
+  // returns within about one time step of a pass after either). SolveSummary.has_plan says
+  // whether `solution` holds a plan of this solve for the current x[0]; if not, its
+  // matrices are empty and the session stays usable.
   virtual absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) = 0;
 };
 

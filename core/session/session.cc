@@ -9,6 +9,7 @@
 #include "core/algorithms/select.h"
 #include "core/priors/scalar_rules.h"
 #include "core/session/elastic.h"
+#include "core/session/footprint.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::core {
@@ -45,18 +46,6 @@ std::optional<SolveStatus> LimitReached(const SolveLimits& limits, double elapse
   if (limits.time_limit_seconds > 0.0 && elapsed_seconds >= limits.time_limit_seconds) return SolveStatus::kTimeLimit;
   return std::nullopt;
 }
-
-namespace {
-
-// LimitReached since `start`; a reached limit becomes the summary's status.
-bool StopRequested(const SolveLimits& limits, std::chrono::steady_clock::time_point start, SolveSummary* summary) {
-  const std::optional<SolveStatus> stop =
-      LimitReached(limits, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-  if (stop.has_value()) summary->status = *stop;
-  return stop.has_value();
-}
-
-}  // namespace
 
 const char* SolveStatusName(SolveStatus status) {
   switch (status) {
@@ -106,6 +95,7 @@ void Session::DerivePriorFlags() {
   has_nonconvex_priors_ = AnyNonconvexPrior(problem_);
   FindHardOutputBounds(problem_, &hard_bounds_);
   elastic_applies_ = options_.elastic_slope > 0.0 && ElasticFormApplies(hard_bounds_, algorithm_->algorithm());
+  flops_per_step_ = EstimateFootprint(ShapeOf(problem_, algorithm_->algorithm())).flops_per_step;
 }
 
 absl::Status Session::SetInitialState(const Eigen::VectorXd& x0) {
@@ -160,8 +150,20 @@ double Session::RoundDiscreteStep(int n, bool pin) {
   return gap;
 }
 
-void Session::MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
-                                 SolveSummary* summary) {
+bool Session::StopNow(SolveSummary* summary) {
+  if (!interrupt_->CheckNow()) return false;
+  summary->status = *interrupt_->reason();
+  return true;
+}
+
+bool Session::PassInterrupted(SolveSummary* summary) {
+  if (!interrupt_->fired()) return false;
+  summary->status = *interrupt_->reason();
+  pass_interrupted_ = true;
+  return true;
+}
+
+void Session::MakeInputsDiscrete(SolveSummary* summary) {
   const int N = problem_.horizon;
   double gap = 0.0;
   int rounded_steps = 0;
@@ -173,11 +175,15 @@ void Session::MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_
       for (; rounded_steps < end; ++rounded_steps) gap = std::max(gap, RoundDiscreteStep(rounded_steps, true));
       if (rounded_steps == N) break;  // nothing left to make up for the rounding
       for (int pass = 0; pass < options_.discrete_fixing_passes; ++pass) {
-        if (StopRequested(limits, start, summary)) {
+        if (StopNow(summary)) {
           stopped = true;
           break;
         }
         algorithm_->Iterate(&current_);
+        if (PassInterrupted(summary)) {  // an incomplete pass: its plan is discarded
+          stopped = true;
+          break;
+        }
         ++summary->iterations;
         if (!AllFinite(current_)) break;  // keep the last finite plan; its rounded part stays
         // The pinned inputs come back exactly as pinned; the rest is the re-solved plan.
@@ -187,7 +193,7 @@ void Session::MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_
     algorithm_->ReleaseInputPins();
   }
   for (; rounded_steps < N; ++rounded_steps) gap = std::max(gap, RoundDiscreteStep(rounded_steps, false));
-  const ObjectiveEvaluator::Result r = SearchDiscreteNeighbours(limits, start, summary);
+  const ObjectiveEvaluator::Result r = SearchDiscreteNeighbours(summary);
   summary->objective = r.objective;
   summary->max_violation = r.max_violation;
   summary->rounded = true;
@@ -224,9 +230,8 @@ void Session::SetGroupLevel(int n, int first, int last, int level) {
   for (int j = first; j <= last; ++j) best_.u(j, n) = j - first < level ? prior.upper : prior.lower;
 }
 
-ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& limits,
-                                                             std::chrono::steady_clock::time_point start,
-                                                             SolveSummary* summary) {
+ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(SolveSummary* summary) {
+  // The rounded plan's own evaluation is not interrupted: it is the one reported.
   ObjectiveEvaluator::Result current = evaluator_.Evaluate(problem_, best_);
   const double tolerance = options_.violation_tolerance * evaluator_.bound_scale();
   // Lower violation first (beyond the tolerance), then lower J.
@@ -237,9 +242,11 @@ ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& 
     }
     return trial.objective < now.objective - 1e-12 * (1.0 + std::abs(now.objective));
   };
+  // An interrupted evaluation is NaN: never better, so the move is undone (and every
+  // later one returns at once until the loops see the stop).
   const auto try_move = [&](auto&& apply, auto&& undo) {
     apply();
-    const ObjectiveEvaluator::Result trial = evaluator_.Evaluate(problem_, best_);
+    const ObjectiveEvaluator::Result trial = evaluator_.Evaluate(problem_, best_, interrupt_);
     if (better(trial, current)) {
       current = trial;
       ++summary->discrete_moves;
@@ -252,7 +259,7 @@ ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& 
   for (int sweep = 0; sweep < options_.discrete_search_sweeps; ++sweep) {
     bool improved = false;
     for (int n = 0; n < N; ++n) {
-      if (StopRequested(limits, start, summary)) return current;  // discrete, only less improved
+      if (StopNow(summary)) return current;  // discrete, only less improved
       for (int first = 0; first < L; ++first) {
         if (problem_.input_prior(n, first).kind != PriorKind::kBinary) continue;
         const int last = GroupEnd(n, first);
@@ -286,7 +293,7 @@ ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(const SolveLimits& 
         first = last;
       }
     }
-    if (!improved && options_.discrete_pair_reach > 0) improved = TryPairMove(limits, start, summary, try_move);
+    if (!improved && options_.discrete_pair_reach > 0) improved = TryPairMove(summary, try_move);
     if (!improved) break;
   }
   return current;  // best_'s evaluation (Solve() re-evaluates it for the returned trajectories)
@@ -303,11 +310,10 @@ bool Session::MoveOneLevel(int n, int direction, int first, int last) {
 }
 
 template <typename TryMove>
-bool Session::TryPairMove(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
-                          SolveSummary* summary, TryMove& try_move) {
+bool Session::TryPairMove(SolveSummary* summary, TryMove& try_move) {
   const int N = problem_.horizon, L = problem_.num_inputs;
   for (int n1 = 0; n1 < N; ++n1) {
-    if (StopRequested(limits, start, summary)) return false;
+    if (StopNow(summary)) return false;
     for (int first = 0; first < L; ++first) {
       if (problem_.input_prior(n1, first).kind != PriorKind::kBinary) continue;
       const int last = GroupEnd(n1, first);
@@ -341,7 +347,7 @@ bool Session::TryPairMove(const SolveLimits& limits, std::chrono::steady_clock::
 void Session::ShiftWarmStart() {
   if (!has_warm_state_) return;
   algorithm_->ShiftWarmStart();
-  // The carried primal iterate moves too (it is what a cancelled solve would return).
+  // The carried primal iterate moves too (the first pass's settling test compares with it).
   const int N = problem_.horizon;
   for (int n = 0; n + 1 < N; ++n) best_.u.col(n) = best_.u.col(n + 1);
 }
@@ -353,31 +359,57 @@ void Session::ResetWarmStart() {
 
 absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution* solution) {
   NUPMPC_RETURN_IF_ERROR(Validate(limits));
+  // The limits count from here: getting the workspace back after ReleaseWorkspace() may
+  // recompute a carried policy (a backward pass), which polls the interrupt like any pass.
+  const auto start = std::chrono::steady_clock::now();
+  Interrupt interrupt(limits, start, flops_per_step_);
+  interrupt_ = &interrupt;
+  pass_interrupted_ = false;
+  algorithm_->set_interrupt(&interrupt);
   const bool warm = limits.warm_start && has_warm_state_;
   if (!warm) algorithm_->ColdStart();
-  algorithm_->AcquireWorkspace(problem_);  // after ReleaseWorkspace(); outside the timed loop's iterations
-  const auto start = std::chrono::steady_clock::now();
+  algorithm_->AcquireWorkspace(problem_);
   const int max_iterations = IterationCap(limits);
   const bool elastic_possible = elastic_applies_ && options_.elastic_after_iterations < max_iterations;
   SolveLimits hard_limits = limits;
   if (elastic_possible) hard_limits.max_iterations = options_.elastic_after_iterations;
-  SolveSummary summary = RunLoop(hard_limits, warm);
-  if (elastic_possible && summary.status == SolveStatus::kIterationLimit &&
-      summary.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
-    ContinueElastic(limits, start, max_iterations, &summary);
+  SolveSummary summary;
+  if (PassInterrupted(&summary)) {
+    summary.has_plan = false;
+  } else {
+    summary = RunLoop(hard_limits, warm);
+    if (elastic_possible && summary.status == SolveStatus::kIterationLimit &&
+        summary.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
+      ContinueElastic(limits, max_iterations, &summary);
+    }
   }
-  if (has_binary_inputs_ && summary.IsUsable()) MakeInputsDiscrete(limits, start, &summary);
+  if (has_binary_inputs_ && summary.has_plan) MakeInputsDiscrete(&summary);
+  // A limit reached anywhere (also inside an evaluation of the discrete search) is the status.
+  if (interrupt.fired()) summary.status = *interrupt.reason();
+  // A cancelled solve returns no plan, whatever it got to (the caller gave up on it).
+  if (summary.status == SolveStatus::kCancelled) summary.has_plan = false;
   summary.solve_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   summary.warm_started = warm;
   summary.algorithm = algorithm_->algorithm();
-  // The elastic fallback's carried state belongs to the elastic problem, not this one.
-  has_warm_state_ = summary.status != SolveStatus::kNumericalError && !summary.elastic;
+  // The elastic fallback's carried state belongs to the elastic problem, not this one; an
+  // interrupted pass may have left the carried state half updated.
+  has_warm_state_ = summary.status != SolveStatus::kNumericalError && !summary.elastic && !pass_interrupted_;
   if (!has_warm_state_) algorithm_->ColdStart();
+  algorithm_->set_interrupt(nullptr);
+  interrupt_ = nullptr;
+  if (!summary.has_plan) {
+    summary.objective = std::numeric_limits<double>::quiet_NaN();
+    summary.max_violation = std::numeric_limits<double>::quiet_NaN();
+  }
   if (solution != nullptr) {
-    evaluator_.Evaluate(problem_, best_);
-    solution->inputs = best_.u.transpose();
-    solution->states = evaluator_.states().transpose();
-    solution->outputs = evaluator_.outputs().transpose();
+    if (summary.has_plan) {
+      evaluator_.Evaluate(problem_, best_);  // not interrupted: the returned plan's trajectories
+      solution->inputs = best_.u.transpose();
+      solution->states = evaluator_.states().transpose();
+      solution->outputs = evaluator_.outputs().transpose();
+    } else {
+      *solution = Solution{};  // no plan: every matrix empty
+    }
   }
   return summary;
 }
@@ -386,18 +418,10 @@ int Session::IterationCap(const SolveLimits& limits) const {
   return limits.max_iterations > 0 ? std::min(limits.max_iterations, options_.max_iterations) : options_.max_iterations;
 }
 
-void Session::ContinueElastic(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
-                              int max_iterations, SolveSummary* summary) {
-  SolveLimits rest = limits;
+void Session::ContinueElastic(const SolveLimits& limits, int max_iterations, SolveSummary* summary) {
+  SolveLimits rest = limits;  // the time limit and cancel flag act through interrupt_
   rest.max_iterations = max_iterations - summary->iterations;
-  if (limits.time_limit_seconds > 0.0) {
-    rest.time_limit_seconds =
-        limits.time_limit_seconds - std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (rest.time_limit_seconds <= 0.0) {
-      summary->status = SolveStatus::kTimeLimit;
-      return;
-    }
-  }
+  if (StopNow(summary)) return;
   // The same algorithm on the elastic form (ElasticFormApplies checked it), from a cold
   // start: the hard problem's dual iterate may exceed the slope.
   SetBoundSlopes(hard_bounds_, options_.elastic_slope, &problem_);
@@ -405,6 +429,8 @@ void Session::ContinueElastic(const SolveLimits& limits, std::chrono::steady_clo
   algorithm_->ColdStart();
   evaluator_.Prepare(problem_);
   const SolveSummary elastic = RunLoop(rest, /*warm=*/false);
+  // best_ is the elastic plan, or the hard loop's (a plan of this solve too).
+  summary->has_plan = summary->has_plan || elastic.has_plan;
   SetBoundSlopes(hard_bounds_, kInfinity, &problem_);
   algorithm_->RefreshOutputPriors(problem_);
   evaluator_.Prepare(problem_);
@@ -424,17 +450,15 @@ void Session::ContinueElastic(const SolveLimits& limits, std::chrono::steady_clo
 }
 
 SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
-  using Clock = std::chrono::steady_clock;
-  const auto start = Clock::now();
   const int max_iterations = IterationCap(limits);
   const double violation_tolerance = options_.violation_tolerance * evaluator_.bound_scale();
   const bool polish_enabled = options_.polish_after_stable_iterations > 0;
 
   SolveSummary summary;
   summary.status = SolveStatus::kIterationLimit;
-  bool have_finite = false;
+  bool have_finite = false;  ///< best_ holds a complete, finite iterate of this loop
 
-  const auto stop_requested = [&]() { return StopRequested(limits, start, &summary); };
+  const auto stop_requested = [&]() { return StopNow(&summary); };
 
   // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
   // while the deciding residual keeps falling); true if it was accepted.
@@ -443,19 +467,34 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     for (int round = 0; summary.iterations < max_iterations; ++round) {
       if (round > 0 && stop_requested()) return false;  // up to 13 passes: honour the limits
       const double residual = algorithm_->Polish(&candidate_);
+      if (PassInterrupted(&summary)) return false;  // an incomplete pass: discarded
       ++summary.iterations;
       const bool progress = residual < best_residual;
       best_residual = std::min(best_residual, residual);
       if (residual <= violation_tolerance && AllFinite(candidate_)) {
-        const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_);
+        const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
+        if (interrupt_->fired()) return false;  // not evaluated: not accepted
         if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
           std::swap(best_, candidate_);
           algorithm_->AcceptPolishRegions();
           summary.objective = r.objective;
           summary.max_violation = r.max_violation;
           summary.polished = true;
+          summary.has_plan = true;
           summary.status = SolveStatus::kConverged;
           return true;
+        }
+      }
+      if (!have_finite && AllFinite(candidate_)) {
+        // Not verified, but a complete pass of this solve for this x[0]: until a plain
+        // iterate exists, the solve's plan (a warm solve capped at one pass returns it).
+        const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
+        if (interrupt_->fired()) return false;
+        if (std::isfinite(r.objective) && std::isfinite(r.max_violation)) {
+          std::swap(best_, candidate_);
+          have_finite = true;
+          summary.objective = r.objective;
+          summary.max_violation = r.max_violation;
         }
       }
       const bool keep_going = round < options_.polish_rounds || (progress && round < options_.polish_max_rounds);
@@ -466,7 +505,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
 
   // A warm start carries the previous active set: if it is still right, one exact pass
   // finishes the solve (restarting from the optimum takes one iteration).
-  if (warm && polish_enabled && algorithm_->has_regions()) {
+  if (warm && polish_enabled && algorithm_->has_regions() && !stop_requested()) {
     algorithm_->AdoptCarriedRegionsForPolish();
     if (try_polish()) return summary;
   }
@@ -482,9 +521,14 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   while (summary.iterations < max_iterations) {
     if (stop_requested()) break;
     const int changed = algorithm_->Iterate(&current_);
+    if (PassInterrupted(&summary)) break;  // an incomplete pass: discarded
     ++summary.iterations;
     const ObjectiveEvaluator::Result r =
-        AllFinite(current_) ? evaluator_.Evaluate(problem_, current_) : ObjectiveEvaluator::Result{NAN, NAN};
+        AllFinite(current_) ? evaluator_.Evaluate(problem_, current_, interrupt_) : ObjectiveEvaluator::Result{NAN, NAN};
+    if (interrupt_->fired()) {  // a complete pass, not evaluated: not returned either
+      summary.status = *interrupt_->reason();
+      break;
+    }
     if (!std::isfinite(r.objective) || !std::isfinite(r.max_violation)) {
       summary.status = SolveStatus::kNumericalError;
       break;
@@ -512,21 +556,15 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     if (polish_enabled && changed >= 0 && stable >= polish_wait) {
       algorithm_->AdoptRegionsForPolish();
       if (try_polish()) break;
+      if (interrupt_->fired()) break;
       // The active set was not right yet: wait longer before the next attempt.
       stable = 0;
       polish_wait = std::min(2 * polish_wait + 1, 64);
     }
   }
-  if (!have_finite) {
-    // No iterate of this solve survived (limits hit first, or a breakdown): report the
-    // carried plan as it is. It is usable after an error only if it is finite.
-    const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
-    summary.objective = r.objective;
-    summary.max_violation = r.max_violation;
-    summary.usable_after_error = false;
-  } else {
-    summary.usable_after_error = summary.status == SolveStatus::kNumericalError;
-  }
+  // No iterate of this solve survived (limits hit first, or a breakdown): best_ is a
+  // previous solve's plan, for another x[0], and is never reported as a plan.
+  summary.has_plan = have_finite || summary.polished;
   return summary;
 }
 

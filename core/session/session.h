@@ -24,6 +24,10 @@ namespace nupmpc::core {
 //  * SetInitialState / Update: new x0, references, bounds, matrices of the same shape.
 //    Validated before anything changes: a rejected update leaves the session as it was.
 //  * Solve(limits): per-solve iteration cap, wall-time limit, cancel flag, warm or cold.
+//    The limits are polled inside every pass every k time steps (k from the per-step flop
+//    count, core/algorithms/interrupt.h): a stopped solve returns within about one time
+//    step of a pass (and the O(N·M²) simulation of the plan it returns). An interrupted
+//    pass is discarded and the carried warm start reset (the next solve starts cold).
 //    The iteration loop allocates nothing.
 //  * ShiftWarmStart(): receding horizon; the carried state moves one step earlier.
 //
@@ -62,21 +66,23 @@ class Session final : public MpcSession {
   // The elastic fallback (SolverOptions.elastic_slope) for the rest of the solve's budget
   // after the hard problem's loop stopped unconverged: solves the elastic form, restores
   // the hard bounds and reports the plan against them.
-  void ContinueElastic(const SolveLimits& limits, std::chrono::steady_clock::time_point start, int max_iterations,
-                       SolveSummary* summary);
+  void ContinueElastic(const SolveLimits& limits, int max_iterations, SolveSummary* summary);
+  // Between passes: whether the solve's interrupt fires now (reads the clock and the flag);
+  // if so its reason becomes the summary's status.
+  bool StopNow(SolveSummary* summary);
+  // After an algorithm call: whether the interrupt fired inside it (the pass is
+  // incomplete: its iterate is discarded, the carried state is reset after the solve).
+  bool PassInterrupted(SolveSummary* summary);
   // Makes the binary inputs of the returned plan discrete (SolverOptions.discrete_fixing_*:
   // at once, or block by block with re-solves in between) and re-evaluates it.
-  void MakeInputsDiscrete(const SolveLimits& limits, std::chrono::steady_clock::time_point start,
-                          SolveSummary* summary);
+  void MakeInputsDiscrete(SolveSummary* summary);
   // Rounds the binaries of step n of best_ to their nearer levels (an M-level run as its
   // sum), pins them in the algorithm if `pin`, and returns the largest distance moved.
   double RoundDiscreteStep(int n, bool pin);
   // The discrete local search (SolverOptions.discrete_search_sweeps) on the rounded best_;
   // counts its moves in the summary (and a limit that stops it in its status) and returns
   // the evaluation of the plan it ends with.
-  ObjectiveEvaluator::Result SearchDiscreteNeighbours(const SolveLimits& limits,
-                                                      std::chrono::steady_clock::time_point start,
-                                                      SolveSummary* summary);
+  ObjectiveEvaluator::Result SearchDiscreteNeighbours(SolveSummary* summary);
   // When the single moves are exhausted: moves two levels of the same binary group at
   // once, each to a neighbouring step, for every pair of steps that carry a level at most
   // SolverOptions.discrete_pair_reach apart (first improvement). On an integrator, one
@@ -84,8 +90,7 @@ class Session final : public MpcSession {
   // the correction a single move cannot make without shifting everything after it.
   // `try_move` is the search's evaluate-and-keep-or-undo step.
   template <typename TryMove>
-  bool TryPairMove(const SolveLimits& limits, std::chrono::steady_clock::time_point start, SolveSummary* summary,
-                   TryMove& try_move);
+  bool TryPairMove(SolveSummary* summary, TryMove& try_move);
   // Moves one level of the group at inputs first..last from step n to step n + direction
   // (±1) if both steps carry that group, n has a level and the other step room for it.
   bool MoveOneLevel(int n, int direction, int first, int last);
@@ -109,6 +114,11 @@ class Session final : public MpcSession {
   bool has_nonconvex_priors_ = false;  ///< likewise
   HardBounds hard_bounds_;             ///< likewise: the hard output bounds
   bool elastic_applies_ = false;       ///< likewise: the elastic fallback is on and applies
+  double flops_per_step_ = 0.0;        ///< EstimateFootprint: sets the interrupt's poll interval
+  // During Solve(): its interrupt (time limit, cancel flag), polled inside the passes too,
+  // and whether it fired inside an algorithm call.
+  Interrupt* interrupt_ = nullptr;
+  bool pass_interrupted_ = false;
 };
 
 }  // namespace nupmpc::core

@@ -5,6 +5,7 @@
 #include "core/nonlinear/keep_out_session.h"
 
 #include <algorithm>
+#include <atomic>
 
 #include "core/examples/scenarios/obstacle_avoidance.h"
 #include "gmock/gmock.h"
@@ -127,6 +128,43 @@ TEST(KeepOutSession, IterationCapHoldsOverAllLinearisations) {
   ASSERT_TRUE(summary.ok()) << summary.status();
   EXPECT_LE(summary->iterations, 7);
   EXPECT_NE(summary->status, SolveStatus::kConverged);
+}
+
+// has_plan: a cancelled solve (cold or warm) carries no plan and leaves the session
+// usable; a solve after it plans again for the current state.
+TEST(KeepOutSession, ACancelledSolveHasNoPlanAndTheNextOneDoes) {
+  auto session = MakeSession(MixedScene());
+  ASSERT_NE(session, nullptr);
+  std::atomic<bool> cancel{true};
+  SolveLimits cancelled;
+  cancelled.cancel = &cancel;
+  Solution plan;
+  auto cold = session->Solve(cancelled, &plan);
+  ASSERT_TRUE(cold.ok()) << cold.status();
+  EXPECT_EQ(cold->status, SolveStatus::kCancelled) << cold->Describe();
+  EXPECT_FALSE(cold->has_plan);
+  EXPECT_EQ(plan.inputs.size(), 0);
+  EXPECT_EQ(plan.states.size(), 0);
+
+  auto solved = session->Solve(SolveLimits{}, &plan);
+  ASSERT_TRUE(solved.ok()) << solved.status();
+  EXPECT_EQ(solved->status, SolveStatus::kConverged) << solved->Describe();
+  EXPECT_TRUE(solved->has_plan);
+  ASSERT_EQ(plan.inputs.rows(), kHorizon);
+
+  // Warm, after the plant moved: cancelled, then solved for the new state.
+  const Eigen::VectorXd x1 = plan.states.row(1).transpose();
+  session->ShiftWarmStart();
+  ASSERT_TRUE(session->SetInitialState(x1).ok());
+  auto warm = session->Solve(cancelled, &plan);
+  ASSERT_TRUE(warm.ok()) << warm.status();
+  EXPECT_FALSE(warm->has_plan) << warm->Describe();
+  EXPECT_EQ(plan.inputs.size(), 0);
+  auto again = session->Solve(SolveLimits{}, &plan);
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_TRUE(again->has_plan) << again->Describe();
+  ASSERT_EQ(plan.states.rows(), kHorizon + 1);
+  EXPECT_LE((plan.states.row(0).transpose() - x1).cwiseAbs().maxCoeff(), 1e-12);
 }
 
 TEST(KeepOutSession, BadRegionsAreRefusedNamingTheField) {

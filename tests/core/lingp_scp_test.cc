@@ -2,6 +2,7 @@
 // closed loop converges, the plans satisfy the chance and terminal constraints under the
 // exact GP, they equal Ipopt's plans on the same step problems (the full NLP with exact
 // GP mean and variance, an independent solver), and the loop tracks the reference.
+#include <atomic>
 #include <cmath>
 
 #include "core/examples/scenarios/gp_tanh.h"
@@ -65,6 +66,33 @@ TEST(LinGpScp, WarmStepsNeedFewIterations) {
     y = x;  // noise-free here
   }
   EXPECT_LE(warm_iterations, 20 * 4) << "settled warm steps should need a few SCP iterations";
+}
+
+// has_plan: only a plan the SCP accepted (or converged to) in this solve; a cancelled
+// solve returns the nominal plan (the shifted previous one, or the cold guess) with
+// has_plan false.
+TEST(LinGpScp, HasAPlanOnlyAfterAnAcceptedStep) {
+  const GpModel model = TanhModel(200);
+  auto scp = LinGpScp::Create(&model, examples::TanhMpcProblem());
+  ASSERT_TRUE(scp.ok());
+  const Eigen::VectorXd y = Eigen::VectorXd::Constant(1, 0.0), u = Eigen::VectorXd::Constant(1, 0.0);
+  const Eigen::VectorXd r = Eigen::VectorXd::Constant(1, -0.5);
+  std::atomic<bool> cancel{true};
+  core::SolveLimits cancelled;
+  cancelled.cancel = &cancel;
+  ScpPlan plan;
+  auto c = (*scp)->Solve(y, u, r, &plan, &cancelled);
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->status, core::SolveStatus::kCancelled);
+  EXPECT_FALSE(c->has_plan);
+  auto s = (*scp)->Solve(y, u, r, &plan);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_TRUE(s->converged);
+  EXPECT_TRUE(s->has_plan);
+  (*scp)->ShiftWarmStart();
+  c = (*scp)->Solve(y, u, r, &plan, &cancelled);
+  ASSERT_TRUE(c.ok());
+  EXPECT_FALSE(c->has_plan) << "the shifted previous plan is not a plan for this state";
 }
 
 TEST(LinGpScp, BadArgumentsAreRefusedNamingTheField) {

@@ -52,4 +52,20 @@ core::Problem RandomGaussianProblem(const RandomProblemSpec& spec) {
   return p;
 }
 
+core::Problem WithBoxes(core::Problem p, double input_bound, double output_bound) {
+  if (input_bound > 0.0) {
+    for (core::ScalarPrior& prior : p.input_priors) {
+      prior = core::ScalarPrior::Box(-input_bound, input_bound).WithGaussian(prior.mean, prior.variance);
+    }
+  }
+  if (output_bound > 0.0) {
+    for (core::ScalarPrior& prior : p.output_priors) {
+      if (prior.has_gaussian()) {
+        prior = core::ScalarPrior::Box(-output_bound, output_bound).WithGaussian(prior.mean, prior.variance);
+      }
+    }
+  }
+  return p;
+}
+
 }  // namespace nupmpc::testing

@@ -20,6 +20,11 @@ struct RandomProblemSpec {
 // priors except a few free ones; A is scaled to spectral radius ≈ 0.9.
 core::Problem RandomGaussianProblem(const RandomProblemSpec& spec);
 
+// The same problem with hard boxes: every input in [-input_bound, input_bound] (0: none)
+// and every output that has a Gaussian prior in [-output_bound, output_bound] (0: none),
+// each keeping its Gaussian part. Inputs only: IBFFD's problem; outputs: IFFBDD's.
+core::Problem WithBoxes(core::Problem problem, double input_bound, double output_bound);
+
 }  // namespace nupmpc::testing
 
 #endif  // NUPMPC_TESTS_UTIL_RANDOM_PROBLEM_H_
