@@ -26,6 +26,7 @@
 
 #include "absl/flags/flag.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "cli/program_flags.h"
 #include "client/client.h"
@@ -82,13 +83,19 @@ std::string Vector(const std::vector<double>& v) {
   return absl::StrCat("[", absl::StrJoin(parts, ","), "]");
 }
 
+// A number in JSON: null where it is not finite (a result without a plan has NaN objective).
+std::string JsonNumber(double value) {
+  return std::isfinite(value) ? absl::StrFormat("%.17g", value) : std::string("null");
+}
+
 void PrintResult(const v1::SolveResult& r, int L, bool json) {
   // A result without a plan has no inputs to show (SolveResult.has_plan).
   const std::string u0 = nupmpc::HasPlan(r) ? U0(r, L) : (json ? "null" : "none (no plan)");
   if (json) {
-    std::printf("{\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%.6g,"
+    std::printf("{\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%s,"
                 "\"has_plan\":%s,\"u0\":%s}\n",
-                SolveStatusName(r.status()).c_str(), r.objective(), r.iterations(), r.solve_ms(), r.max_violation(),
+                SolveStatusName(r.status()).c_str(), JsonNumber(r.objective()).c_str(), r.iterations(), r.solve_ms(),
+                JsonNumber(r.max_violation()).c_str(),
                 nupmpc::HasPlan(r) ? "true" : "false", u0.c_str());
   } else {
     std::printf("status %s, %u iterations, %.4f ms, J = %.12g, max violation %.3g\nu[0] = %s\n",
@@ -190,10 +197,10 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
     }
     record.push_back({r->status(), r->solve_ms(), rtt_ms, r->max_violation(), has_plan});
     if (json) {
-      std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%.17g,\"iterations\":%u,\"solve_ms\":%.6f,"
-                  "\"round_trip_ms\":%.6f,\"max_violation\":%.6g,\"warm_started\":%s,\"has_plan\":%s,\"u0\":%s}\n",
-                  t, SolveStatusName(r->status()).c_str(), r->objective(), r->iterations(), r->solve_ms(), rtt_ms,
-                  r->max_violation(), r->warm_started() ? "true" : "false", has_plan ? "true" : "false",
+      std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,\"solve_ms\":%.6f,"
+                  "\"round_trip_ms\":%.6f,\"max_violation\":%s,\"warm_started\":%s,\"has_plan\":%s,\"u0\":%s}\n",
+                  t, SolveStatusName(r->status()).c_str(), JsonNumber(r->objective()).c_str(), r->iterations(),
+                  r->solve_ms(), rtt_ms, JsonNumber(r->max_violation()).c_str(), r->warm_started() ? "true" : "false", has_plan ? "true" : "false",
                   Vector(u).c_str());
     } else {
       std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s%s\n", t, SolveStatusName(r->status()).c_str(),

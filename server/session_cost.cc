@@ -45,9 +45,12 @@ absl::Status CheckSessionLimits(const SessionCost& cost, const SizeLimits& limit
   return absl::OkStatus();
 }
 
-core::Footprint Footprint(std::int64_t M, std::int64_t L, std::int64_t K, std::int64_t N, bool per_step) {
+core::Footprint Footprint(std::int64_t M, std::int64_t L, std::int64_t K, std::int64_t N, bool per_step,
+                          bool uncertain_initial_state = false, bool terminal_cost = true) {
   return core::EstimateFootprint({.num_states = M, .num_inputs = L, .num_outputs = K, .horizon = N,
-                                  .a_per_step = per_step, .b_per_step = per_step, .c_per_step = per_step});
+                                  .a_per_step = per_step, .b_per_step = per_step, .c_per_step = per_step,
+                                  .uncertain_initial_state = uncertain_initial_state,
+                                  .terminal_cost = terminal_cost});
 }
 
 absl::StatusOr<SessionCost> GpSpecCost(const v1::GpMpc& gp, const SizeLimits& limits) {
@@ -61,6 +64,7 @@ absl::StatusOr<SessionCost> GpSpecCost(const v1::GpMpc& gp, const SizeLimits& li
   const std::int64_t model_bytes = kGpModelSquares * P * P * kDouble;
   cost.resident_bytes = model_bytes + sub.problem_bytes + sub.carried_bytes;
   cost.scratch_bytes = sub.workspace_bytes;
+  cost.transient_bytes = sub.transient_bytes;
   cost.build_bytes = (gp.model().has_kernel() ? model_bytes : kGpFitSquares * P * P * kDouble) + cost.session_bytes();
   cost.pass_flops = sub.flops_per_pass;
   return cost;
@@ -101,10 +105,12 @@ absl::StatusOr<SessionCost> SpecCost(const v1::ProblemSpec& spec, const SizeLimi
     K += L;
   }
   const bool per_step = model.a_size() > 1 || model.b_size() > 1 || model.c_size() > 1;
-  core::Footprint f = Footprint(M, L, K, N, per_step);
+  core::Footprint f =
+      Footprint(M, L, K, N, per_step, spec.initial_state().has_covariance(), spec.has_terminal());
   SessionCost cost;
   cost.resident_bytes = f.problem_bytes + f.carried_bytes;
   cost.scratch_bytes = f.workspace_bytes;
+  cost.transient_bytes = f.transient_bytes;
   cost.pass_flops = f.flops_per_pass;
   if (spec.has_keep_out()) {
     const std::int64_t regions = spec.keep_out().regions_size();
@@ -116,7 +122,9 @@ absl::StatusOr<SessionCost> SpecCost(const v1::ProblemSpec& spec, const SizeLimi
     cost.scratch_bytes = std::max(cost.scratch_bytes, linearised.workspace_bytes);
     cost.pass_flops = std::max(cost.pass_flops, linearised.flops_per_pass);
   }
-  cost.build_bytes = cost.session_bytes();
+  // Create and Solve allocate transients on top of what the session keeps (the conversion
+  // also holds the spec's problem while the session copies it).
+  cost.build_bytes = cost.session_bytes() + cost.transient_bytes + f.problem_bytes;
   NUPMPC_RETURN_IF_ERROR(CheckSessionLimits(cost, limits));
   return cost;
 }

@@ -415,7 +415,7 @@ void CopyRows(const Eigen::MatrixXd& m, google::protobuf::RepeatedField<double>*
 void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, v1::SolveResult* out) {
   out->set_status(StatusToProto(s.status));
   out->set_iterations(static_cast<unsigned>(s.iterations));
-  const bool has_plan = s.IsUsable() && s.status != core::SolveStatus::kCancelled;
+  const bool has_plan = s.has_plan;
   out->set_has_plan(has_plan);
   out->set_objective(has_plan ? s.objective : std::numeric_limits<double>::quiet_NaN());
   out->set_max_violation(has_plan ? s.max_violation : std::numeric_limits<double>::quiet_NaN());

@@ -229,7 +229,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   entry.compacted = false;  // Solve() took its scratch back
   entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
-  if (transform.active() && summary.IsUsable()) {
+  if (transform.active() && summary.has_plan) {
     transform.MapBack(previous_input, &entry.solution);
     transform.RememberApplied(entry.solution);
   }
@@ -245,7 +245,7 @@ absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limit
   NUPMPC_RETURN_IF_ERROR(MakeLimits(built.default_time_limit_ms, nullptr, call, &limits));
   core::Solution solution;
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, built.solver->Solve(limits, &solution));
-  if (summary.IsUsable()) built.transform.MapBack(built.transform.previous_input, &solution);
+  if (summary.has_plan) built.transform.MapBack(built.transform.previous_input, &solution);
   ResultToProto(summary, solution, out);
   return absl::OkStatus();
 }
