@@ -22,6 +22,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "client/problem_file.h"
 #include "google/protobuf/util/json_util.h"
 #include "grpcpp/grpcpp.h"
@@ -80,6 +81,12 @@ bool WaitUntilServing(int port) {
 
 // masses_N30 as a ProblemSpec file: no recorded states, so the CLI simulates the plant
 // with the inputs it applies. `initial_state` replaces x[0] when given.
+// ctest runs each test of this file as its own process, in parallel: every scratch file
+// carries the process id so that one test never truncates a file another is writing.
+std::filesystem::path ScratchPath(const std::string& name) {
+  return std::filesystem::path(::testing::TempDir()) / absl::StrCat(name, ".", getpid());
+}
+
 std::string WriteSpec(const std::string& name, const std::vector<double>& initial_state = {}) {
   absl::StatusOr<ProblemFile> problem = LoadProblemFile(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
   EXPECT_TRUE(problem.ok()) << problem.status();
@@ -89,7 +96,7 @@ std::string WriteSpec(const std::string& name, const std::vector<double>& initia
   }
   std::string text;
   EXPECT_TRUE(google::protobuf::util::MessageToJsonString(problem->spec, &text).ok());
-  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / name;
+  const std::filesystem::path path = ScratchPath(name);
   std::ofstream(path) << text;
   return path.string();
 }
@@ -108,7 +115,7 @@ struct CliRun {
 template <typename OnStep>
 CliRun RunCli(int port, const std::string& spec, std::vector<std::string> flags, OnStep on_step) {
   CliRun run;
-  const std::filesystem::path err_path = std::filesystem::path(::testing::TempDir()) / "closed_loop_stderr";
+  const std::filesystem::path err_path = ScratchPath("closed_loop_stderr");
   int out[2];
   if (pipe(out) != 0) return run;
   (void)fcntl(out[1], F_SETPIPE_SZ, 4096);
@@ -242,7 +249,7 @@ TEST(ClosedLoopNoPlan, AStepWithoutAPlanHoldsTheLastInput) {
   recorded["u_applied"] =
       nlohmann::json::array({recorded["u_applied"][0], recorded["u_applied"][1], recorded["u_applied"][2]});
   recorded["T"] = 3;
-  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / "masses_N30_bad_state.json";
+  const std::filesystem::path path = ScratchPath("masses_N30_bad_state.json");
   std::ofstream(path) << instance.dump();
 
   const int port = FreePort();
