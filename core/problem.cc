@@ -139,6 +139,41 @@ Problem Problem::TimeInvariant(int M, int L, int K, int N) {
   return p;
 }
 
+absl::Status ValidatePriors(const Problem& p) {
+  const int L = p.num_inputs, K = p.num_outputs;
+  const std::size_t N = static_cast<std::size_t>(p.horizon);
+  if (p.input_priors.size() != N * L) {
+    return absl::InvalidArgumentError(absl::StrCat("Problem.input_priors: expected N*L = ", N * L,
+                                                   " entries, got ", p.input_priors.size()));
+  }
+  if (p.output_priors.size() != (N + 1) * K) {
+    return absl::InvalidArgumentError(absl::StrCat("Problem.output_priors: expected (N+1)*K = ",
+                                                   (N + 1) * K, " entries, got ", p.output_priors.size()));
+  }
+  for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
+    NUPMPC_RETURN_IF_ERROR(ValidatePrior(p.input_priors[i], "Problem.input_priors", static_cast<int>(i)));
+  }
+  for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
+    NUPMPC_RETURN_IF_ERROR(ValidatePrior(p.output_priors[i], "Problem.output_priors", static_cast<int>(i)));
+    if (p.output_priors[i].rounds_with_next) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("Problem.output_priors[", i, "].rounds_with_next: only binary inputs are rounded"));
+    }
+  }
+  for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
+    const ScalarPrior& prior = p.input_priors[i];
+    if (!prior.rounds_with_next) continue;
+    const bool next_fits = (i + 1) % L != 0 && p.input_priors[i + 1].kind == PriorKind::kBinary &&
+                           p.input_priors[i + 1].lower == prior.lower && p.input_priors[i + 1].upper == prior.upper;
+    if (prior.kind != PriorKind::kBinary || !next_fits) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "Problem.input_priors[", i,
+          "].rounds_with_next: must be a binary followed, at the same step, by a binary with the same levels"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 absl::Status Validate(const Problem& p) {
   const auto positive = [](const char* field, int value, int min) -> absl::Status {
     if (value < min) {
@@ -186,35 +221,7 @@ absl::Status Validate(const Problem& p) {
     }
   }
 
-  if (p.input_priors.size() != N * L) {
-    return absl::InvalidArgumentError(absl::StrCat("Problem.input_priors: expected N*L = ", N * L,
-                                                   " entries, got ", p.input_priors.size()));
-  }
-  if (p.output_priors.size() != (N + 1) * K) {
-    return absl::InvalidArgumentError(absl::StrCat("Problem.output_priors: expected (N+1)*K = ",
-                                                   (N + 1) * K, " entries, got ", p.output_priors.size()));
-  }
-  for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
-    NUPMPC_RETURN_IF_ERROR(ValidatePrior(p.input_priors[i], "Problem.input_priors", static_cast<int>(i)));
-  }
-  for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
-    NUPMPC_RETURN_IF_ERROR(ValidatePrior(p.output_priors[i], "Problem.output_priors", static_cast<int>(i)));
-    if (p.output_priors[i].rounds_with_next) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("Problem.output_priors[", i, "].rounds_with_next: only binary inputs are rounded"));
-    }
-  }
-  for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
-    const ScalarPrior& prior = p.input_priors[i];
-    if (!prior.rounds_with_next) continue;
-    const bool next_fits = (i + 1) % L != 0 && p.input_priors[i + 1].kind == PriorKind::kBinary &&
-                           p.input_priors[i + 1].lower == prior.lower && p.input_priors[i + 1].upper == prior.upper;
-    if (prior.kind != PriorKind::kBinary || !next_fits) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "Problem.input_priors[", i,
-          "].rounds_with_next: must be a binary followed, at the same step, by a binary with the same levels"));
-    }
-  }
+  NUPMPC_RETURN_IF_ERROR(ValidatePriors(p));
 
   if (p.terminal.has_value()) {
     const auto& t = *p.terminal;

@@ -23,7 +23,7 @@ if [ ! -f build-asan/CMakeCache.txt ]; then
 fi
 core_tests=(message_passing_test scalar_rules_test nonconvex_priors_test discrete_plan_test input_differences_test
             multilevel_inputs_test keep_out_test keep_out_session_test gp_model_test nonlinear_model_test
-            benchmark_reference_test session_test elastic_test)
+            benchmark_reference_test session_test elastic_test step_update_test)
 server_tests=(service_solve_test service_validation_test service_transform_test service_keep_out_test
               service_gp_test control_stream_lifetime_test worker_pool_test session_strand_test loadtest_test
               server_binary_test service_admission_test service_stream_bounds_test service_malformed_bytes_test

@@ -3,6 +3,7 @@
 #include "absl/strings/str_cat.h"
 #include "server/catch_exceptions.h"
 #include "server/raw_messages.h"
+#include "server/session_factory.h"
 #include "server/step_solver.h"
 #include "spdlog/spdlog.h"
 
@@ -46,12 +47,12 @@ void ControlStream::Begin() {
 }
 
 bool ControlStream::ShouldReadLocked() {
-  if (finish_requested_ || reads_done_) return false;
+  if (phase_ == Phase::kEnding || phase_ == Phase::kFinished || reading_ == Reading::kDone) return false;
   // The client does not read its answers: stop reading its steps (flow control) until it does.
   const bool pause = static_cast<int>(writes_.size()) >= state_->options.max_stream_answers;
-  if (pause && !read_paused_) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
-  read_paused_ = pause;
-  return !read_paused_;
+  if (pause && reading_ != Reading::kPaused) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
+  reading_ = pause ? Reading::kPaused : Reading::kActive;
+  return !pause;
 }
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::ControlRequest& first) {
@@ -90,7 +91,7 @@ void ControlStream::OnReadDone(bool ok) {
   if (!ok) {  // the client half-closed (or went away)
     {
       std::lock_guard<std::mutex> lock(mu_);
-      reads_done_ = true;
+      reading_ = Reading::kDone;
     }
     Pump();
     return;
@@ -98,18 +99,18 @@ void ControlStream::OnReadDone(bool ok) {
   v1::ControlRequest request;
   const absl::Status parsed = ParseRaw(&read_buffer_, &request);
   read_buffer_.Clear();
-  // The next read starts only once the first message is handled, so attached_ cannot
-  // change under this check.
+  // The next read starts only once the first message is handled, so the phase cannot
+  // leave kAwaitingFirst under this check.
   bool first_message;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    first_message = !attached_;
+    first_message = phase_ == Phase::kAwaitingFirst;
   }
   if (first_message && !parsed.ok()) {
     {
       std::lock_guard<std::mutex> lock(mu_);
       final_status_ = state_->ToGrpc(parsed);
-      finish_requested_ = true;
+      phase_ = Phase::kEnding;
     }
     Pump();
     return;
@@ -146,16 +147,15 @@ void ControlStream::StartAttach(v1::ControlRequest first) {
   }
   {
     std::lock_guard<std::mutex> lock(mu_);
-    solving_ = true;  // keeps the stream from finishing while the pool builds the session
+    phase_ = Phase::kAttaching;  // keeps the stream from finishing while the pool builds the session
   }
   const absl::Status queued = state_->pool.TrySubmit(
       [self = shared_from_this(), first = std::move(first)]() mutable { self->AttachAndContinue(std::move(first)); });
   if (queued.ok()) return;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    solving_ = false;
     final_status_ = state_->ToGrpc(queued);
-    finish_requested_ = true;
+    phase_ = Phase::kEnding;
   }
   Pump();
 }
@@ -170,13 +170,12 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
   bool read_more = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    solving_ = false;
     if (!entry.ok()) {
       final_status_ = state_->ToGrpc(entry.status());
-      finish_requested_ = true;
+      phase_ = Phase::kEnding;
     } else {
       entry_ = *std::move(entry);
-      attached_ = true;
+      phase_ = Phase::kOpen;
       if (first.has_step()) {
         EnqueueStepLocked(std::move(first));
       } else {
@@ -276,12 +275,13 @@ void ControlStream::Pump() {
   bool finish = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (finished_) return;
+    if (phase_ == Phase::kFinished) return;
     if (!writing_ && !writes_.empty()) {
       writing_ = true;
       to_write = &writes_.front();  // deque: stays valid while other elements are added at the back
-    } else if (!writing_ && !solving_ && (finish_requested_ || (reads_done_ && !parked_.has_value()))) {
-      finished_ = true;
+    } else if (!writing_ && !solving_ && phase_ != Phase::kAttaching &&
+               (phase_ == Phase::kEnding || (reading_ == Reading::kDone && !parked_.has_value()))) {
+      phase_ = Phase::kFinished;
       finish = true;
     }
   }
@@ -298,9 +298,9 @@ void ControlStream::OnWriteDone(bool ok) {
     if (!ok) {  // the client is gone: drop what is left
       writes_.clear();
       parked_.reset();
-      reads_done_ = true;
+      reading_ = Reading::kDone;
     }
-    resume_reading = read_paused_ && ShouldReadLocked();
+    resume_reading = reading_ == Reading::kPaused && ShouldReadLocked();
   }
   if (resume_reading) StartRead(&read_buffer_);
   Pump();

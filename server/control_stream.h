@@ -68,31 +68,43 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
   void QueueWriteLocked(v1::ControlResponse response);
   // Whether to start the next read now: not while the client leaves max_stream_answers
-  // answers unread (then read_paused_ is set and OnWriteDone resumes). Called with mu_.
+  // answers unread (then reading_ is kPaused and OnWriteDone resumes). Called with mu_.
   bool ShouldReadLocked();
   // Starts the next write / finishes the stream if nothing is left. Called without mu_.
   void Pump();
 
   ServerState* const state_;
-  // Valid until OnDone; read only while the stream cannot finish (a read pending or
-  // `solving_` set).
+  // Valid until OnDone; read only while the stream cannot finish (a read pending, the
+  // phase kAttaching or `solving_` set).
   grpc::CallbackServerContext* const context_;
   std::shared_ptr<ControlStream> grpc_reference_;  // set by Start, dropped by OnDone
   grpc::ByteBuffer read_buffer_;  // raw: parsed by OnReadDone (server/raw_messages.h)
   std::atomic<bool> cancelled_{false};
   bool counted_ = false;  // in state_->control_streams (set by Begin, before any reaction)
 
+  // Where the stream is in its life.
+  enum class Phase {
+    kAwaitingFirst,  // the first message is being read (or looked up, in the reaction)
+    kAttaching,      // the first message's session is being built on the pool
+    kOpen,           // attached: steps are read, solved and answered
+    kEnding,         // no more work: queued answers are written, then Finish(final_status_)
+    kFinished,       // Finish was called
+  };
+  // Whether a read is pending.
+  enum class Reading {
+    kActive,  // a read is pending (or starts as soon as the current message is handled)
+    kPaused,  // max_stream_answers answers wait for the client: OnWriteDone resumes
+    kDone,    // the client half-closed or went away
+  };
+
   std::mutex mu_;
+  Phase phase_ = Phase::kAwaitingFirst;
+  Reading reading_ = Reading::kActive;
   std::shared_ptr<SessionEntry> entry_;        // set by the first message
-  bool attached_ = false;
   std::optional<v1::ControlRequest> parked_;   // the newest step not yet started
-  bool solving_ = false;                       // a solve (or the attach) is on the pool
+  bool solving_ = false;                       // a step is on the pool (in its session's strand)
   std::deque<grpc::ByteBuffer> writes_;        // serialized answers; front is being written when writing_
   bool writing_ = false;
-  bool reads_done_ = false;
-  bool read_paused_ = false;  // no read pending because too many answers wait (flow control)
-  bool finish_requested_ = false;
-  bool finished_ = false;
   grpc::Status final_status_;
 };
 

@@ -6,7 +6,9 @@
 #include "server/control_stream.h"
 #include "server/gp_conversion.h"
 #include "server/process_memory.h"
+#include "server/result_conversion.h"
 #include "server/session_cost.h"
+#include "server/session_factory.h"
 #include "server/step_solver.h"
 #include "server/unary_call.h"
 #include "server/version.h"
@@ -115,12 +117,13 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
     call->Reply(absl::FailedPreconditionError("session_id: the session belongs to a Control stream and closes with it"));
     return call;
   }
-  const absl::Status status = state_->registry.Close(id);
-  if (status.ok()) {
-    spdlog::info("session {} closed; memory budget: {} MiB reserved of {} MiB", id, state_->budget.reserved() >> 20,
-                 state_->budget.capacity() >> 20);
-  }
-  call->Reply(status);
+  // Answered once the session's memory is given back (after a solve in flight).
+  const absl::Status status = state_->registry.Close(id, [state = state_, call, id] {
+    spdlog::info("session {} closed; memory budget: {} MiB reserved of {} MiB", id, state->budget.reserved() >> 20,
+                 state->budget.capacity() >> 20);
+    call->Reply(absl::OkStatus());
+  });
+  if (!status.ok()) call->Reply(status);
   return call;
 }
 

@@ -40,7 +40,7 @@ struct ServerState {
   explicit ServerState(const ServerOptions& o)
       : options(o),
         budget(o.memory_budget_bytes > 0 ? o.memory_budget_bytes : DefaultMemoryBudgetBytes()),
-        registry(o.max_sessions),
+        registry(o.max_sessions, pool),  // only kept: the pool is built next, and joined first
         pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms) {}
   ServerOptions options;
   MemoryBudget budget;  ///< before the registry: sessions give their reservations back to it

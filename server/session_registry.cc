@@ -8,7 +8,7 @@
 #include "absl/strings/escaping.h"
 #include "absl/strings/str_format.h"
 #include "core/util/status_macros.h"
-#include "server/spec_conversion.h"
+#include "server/result_conversion.h"
 
 namespace nupmpc::server {
 
@@ -37,20 +37,16 @@ std::string SessionRegistry::NewId() {
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
                                                                    double default_time_limit_ms,
-                                                                   bool owned_by_stream, InputTransform transform,
-                                                                   SessionMemory memory) {
+                                                                   bool owned_by_stream, SessionMemory memory) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owned_by_stream = owned_by_stream;
   entry->default_time_limit_ms = default_time_limit_ms;
   entry->algorithm = solver->algorithm();
-  const core::Problem& p = solver->problem();
-  const bool own = transform.active();  // the client's dimensions, not the core's
-  entry->dims.set_num_states(own ? transform.num_states : p.num_states);
-  entry->dims.set_num_inputs(own ? transform.num_inputs : p.num_inputs);
-  entry->dims.set_num_outputs(own ? transform.num_outputs : p.num_outputs);
-  entry->dims.set_horizon(p.horizon);
-  entry->x0.setZero(entry->dims.num_states());
-  entry->transform = std::move(transform);
+  const core::Dimensions dims = solver->dimensions();
+  entry->dims.set_num_states(dims.num_states);
+  entry->dims.set_num_inputs(dims.num_inputs);
+  entry->dims.set_num_outputs(dims.num_outputs);
+  entry->dims.set_horizon(dims.horizon);
   entry->solver = std::move(solver);
   entry->memory = std::move(memory);
   entry->Touch();
@@ -87,7 +83,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Find(const std::s
   return it->second;
 }
 
-absl::Status SessionRegistry::Close(const std::string& id) {
+absl::Status SessionRegistry::Close(const std::string& id, std::function<void()> closed) {
   NUPMPC_RETURN_IF_ERROR(CheckSessionIdForm(id));
   std::shared_ptr<SessionEntry> entry;
   {
@@ -97,12 +93,13 @@ absl::Status SessionRegistry::Close(const std::string& id) {
     entry = std::move(it->second);
     sessions_.erase(it);
   }
-  // Mark it closed after any solve in flight; the memory goes with the last reference.
-  std::lock_guard<std::mutex> lock(entry->mu);
-  entry->closed = true;
-  entry->solver.reset();
-  entry->memory = SessionMemory{};
   closed_total_.fetch_add(1, std::memory_order_relaxed);
+  SessionStrand::RunExclusive(entry->strand, pool_, [entry, closed = std::move(closed)] {
+    entry->closed = true;
+    entry->solver.reset();
+    entry->memory = SessionMemory{};
+    if (closed) closed();
+  });
   return absl::OkStatus();
 }
 
@@ -110,12 +107,14 @@ int SessionRegistry::CompactIdle(double idle_seconds) {
   int compacted = 0;
   for (const std::shared_ptr<SessionEntry>& entry : List()) {
     if (entry->idle_seconds() <= idle_seconds) continue;
-    std::unique_lock<std::mutex> lock(entry->mu, std::try_to_lock);
-    if (!lock.owns_lock() || entry->closed || entry->compacted) continue;
-    entry->solver->ReleaseWorkspace();
-    entry->memory.scratch.Release();
-    entry->compacted = true;
-    ++compacted;
+    // A busy session is not idle: skip it.
+    SessionStrand::RunNowIfIdle(entry->strand, pool_, [&] {
+      if (entry->closed || entry->compacted) return;
+      entry->solver->ReleaseWorkspace();
+      entry->memory.scratch.Release();
+      entry->compacted = true;
+      ++compacted;
+    });
   }
   return compacted;
 }

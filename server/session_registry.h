@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -13,7 +14,6 @@
 #include "absl/strings/string_view.h"
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
-#include "server/input_transform.h"
 #include "server/memory_budget.h"
 #include "server/session_strand.h"
 
@@ -29,25 +29,22 @@ struct SessionMemory {
   std::int64_t scratch_bytes = 0;  ///< what `scratch` holds when the scratch is allocated
 };
 
-// One client session: the core session (problem, workspace, warm start). `mu` serialises
-// solves: one solve at a time per session.
+// One client session: the core session (problem, workspace, warm start). Its strand
+// serialises everything that uses the solver (solves, compaction, closing): the fields
+// marked "strand" are used only by the task that holds it.
 struct SessionEntry {
   std::string id;
   bool owned_by_stream = false;
   double default_time_limit_ms = 0.0;  ///< from the spec's options
-  v1::Dimensions dims;                 ///< fixed at creation (the spec's, before any transform)
+  v1::Dimensions dims;                 ///< fixed at creation: the caller's (MpcSession::dimensions)
 
-  std::mutex mu;
-  std::unique_ptr<core::MpcSession> solver;  ///< guarded by mu; holds the session's problem
-  Eigen::VectorXd x0;                     ///< guarded by mu; the measured state being applied
-  InputTransform transform;               ///< guarded by mu; multi-level / Δu mapping
-  bool compacted = false;                 ///< guarded by mu: solver scratch released while idle
-  core::Solution solution;                ///< guarded by mu; reused buffer
-  bool closed = false;                    ///< guarded by mu: removed from the registry
-  SessionMemory memory;                   ///< guarded by mu
+  std::unique_ptr<core::MpcSession> solver;  ///< strand; holds the session's problem
+  bool compacted = false;                    ///< strand: solver scratch released while idle
+  core::Solution solution;                   ///< strand; reused buffer
+  bool closed = false;                       ///< strand: removed from the registry
+  SessionMemory memory;                      ///< strand
 
-  // Solves of this session go through its strand: one at a time, none holding a worker
-  // while another one runs.
+  // One task at a time, none holding a worker while another one runs.
   const std::shared_ptr<SessionStrand> strand = std::make_shared<SessionStrand>();
 
   std::atomic<bool> attached{false};  ///< a Control stream uses it
@@ -72,16 +69,19 @@ std::string QuoteSessionId(absl::string_view id);
 // expiry. Thread-safe; lookups are short critical sections (never held during a solve).
 class SessionRegistry {
  public:
-  explicit SessionRegistry(int max_sessions) : max_sessions_(max_sessions) {}
+  // `pool` runs the sessions' strands (closing or compacting a busy session queues on it).
+  SessionRegistry(int max_sessions, WorkerPool& pool) : max_sessions_(max_sessions), pool_(pool) {}
 
   // RESOURCE_EXHAUSTED when full.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver,
                                                     double default_time_limit_ms, bool owned_by_stream,
-                                                    InputTransform transform = {}, SessionMemory memory = {});
+                                                    SessionMemory memory = {});
   // INVALID_ARGUMENT for malformed ids, NOT_FOUND for unknown (or closed, or expired) ones.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id) const;
-  // Frees the session's solver and gives its memory back at once (after a solve in flight).
-  absl::Status Close(const std::string& id);
+  // Removes the session at once; frees its solver and gives its memory back now, or right
+  // after a solve in flight (solves waiting for it then find it closed), and then calls
+  // `closed` (if given). Not called when the id is refused.
+  absl::Status Close(const std::string& id, std::function<void()> closed = nullptr);
   std::vector<std::shared_ptr<SessionEntry>> List() const;
   // Closes sessions idle longer than `idle_seconds` that no stream is attached to.
   int ExpireIdle(double idle_seconds);
@@ -97,6 +97,7 @@ class SessionRegistry {
  private:
   static std::string NewId();
   const int max_sessions_;
+  WorkerPool& pool_;
   mutable std::mutex mu_;
   std::unordered_map<std::string, std::shared_ptr<SessionEntry>> sessions_;
   std::atomic<std::uint64_t> closed_total_{0};

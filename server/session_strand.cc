@@ -54,6 +54,33 @@ void SessionStrand::StartNext(const std::shared_ptr<SessionStrand>& strand, Work
   }
 }
 
+bool SessionStrand::RunNowIfIdle(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
+                                 const std::function<void()>& work) {
+  {
+    std::lock_guard<std::mutex> lock(strand->mu_);
+    if (strand->busy_) return false;
+    strand->busy_ = true;
+  }
+  work();
+  StartNext(strand, pool);  // tasks may have queued up while it ran
+  return true;
+}
+
+void SessionStrand::RunExclusive(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
+                                 std::function<void()> work) {
+  {
+    std::lock_guard<std::mutex> lock(strand->mu_);
+    if (strand->busy_) {
+      // StartNext calls `fail` with the strand still held, so the work is exclusive either way.
+      strand->waiting_.push_front({work, [work](absl::Status) { work(); }, 0.0});
+      return;
+    }
+    strand->busy_ = true;
+  }
+  work();
+  StartNext(strand, pool);
+}
+
 int SessionStrand::waiting() const {
   std::lock_guard<std::mutex> lock(mu_);
   return static_cast<int>(waiting_.size());

@@ -14,8 +14,11 @@ namespace nupmpc::server {
 // One session's work, run one task at a time on the worker pool without a worker ever
 // waiting for the session: while a task of the session is queued or running, later ones
 // wait here and are handed to the pool when it finishes. Two unary Solves on one session
-// thus occupy at most one worker (the session's lock would otherwise hold the second
-// worker idle), and the other sessions keep the rest of the pool.
+// thus occupy at most one worker (a lock would hold the second worker idle), and the
+// other sessions keep the rest of the pool.
+//
+// The strand is the session's only serialiser: solves, idle compaction and closing all
+// run as its tasks, so whatever runs a task has the session to itself.
 class SessionStrand {
  public:
   // Solves that may wait for one session; more are refused (RESOURCE_EXHAUSTED).
@@ -31,6 +34,17 @@ class SessionStrand {
   // once. Otherwise it was not taken and the caller answers with the status: the pool's
   // refusal, or RESOURCE_EXHAUSTED when kMaxWaiting tasks already wait for this session.
   static absl::Status Submit(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task);
+
+  // Runs `work` now, on the calling thread, if no task of this session is queued or
+  // running, and returns true; else returns false and does nothing. For short work that
+  // may be skipped while the session is busy (idle compaction).
+  static bool RunNowIfIdle(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
+                           const std::function<void()>& work);
+  // Runs `work` with the session to itself and never refuses it: now on the calling thread
+  // if the strand is idle, else right after the task in flight, before those that wait (on
+  // a worker, or on the thread that finds the pool refusing it). For short work that must
+  // happen (closing a session: the waiting solves then find it closed).
+  static void RunExclusive(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, std::function<void()> work);
 
   int waiting() const;
 

@@ -333,114 +333,13 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, 
   return out;
 }
 
-absl::Status ReadStepState(const v1::Step& step, const char* field, int num_states, Eigen::VectorXd* x0) {
-  if (!v1::WarmStart_IsValid(step.warm_start())) {
-    return Invalid(field, ".warm_start = ", static_cast<int>(step.warm_start()), ": unknown");
-  }
-  if (!(step.time_limit_ms() >= 0.0) || !std::isfinite(step.time_limit_ms())) {
-    return Invalid(field, ".time_limit_ms = ", step.time_limit_ms(), ": must be finite and >= 0");
-  }
-  if (step.state_size() == 0) return absl::OkStatus();
-  if (step.state_size() != num_states) {
-    return absl::FailedPreconditionError(absl::StrCat(field, ".state: expected ", num_states,
-                                                      " values (the session's num_states), got ", step.state_size()));
-  }
-  for (int i = 0; i < num_states; ++i) {
-    if (!std::isfinite(step.state(i))) return Invalid(field, ".state[", i, "] = ", step.state(i), ": must be finite");
-  }
-  *x0 = Eigen::Map<const Eigen::VectorXd>(step.state().data(), num_states);
-  return absl::OkStatus();
-}
-
-absl::Status ApplyPriorUpdate(const v1::PriorUpdate& u, const std::string& base, core::Problem* p) {
-  const int L = p->num_inputs, K = p->num_outputs, N = p->horizon;
-  if (u.shift()) {
-    for (int n = 0; n + 1 < N; ++n) {
-      for (int l = 0; l < L; ++l) p->mutable_input_prior(n, l) = p->input_prior(n + 1, l);
-    }
-    for (int n = 0; n < N; ++n) {
-      for (int k = 0; k < K; ++k) p->mutable_output_prior(n, k) = p->output_prior(n + 1, k);
-    }
-  }
-  for (int i = 0; i < u.inputs_size(); ++i) {
-    const auto& e = u.inputs(i);
-    if (e.index() >= static_cast<unsigned>(L)) {
-      return Invalid(Path(base, "inputs", i), ".index = ", e.index(), ": must be < num_inputs = ", L);
-    }
-    NUPMPC_RETURN_IF_ERROR(ComponentFromProto(e.prior(), N, absl::StrCat(Path(base, "inputs", i), ".prior"),
-                                              &p->input_priors, L, static_cast<int>(e.index())));
-  }
-  for (int i = 0; i < u.outputs_size(); ++i) {
-    const auto& e = u.outputs(i);
-    if (e.index() >= static_cast<unsigned>(K)) {
-      return Invalid(Path(base, "outputs", i), ".index = ", e.index(), ": must be < num_outputs = ", K);
-    }
-    NUPMPC_RETURN_IF_ERROR(ComponentFromProto(e.prior(), N + 1, absl::StrCat(Path(base, "outputs", i), ".prior"),
-                                              &p->output_priors, K, static_cast<int>(e.index())));
-  }
-  return absl::OkStatus();
-}
-
-v1::Algorithm AlgorithmToProto(core::Algorithm a) {
-  switch (a) {
-    case core::Algorithm::kIake: return v1::ALGORITHM_IAKE;
-    case core::Algorithm::kIbffd: return v1::ALGORITHM_IBFFD;
-    case core::Algorithm::kIffbdd: return v1::ALGORITHM_IFFBDD;
-    case core::Algorithm::kAuto: break;
-  }
-  return v1::ALGORITHM_UNSPECIFIED;
-}
-
-namespace {
-v1::SolveStatus StatusToProto(core::SolveStatus s) {
-  switch (s) {
-    case core::SolveStatus::kConverged: return v1::SOLVE_STATUS_CONVERGED;
-    case core::SolveStatus::kIterationLimit: return v1::SOLVE_STATUS_ITERATION_LIMIT;
-    case core::SolveStatus::kTimeLimit: return v1::SOLVE_STATUS_TIME_LIMIT;
-    case core::SolveStatus::kNumericalError: return v1::SOLVE_STATUS_NUMERICAL_ERROR;
-    case core::SolveStatus::kCancelled: return v1::SOLVE_STATUS_CANCELLED;
-    case core::SolveStatus::kInfeasible: return v1::SOLVE_STATUS_INFEASIBLE;
-  }
-  return v1::SOLVE_STATUS_UNSPECIFIED;
-}
-
-// Row-major (step-major) copy of a matrix whose rows are steps.
-void CopyRows(const Eigen::MatrixXd& m, google::protobuf::RepeatedField<double>* out) {
-  out->Resize(static_cast<int>(m.size()), 0.0);
-  Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(out->mutable_data(), m.rows(),
-                                                                                     m.cols()) = m;
-}
-}  // namespace
-
-void ResultToProto(const core::SolveSummary& s, const core::Solution& solution, v1::SolveResult* out) {
-  out->set_status(StatusToProto(s.status));
-  out->set_iterations(static_cast<unsigned>(s.iterations));
-  const bool has_plan = s.has_plan;
-  out->set_has_plan(has_plan);
-  out->set_objective(has_plan ? s.objective : std::numeric_limits<double>::quiet_NaN());
-  out->set_max_violation(has_plan ? s.max_violation : std::numeric_limits<double>::quiet_NaN());
-  out->set_solve_ms(s.solve_seconds * 1e3);
-  out->set_algorithm(AlgorithmToProto(s.algorithm));
-  out->set_warm_started(s.warm_started);
-  out->set_polished(s.polished);
-  out->set_rounded(s.rounded);
-  out->set_discrete_gap(s.discrete_gap);
-  out->set_discrete_moves(static_cast<uint32_t>(s.discrete_moves));
-  out->set_linearisations(static_cast<unsigned>(s.linearisations));
-  out->set_keep_out_violation(s.nonlinear_violation);
-  // Without a plan for this step's state nothing of one is sent (SolveResult.has_plan).
-  if (!has_plan) return;
-  CopyRows(solution.inputs, out->mutable_inputs());
-  CopyRows(solution.outputs, out->mutable_outputs());
-  CopyRows(solution.states, out->mutable_states());
-  CopyRows(solution.output_stddev, out->mutable_output_stddev());
-}
-
 namespace {
 void SetMatrix(const Eigen::MatrixXd& m, v1::Matrix* out) {
   out->set_rows(static_cast<unsigned>(m.rows()));
   out->set_cols(static_cast<unsigned>(m.cols()));
-  CopyRows(m, out->mutable_data());
+  out->mutable_data()->Resize(static_cast<int>(m.size()), 0.0);
+  Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(out->mutable_data()->mutable_data(),
+                                                                                     m.rows(), m.cols()) = m;
 }
 
 // Per-step arrays of one component; compressed to one value when constant.

@@ -1,8 +1,9 @@
 #ifndef NUPMPC_SERVER_SPEC_CONVERSION_H_
 #define NUPMPC_SERVER_SPEC_CONVERSION_H_
 
-// proto ⇄ core conversion. Everything a client sends passes through here before it reaches
-// the core: every error names the proto field path (e.g. "spec.model.a[2]") and the rule.
+// ProblemSpec → core conversion. Every spec a client sends passes through here before it
+// reaches the core: every error names the proto field path (e.g. "spec.model.a[2]") and
+// the rule. (SpecFromProblem, the other direction, is for tools that read problem files.)
 
 #include "absl/status/statusor.h"
 #include "core/options.h"
@@ -49,20 +50,6 @@ absl::Status ComponentPriorsFromProto(const v1::ComponentPrior& component, int s
 
 // The solver options of a spec (defaults where fields are 0).
 absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& options, const SizeLimits& limits);
-
-// Checks the fields of a step that do not depend on its update (warm_start, time limit,
-// state size and finiteness) and copies its state, if it has one, to *x0 (same size as
-// the state). Writes nothing when it fails.
-absl::Status ReadStepState(const v1::Step& step, const char* field, int num_states, Eigen::VectorXd* x0);
-
-// Applies a prior update (shift, then replaced components) to a problem. `field` is the
-// path used in messages ("step.update"). A bad entry may fail half-way: pass a copy.
-absl::Status ApplyPriorUpdate(const v1::PriorUpdate& update, const std::string& field, core::Problem* problem);
-
-// Fills a SolveResult from the core's summary and solution.
-void ResultToProto(const core::SolveSummary& summary, const core::Solution& solution, v1::SolveResult* out);
-
-v1::Algorithm AlgorithmToProto(core::Algorithm algorithm);
 
 // The spec of a core problem (for tools that read problems from files). Fails when a
 // component mixes prior kinds that one ComponentPrior cannot express.

@@ -7,16 +7,6 @@
 #include "core/util/status_macros.h"
 
 namespace nupmpc::gp {
-namespace {
-
-// Every field but the Gaussian mean (the reference lives there).
-bool SameExceptMean(const core::ScalarPrior& a, const core::ScalarPrior& b) {
-  return a.kind == b.kind && a.variance == b.variance && a.lower == b.lower && a.upper == b.upper &&
-         a.slope == b.slope && a.radius == b.radius && a.exponent == b.exponent && a.em == b.em &&
-         a.initial_variance == b.initial_variance && a.rounds_with_next == b.rounds_with_next;
-}
-
-}  // namespace
 
 GpMpcSession::GpMpcSession(std::shared_ptr<const GpModel> model, GpMpcProblem problem)
     : model_(std::move(model)), problem_(std::move(problem)) {}
@@ -62,30 +52,28 @@ absl::Status GpMpcSession::SetInitialState(const Eigen::VectorXd& window) {
   return absl::OkStatus();
 }
 
-absl::Status GpMpcSession::Update(const core::Problem& problem) {
-  NUPMPC_RETURN_IF_ERROR(core::CheckSameShape(shape_, problem));
-  for (std::size_t i = 0; i < shape_.input_priors.size(); ++i) {
-    const core::ScalarPrior &now = shape_.input_priors[i], &next = problem.input_priors[i];
-    if (!SameExceptMean(now, next) || now.mean != next.mean) {
-      return absl::FailedPreconditionError(absl::StrCat(
-          "input_priors[", i, "]: a GP session's input box is fixed at creation (only the reference changes)"));
-    }
+absl::Status GpMpcSession::Apply(const core::StepUpdate& update) {
+  if (update.changes_priors()) {
+    return absl::FailedPreconditionError(
+        "update: a GP session's costs and input box are fixed at creation; it takes a new reference in reference");
   }
-  for (std::size_t i = 0; i < shape_.output_priors.size(); ++i) {
-    const bool measured_step = i == 0;  // y[0] is measured: no prior to change
-    if (!SameExceptMean(shape_.output_priors[i], problem.output_priors[i]) ||
-        (measured_step && shape_.output_priors[i].mean != problem.output_priors[i].mean)) {
-      return absl::FailedPreconditionError(absl::StrCat(
-          "output_priors[", i, "]: a GP session takes new reference values (targets of steps 1..H) only"));
+  NUPMPC_RETURN_IF_ERROR(core::RefusePreviousInput(update));
+  if (update.state.has_value()) NUPMPC_RETURN_IF_ERROR(core::CheckStepState(shape_.num_states, *update.state));
+  if (update.reference.has_value()) {
+    const Eigen::VectorXd& r = *update.reference;
+    const int H = problem_.horizon;
+    if (r.size() != 1 && r.size() != H) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("reference: expected 1 or ", H, " values (the horizon), got ", r.size()));
     }
-    if (!std::isfinite(problem.output_priors[i].mean)) {
-      return absl::InvalidArgumentError(absl::StrCat("output_priors[", i, "].mean: must be finite"));
+    for (Eigen::Index n = 0; n < r.size(); ++n) {
+      if (!std::isfinite(r(n))) return absl::InvalidArgumentError(absl::StrCat("reference[", n, "] = ", r(n), ": must be finite"));
     }
+    // The reference lives in the output means of steps 1..H (see the header).
+    for (int n = 0; n < H; ++n) shape_.mutable_output_prior(n + 1, 0).mean = r.size() == H ? r(n) : r(0);
+    ReadReference(&reference_);
   }
-  NUPMPC_RETURN_IF_ERROR(core::CheckInitialState(shape_, problem.initial_mean));
-  shape_.output_priors = problem.output_priors;
-  ReadReference(&reference_);
-  return SetInitialState(problem.initial_mean);
+  return update.state.has_value() ? SetInitialState(*update.state) : absl::OkStatus();
 }
 
 absl::StatusOr<core::SolveSummary> GpMpcSession::Solve(const core::SolveLimits& limits, core::Solution* solution) {

@@ -16,8 +16,7 @@
 // * states x[n] = the past window at t+n along the plan.
 // problem() describes the costs in core terms (inputs Box(u_min, u_max), outputs at steps
 // 1..H Gaussian with mean r[t+n-1] and weight 2Q); its model matrices are zero, because the
-// GP is the model. Update() accepts a problem that differs from problem() in the output
-// means (the reference) only.
+// GP is the model. Apply() takes a new state (the window) and reference, nothing else.
 
 #include <memory>
 
@@ -42,7 +41,7 @@ class GpMpcSession final : public core::MpcSession {
   // The subproblems run on IFFBDD.
   core::Algorithm algorithm() const override { return core::Algorithm::kIffbdd; }
   absl::Status SetInitialState(const Eigen::VectorXd& window) override;
-  absl::Status Update(const core::Problem& problem) override;
+  absl::Status Apply(const core::StepUpdate& update) override;
   void ShiftWarmStart() override { scp_->ShiftWarmStart(); }
   // Nothing to give back: the factorised GP is the model, not scratch (and may be shared),
   // and the SCP's per-step buffers are a few horizons long.
@@ -67,7 +66,7 @@ class GpMpcSession final : public core::MpcSession {
   core::Problem shape_;
   std::unique_ptr<LinGpScp> scp_;
   // shape_'s initial mean and output means in the form LinGpScp::Solve takes, kept so that a
-  // solve copies nothing; written together with shape_ (SetInitialState, Update).
+  // solve copies nothing; written together with shape_ (SetInitialState, Apply).
   Eigen::VectorXd past_outputs_, past_inputs_, reference_;
   ScpPlan plan_;
   bool solved_ = false;  ///< a Solve() has run since creation (the carried plan is warm)

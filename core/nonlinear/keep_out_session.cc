@@ -74,6 +74,18 @@ absl::Status KeepOutSession::Update(const Problem& plant) {
   return absl::OkStatus();
 }
 
+absl::Status KeepOutSession::Apply(const StepUpdate& update) {
+  NUPMPC_RETURN_IF_ERROR(free_planner_->Apply(update));  // checks everything; unchanged on error
+  if (update.changes_priors()) {
+    // Same shape and valid (the planner accepted it): the linearisation cannot refuse it.
+    NUPMPC_RETURN_IF_ERROR(solver_->SetBase(free_planner_->problem()));
+    free_planner_->ReleaseWorkspace();
+  } else if (update.state.has_value()) {
+    NUPMPC_RETURN_IF_ERROR(solver_->SetInitialState(*update.state));
+  }
+  return absl::OkStatus();
+}
+
 void KeepOutSession::ShiftWarmStart() {
   solver_->ShiftWarmStart();
   ShiftRowsUp(&guess_.states);

@@ -31,7 +31,10 @@ class KeepOutSession final : public MpcSession {
   const KeepOut& keep_out() const { return keep_out_; }
 
   absl::Status SetInitialState(const Eigen::VectorXd& x0) override;
-  absl::Status Update(const Problem& plant) override;
+  // The free planner holds the plant's problem: it checks and applies the update; the
+  // linearisation then takes the plant's new priors.
+  absl::Status Apply(const StepUpdate& update) override;
+  absl::Status Update(const Problem& plant);
   void ShiftWarmStart() override;
   void ReleaseWorkspace() override { solver_->ReleaseWorkspace(); }
 

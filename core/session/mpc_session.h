@@ -2,10 +2,12 @@
 #define NUPMPC_CORE_SESSION_MPC_SESSION_H_
 
 // What a long-lived controller needs from a solver, whatever the problem class: a problem
-// of fixed shape whose values change between solves, a warm start carried from one solve
-// to the next, and solves under limits. Implemented by Session (linear problems) and by
-// KeepOutSession (a linear plant with keep-out regions, solved by sequential
-// linearisation). The service holds every session through this interface.
+// of fixed shape whose values change between solves (one StepUpdate per control period),
+// a warm start carried from one solve to the next, and solves under limits. Implemented
+// by Session (linear problems), KeepOutSession (a linear plant with keep-out regions,
+// solved by sequential linearisation), gp::GpMpcSession (a GP model) and
+// InputMappedSession (multi-level inputs or input differences around any of them). The
+// service holds every session through this interface and steps all of them the same way.
 //
 // Thread safety: none; one thread uses a session at a time.
 
@@ -14,22 +16,33 @@
 #include "absl/status/statusor.h"
 #include "core/options.h"
 #include "core/problem.h"
+#include "core/session/step_update.h"
 #include "core/solution.h"
 
 namespace nupmpc::core {
+
+// A session's sizes in the caller's terms.
+struct Dimensions {
+  int num_states = 0, num_inputs = 0, num_outputs = 0, horizon = 0;
+};
+inline Dimensions DimensionsOf(const Problem& p) { return {p.num_states, p.num_inputs, p.num_outputs, p.horizon}; }
 
 class MpcSession {
  public:
   virtual ~MpcSession() = default;
 
-  // The problem in the caller's terms (what Update() replaces).
+  // The problem the solver works on (for an InputMappedSession the expanded or augmented
+  // one; dimensions() gives the caller's).
   virtual const Problem& problem() const = 0;
   virtual Algorithm algorithm() const = 0;
+  // The caller's dimensions: the sizes of Apply()'s vectors and of Solve()'s plan.
+  virtual Dimensions dimensions() const { return DimensionsOf(problem()); }
 
   virtual absl::Status SetInitialState(const Eigen::VectorXd& x0) = 0;
-  // Replaces the problem's values; the shape must match (FAILED_PRECONDITION otherwise).
-  // A rejected problem leaves the session as it was.
-  virtual absl::Status Update(const Problem& problem) = 0;
+  // One control period's changes (core/session/step_update.h), checked completely before
+  // anything changes: a rejected update leaves the session as it was, and the message
+  // names the StepUpdate field. An update never copies the session's model.
+  virtual absl::Status Apply(const StepUpdate& update) = 0;
 
   // Receding horizon: the carried warm start moves one step earlier.
   virtual void ShiftWarmStart() = 0;

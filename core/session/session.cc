@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "core/algorithms/select.h"
@@ -108,23 +109,57 @@ absl::Status Session::SetInitialState(const Eigen::VectorXd& x0) {
 absl::Status Session::Update(const Problem& problem) {
   NUPMPC_RETURN_IF_ERROR(CheckSameShape(problem_, problem));
   NUPMPC_RETURN_IF_ERROR(Validate(problem));
-  NUPMPC_ASSIGN_OR_RETURN(const Algorithm selected, SelectAlgorithm(problem, options_.algorithm));
+  const bool was_input_constrained = AnyInputConstrained(problem_);
+  Problem previous = std::exchange(problem_, problem);
+  if (absl::Status adopted = AdoptNewValues(was_input_constrained); !adopted.ok()) {
+    problem_ = std::move(previous);
+    return adopted;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Session::Apply(const StepUpdate& update) {
+  NUPMPC_RETURN_IF_ERROR(RefusePreviousInput(update));
+  NUPMPC_RETURN_IF_ERROR(RefuseReference(update));
+  if (update.state.has_value()) NUPMPC_RETURN_IF_ERROR(CheckStepState(problem_.num_states, *update.state));
+  if (!update.changes_priors()) {
+    // The common per-step path: only x[0] changes.
+    return update.state.has_value() ? SetInitialState(*update.state) : absl::OkStatus();
+  }
+  NUPMPC_RETURN_IF_ERROR(CheckPriorChanges(problem_.num_inputs, problem_.num_outputs, problem_.horizon, update));
+  // The candidate priors are written into scratch arrays of the same size (no allocation
+  // after the first update) and swapped in; the swap leaves the previous ones in scratch.
+  scratch_input_priors_ = problem_.input_priors;
+  scratch_output_priors_ = problem_.output_priors;
+  WritePriorChanges(update, problem_.num_inputs, problem_.num_outputs, problem_.horizon, &scratch_input_priors_,
+                    &scratch_output_priors_);
+  const bool was_input_constrained = AnyInputConstrained(problem_);
+  const auto swap_candidate = [&] {
+    problem_.input_priors.swap(scratch_input_priors_);
+    problem_.output_priors.swap(scratch_output_priors_);
+    if (update.state.has_value()) problem_.initial_mean.swap(scratch_state_);
+  };
+  if (update.state.has_value()) scratch_state_ = *update.state;
+  swap_candidate();
+  absl::Status adopted = ValidatePriors(problem_);
+  if (adopted.ok()) adopted = AdoptNewValues(was_input_constrained);
+  if (!adopted.ok()) swap_candidate();  // the previous values again
+  return adopted;
+}
+
+absl::Status Session::AdoptNewValues(bool was_input_constrained) {
+  NUPMPC_ASSIGN_OR_RETURN(const Algorithm selected, SelectAlgorithm(problem_, options_.algorithm));
   // IFFBDD's graph is augmented iff some input is constrained: that is part of its shape.
   const bool same_graph =
       selected == algorithm_->algorithm() &&
-      (selected != Algorithm::kIffbdd || AnyInputConstrained(problem) == AnyInputConstrained(problem_));
-  if (!same_graph) {
-    // The new priors need another algorithm (or augmentation): build it on a copy first so
-    // that a failure leaves the session untouched.
+      (selected != Algorithm::kIffbdd || AnyInputConstrained(problem_) == was_input_constrained);
+  if (same_graph) {
+    algorithm_->Refresh(problem_);
+  } else {
     SolverOptions forced = options_;
     forced.algorithm = selected;
-    NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<OuterIteration> rebuilt, MakeOuterIteration(problem, forced));
-    problem_ = problem;
-    algorithm_ = std::move(rebuilt);
+    NUPMPC_ASSIGN_OR_RETURN(algorithm_, MakeOuterIteration(problem_, forced));
     has_warm_state_ = false;
-  } else {
-    problem_ = problem;
-    algorithm_->Refresh(problem_);
   }
   evaluator_.Prepare(problem_);
   DerivePriorFlags();

@@ -41,9 +41,13 @@ class Session final : public MpcSession {
   Algorithm algorithm() const override { return algorithm_->algorithm(); }
 
   absl::Status SetInitialState(const Eigen::VectorXd& x0) override;
-  // Replaces the problem's values. The shape (dimensions, horizon, which matrices vary
-  // per step, terminal cost present) must match: FAILED_PRECONDITION otherwise.
-  absl::Status Update(const Problem& problem) override;
+  // The state and prior changes of a control period, in place (no copy of the model);
+  // previous_input and reference are refused (InputMappedSession, GpMpcSession take them).
+  absl::Status Apply(const StepUpdate& update) override;
+  // Replaces the problem's values, matrices included. The shape (dimensions, horizon,
+  // which matrices vary per step, terminal cost present) must match: FAILED_PRECONDITION
+  // otherwise.
+  absl::Status Update(const Problem& problem);
 
   void ShiftWarmStart() override;
   void ResetWarmStart();
@@ -58,6 +62,11 @@ class Session final : public MpcSession {
  private:
   Session(Problem problem, SolverOptions options);
   absl::Status Rebuild();
+  // After problem_'s values changed (Update, Apply): picks the algorithm for the new
+  // priors, refreshes the current one or builds another (other priors may need another
+  // algorithm, or IFFBDD another graph), and prepares the evaluator. On error nothing but
+  // problem_ has changed; the caller puts its previous values back.
+  absl::Status AdoptNewValues(bool was_input_constrained);
   // has_binary_inputs_, has_nonconvex_priors_, hard_bounds_, elastic_applies_ from problem_.
   void DerivePriorFlags();
   // The solve's pass budget: the limits' cap within the options' one.
@@ -105,6 +114,10 @@ class Session final : public MpcSession {
   bool SameGroupAt(int n, int other, int first, int last) const;
 
   Problem problem_;
+  // Apply()'s scratch: the candidate priors are written here and swapped into problem_;
+  // after a swap they hold the previous ones (to put back if the new ones are refused).
+  std::vector<ScalarPrior> scratch_input_priors_, scratch_output_priors_;
+  Eigen::VectorXd scratch_state_;  ///< likewise for x[0] when an update changes both
   SolverOptions options_;
   std::unique_ptr<OuterIteration> algorithm_;
   ObjectiveEvaluator evaluator_;

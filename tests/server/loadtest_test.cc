@@ -14,6 +14,7 @@
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
 #include "loadtest/transport_floor.h"
+#include "server/session_factory.h"
 #include "server/session_registry.h"
 #include "server/step_solver.h"
 #include "service_fixture.h"
@@ -213,7 +214,8 @@ TEST(Quantile, NearestRank) {
 
 TEST(SessionCompaction, ACompactedSessionContinuesBitIdentically) {
   const Workload w = MassesWorkload();
-  server::SessionRegistry kept_registry(4), compacted_registry(4);
+  server::WorkerPool pool(/*threads=*/1, /*queue_capacity=*/4, /*max_queue_wait_ms=*/0.0);
+  server::SessionRegistry kept_registry(4, pool), compacted_registry(4, pool);
   std::shared_ptr<server::SessionEntry> kept, compacted;
   for (auto [registry, entry] : {std::pair{&kept_registry, &kept}, std::pair{&compacted_registry, &compacted}}) {
     absl::StatusOr<server::BuiltSession> built = server::BuildSession(w.spec, {});

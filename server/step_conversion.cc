@@ -1,0 +1,72 @@
+#include "server/step_conversion.h"
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "core/util/status_macros.h"
+#include "server/spec_conversion.h"
+
+namespace nupmpc::server {
+namespace {
+
+Eigen::VectorXd ToVector(const google::protobuf::RepeatedField<double>& values) {
+  return Eigen::Map<const Eigen::VectorXd>(values.data(), values.size());
+}
+
+absl::StatusOr<std::vector<core::ComponentPriors>> ComponentsFromProto(
+    const google::protobuf::RepeatedPtrField<v1::PriorUpdate::Entry>& entries, int steps, const char* field) {
+  std::vector<core::ComponentPriors> components(entries.size());
+  for (int i = 0; i < entries.size(); ++i) {
+    const v1::PriorUpdate::Entry& entry = entries[i];
+    // Out of int range is out of any session's range: the session's check names it.
+    components[i].index = entry.index() > static_cast<unsigned>(std::numeric_limits<int>::max())
+                              ? std::numeric_limits<int>::max()
+                              : static_cast<int>(entry.index());
+    components[i].priors.resize(steps);
+    NUPMPC_RETURN_IF_ERROR(ComponentPriorsFromProto(entry.prior(), steps,
+                                                    absl::StrCat("step.update.", field, "[", i, "].prior"),
+                                                    &components[i].priors, /*stride=*/1, /*offset=*/0));
+  }
+  return components;
+}
+
+}  // namespace
+
+absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const core::Dimensions& dimensions) {
+  if (!v1::WarmStart_IsValid(step.warm_start())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("step.warm_start = ", static_cast<int>(step.warm_start()), ": unknown"));
+  }
+  if (!(step.time_limit_ms() >= 0.0) || !std::isfinite(step.time_limit_ms())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("step.time_limit_ms = ", step.time_limit_ms(), ": must be finite and >= 0"));
+  }
+  if (step.max_iterations() > static_cast<unsigned>(std::numeric_limits<int>::max())) {
+    return absl::InvalidArgumentError("step.max_iterations: too large");
+  }
+  core::StepUpdate update;
+  if (step.state_size() > 0) update.state = ToVector(step.state());
+  if (step.previous_input_size() > 0) update.previous_input = ToVector(step.previous_input());
+  if (step.reference_size() > 0) update.reference = ToVector(step.reference());
+  if (step.has_update()) {
+    const v1::PriorUpdate& u = step.update();
+    update.shift = u.shift();
+    NUPMPC_ASSIGN_OR_RETURN(update.inputs, ComponentsFromProto(u.inputs(), dimensions.horizon, "inputs"));
+    NUPMPC_ASSIGN_OR_RETURN(update.outputs, ComponentsFromProto(u.outputs(), dimensions.horizon + 1, "outputs"));
+  }
+  return update;
+}
+
+absl::Status AsStepError(const absl::Status& status) {
+  if (status.ok()) return status;
+  const absl::string_view message = status.message();
+  for (absl::string_view field : {"state", "update", "previous_input", "reference"}) {
+    if (absl::StartsWith(message, field)) return absl::Status(status.code(), absl::StrCat("step.", message));
+  }
+  return absl::Status(status.code(), absl::StrCat("step: ", message));
+}
+
+}  // namespace nupmpc::server
