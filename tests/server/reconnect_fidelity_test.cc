@@ -151,6 +151,8 @@ v1::ProblemSpec RateLimitedSpec() {
   u->set_kind(v1::PRIOR_KIND_BOX);
   Set({-0.5}, u->mutable_lower());
   Set({0.5}, u->mutable_upper());
+  Set({10.0}, u->mutable_weight());
+  Set(Ramp(kN, 0.2, 0.01), u->mutable_target());
   v1::ComponentPrior* y = spec.add_output_priors();
   Set({50.0}, y->mutable_weight());
   Set({1.0}, y->mutable_target());
@@ -164,8 +166,8 @@ v1::ProblemSpec RateLimitedSpec() {
   return spec;
 }
 
-TEST_F(ReconnectFidelityTest, InputDifferenceSessionKeepsTheAppliedInputAndShiftedRates) {
-  const v1::ProblemSpec spec = RateLimitedSpec();
+// Steps with shifts, a per-step reference, and one step with its own previous_input.
+std::vector<v1::Step> RateLimitedSteps(const v1::ProblemSpec& spec) {
   std::vector<v1::Step> steps(5);
   for (std::size_t k = 0; k < steps.size(); ++k) {
     Set({-0.4 + 0.03 * static_cast<double>(k), 0.02 * static_cast<double>(k)}, steps[k].mutable_state());
@@ -175,7 +177,29 @@ TEST_F(ReconnectFidelityTest, InputDifferenceSessionKeepsTheAppliedInputAndShift
   v1::ComponentPrior y = spec.output_priors(0);
   Set(Ramp(16, 0.8, 0.01), y.mutable_target());
   AddEntry(steps[3].mutable_update()->mutable_outputs(), 0, y);
+  return steps;
+}
+
+TEST_F(ReconnectFidelityTest, InputDifferenceSessionKeepsTheAppliedInputAndShiftedRates) {
+  const v1::ProblemSpec spec = RateLimitedSpec();
+  std::vector<v1::Step> steps = RateLimitedSteps(spec);
   const v1::Step next = steps.back();  // u[-1]: the last plan's u[0]
+  steps.pop_back();
+  ExpectSamePlanAfterRestart(spec, steps, next);
+}
+
+// Disabled for a server bug outside the client: on a Δu session the server's shift
+// (ApplyPriorUpdate on the augmented problem) also moves u[0]'s prior to output step 0,
+// which carries the fixed u[-1]. The session that never restarted then has a prior on
+// u[-1] (here a constant ½·w·(u[-1] - target)², 0.037 more objective with the same plan;
+// with a moving bound on u, a bound on a fixed value) that no spec can state, so the
+// re-created session, whose resent step here does not shift, lacks it. Enable when the
+// server's shift leaves u[-1] without a prior.
+TEST_F(ReconnectFidelityTest, DISABLED_InputDifferenceSessionResentStepWithoutShift) {
+  const v1::ProblemSpec spec = RateLimitedSpec();
+  std::vector<v1::Step> steps = RateLimitedSteps(spec);
+  v1::Step next = steps.back();
+  next.clear_update();
   steps.pop_back();
   ExpectSamePlanAfterRestart(spec, steps, next);
 }
