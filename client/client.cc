@@ -4,6 +4,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "client/spec_update.h"
 
 namespace nupmpc {
 namespace {
@@ -12,37 +13,6 @@ absl::Status FromGrpc(const grpc::Status& s) {
   return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
 }
 
-// Shifts a per-step array one step (n+1 → n, last repeated); length-1 arrays are constant.
-void ShiftArray(google::protobuf::RepeatedField<double>* values) {
-  for (int n = 0; n + 1 < values->size(); ++n) values->Set(n, values->Get(n + 1));
-}
-
-void ShiftComponent(v1::ComponentPrior* c) {
-  for (auto* f : {c->mutable_weight(), c->mutable_target(), c->mutable_lower(), c->mutable_upper(),
-                  c->mutable_slope(), c->mutable_radius(), c->mutable_exponent()}) {
-    ShiftArray(f);
-  }
-}
-
-}  // namespace
-
-void ApplyUpdateToSpec(const v1::Step& step, v1::ProblemSpec* spec) {
-  if (step.state_size() > 0) *spec->mutable_initial_state()->mutable_mean() = step.state();
-  if (!step.has_update()) return;
-  const v1::PriorUpdate& u = step.update();
-  if (u.shift()) {
-    for (auto& c : *spec->mutable_input_priors()) ShiftComponent(&c);
-    for (auto& c : *spec->mutable_output_priors()) ShiftComponent(&c);
-  }
-  for (const auto& e : u.inputs()) {
-    if (static_cast<int>(e.index()) < spec->input_priors_size()) *spec->mutable_input_priors(e.index()) = e.prior();
-  }
-  for (const auto& e : u.outputs()) {
-    if (static_cast<int>(e.index()) < spec->output_priors_size()) *spec->mutable_output_priors(e.index()) = e.prior();
-  }
-}
-
-namespace {
 // `own_subchannel`: a connection of this channel's own, not shared through gRPC's global
 // subchannel pool with other channels to the same address (and so not sharing their
 // reconnect back-off either).
@@ -302,7 +272,7 @@ absl::StatusOr<v1::SolveResult> Session::Step(const v1::Step& step) {
       result = outage;
     }
   }
-  if (result.ok()) ApplyUpdateToSpec(step, &spec_);
+  if (result.ok()) ApplyStepToSpec(step, *result, &spec_);
   return result;
 }
 

@@ -11,7 +11,9 @@
 // A Session survives a server restart: when its stream breaks (a retryable error, see
 // client/reconnect.h) it reconnects with exponential back-off and jitter within a budget
 // (ReconnectOptions, default 50 ms doubling to 2 s, ±20 %, 30 s), re-creates the session
-// from the spec it holds (with every update sent so far applied), and resends the step,
+// from the spec it holds (kept current with every answered step by ApplyStepToSpec,
+// client/spec_update.h: state, references, bounds, shifts, GP reference, Δu's u[-1]),
+// and resends the step,
 // so Step() returns that step's result (the warm start is lost, nothing else). Only when
 // the budget is spent does Step() fail, with UNAVAILABLE.
 //
@@ -124,7 +126,7 @@ class Session {
   // (see Session::Step).
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::MpcService::Stub> stub_;
-  v1::ProblemSpec spec_;  // kept current with every update sent, for reconnects
+  v1::ProblemSpec spec_;  // kept current with every answered step (ApplyStepToSpec), for reconnects
   mutable std::mutex mu_;
   std::unique_ptr<grpc::ClientContext> context_;
   std::unique_ptr<grpc::ClientReaderWriter<v1::ControlRequest, v1::ControlResponse>> stream_;
@@ -133,10 +135,6 @@ class Session {
   ReconnectOptions reconnect_;
   ReconnectStats stats_;
 };
-
-// Applies a step's update to a spec the way the server applies it to its session
-// (shift of per-step arrays, then replaced components). Exposed for tests.
-void ApplyUpdateToSpec(const v1::Step& step, v1::ProblemSpec* spec);
 
 }  // namespace nupmpc
 

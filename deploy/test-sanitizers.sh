@@ -27,7 +27,8 @@ core_tests=(message_passing_test scalar_rules_test nonconvex_priors_test discret
 server_tests=(service_solve_test service_validation_test service_transform_test service_keep_out_test
               service_gp_test control_stream_lifetime_test worker_pool_test session_strand_test loadtest_test
               server_binary_test service_admission_test service_stream_bounds_test service_malformed_bytes_test
-              memory_budget_test client_reconnect_test closed_loop_restart_test)
+              memory_budget_test client_reconnect_test closed_loop_restart_test reconnect_fidelity_test
+              client_spec_update_test)
 targets=()
 for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-asan -j "$(nproc)" "${targets[@]}"
