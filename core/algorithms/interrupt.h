@@ -83,6 +83,14 @@ class Interrupt {
   std::optional<SolveStatus> fired_;
 };
 
+// Between passes: whether `interrupt` fires now (reads the clock and the flag); if so its
+// reason becomes the summary's status.
+inline bool StopNow(Interrupt* interrupt, SolveSummary* summary) {
+  if (!interrupt->CheckNow()) return false;
+  summary->status = *interrupt->reason();
+  return true;
+}
+
 // The poll of one loop: call once per step; true (and from then on always true) when the
 // interrupt has fired, read every `interval` calls. A null interrupt never fires.
 class StopPoll {

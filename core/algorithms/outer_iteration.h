@@ -5,21 +5,12 @@
 
 #include "Eigen/Core"
 #include "core/algorithms/interrupt.h"
+#include "core/algorithms/primal_iterate.h"
 #include "core/options.h"
 #include "core/priors/scalar_rules.h"
 #include "core/problem.h"
 
 namespace nupmpc::core {
-
-// The primal iterate every algorithm produces: x[0] and the inputs (L × N, column n = u[n]).
-struct PrimalIterate {
-  Eigen::VectorXd x0;
-  Eigen::MatrixXd u;
-  void Resize(int M, int L, int N) {
-    x0.setZero(M);
-    u.setZero(L, N);
-  }
-};
 
 // One NUP algorithm: its graph, its workspace and the per-scalar state it carries between
 // iterations and between solves (the warm start). The solve loop (stopping, limits,
