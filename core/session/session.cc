@@ -45,8 +45,8 @@ class Session::Hooks final : public DiscreteSearch::PinnedPasses, public Elastic
  public:
   explicit Hooks(Session* session) : s_(*session) {}
 
-  void Pin(int index, double value) override { s_.algorithm_->PinInput(index, value); }
-  void ReleasePins() override { s_.algorithm_->ReleaseInputPins(); }
+  void Pin(int index, double value) override { s_.algorithm_->input_pinning()->PinInput(index, value); }
+  void ReleasePins() override { s_.algorithm_->input_pinning()->ReleaseInputPins(); }
   bool Run(SolveSummary* summary, PrimalIterate* out) override {
     s_.algorithm_->Iterate(out);
     if (s_.PassInterrupted(summary)) return false;
@@ -184,10 +184,11 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
     }
   }
   if (has_binary_inputs_ && summary.has_plan) {
-    // Only IAKE runs binary priors, and only it can pin inputs for the sequential fixing.
+    // The sequential fixing needs an algorithm that pins inputs (IAKE, the one that runs
+    // binary priors); without one every binary is rounded at once.
     Hooks hooks(this);
     DiscreteSearch search(problem_, options_, &evaluator_, interrupt_, &best_, &current_);
-    search.MakeInputsDiscrete(algorithm_->algorithm() == Algorithm::kIake ? &hooks : nullptr, &summary);
+    search.MakeInputsDiscrete(algorithm_->input_pinning() != nullptr ? &hooks : nullptr, &summary);
   }
   // A limit reached anywhere (also inside an evaluation of the discrete search) is the status.
   if (interrupt.fired()) summary.status = *interrupt.reason();
