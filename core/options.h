@@ -39,18 +39,18 @@ struct SolverOptions {
   int polish_after_stable_iterations = 1;
   // An iteration counts as "not changed" when at most this fraction of the decided scalars
   // changed region. On large problems the last few scalars settle slowly while the
-  // correction steps of the polish fix them at once (random_outbox N = 1000: 31 -> 19
-  // passes at 1e-3); 0 waits for a set that does not change at all.
+  // correction steps of the polish fix them at once; 0 waits for a set that does not
+  // change at all.
   double polish_settled_fraction = 1e-3;
   // The same when the polish would run on an input sub-problem (IFFBDD with constrained
   // inputs and every output constraint inactive): that polish is IBFFD's active-set method
   // on the inputs alone, whose corrections recover from a rough active set, while IFFBDD's
-  // own iterate settles the last input regions slowly (masses_N30 cold: 10 -> 5 passes).
+  // own iterate settles the last input regions slowly.
   double input_polish_settled_fraction = 0.1;
   // Primal-dual active-set corrections tried after a failed polish before the plain
   // iteration resumes, and up to polish_max_rounds while the deciding residual keeps
   // falling (stiff problems such as ibffd_2d need more, and the plain iteration does not
-  // know what the corrections found: 71 -> 40 passes there).
+  // know what the corrections found).
   int polish_rounds = 4;
   int polish_max_rounds = 12;
 
@@ -85,9 +85,8 @@ struct SolverOptions {
   // When a sweep finds no single move: two levels moved at once, each to a neighbouring
   // step, at steps at most this far apart (0: off). One flap earlier and a later one later
   // lifts only the stretch between them. Each pair tries four moves, so a pair sweep costs
-  // up to 4 · (steps with a level) · reach evaluations. On the flappy bird
-  // (layouts 1-40, 75 fixing blocks) it takes the layouts that pass every slit from 12
-  // to 36 (reach 100: 35).
+  // up to 4 · (steps with a level) · reach evaluations. The reach must span the distance
+  // between a correction's two moves (on the flappy bird, from a flap to the next slit).
   int discrete_pair_reach = 150;
 
   // Elastic fallback (core/session/elastic.h) for output bounds that cannot all be met.

@@ -18,7 +18,7 @@ namespace nupmpc::core {
 // Hard constraints are replaced by the exact penalty with slope
 // SolverOptions.iake_hard_slope (it must exceed the constraint's multiplier, §6.2).
 // It does not track active sets, so it is never polished.
-class Iake final : public OuterIteration {
+class Iake final : public OuterIteration, public InputPinning {
  public:
   static absl::Status CheckApplicable(const Problem& problem);
   Iake(const Problem& problem, const SolverOptions& options);
@@ -33,6 +33,7 @@ class Iake final : public OuterIteration {
   void AcceptPolishRegions() override {}
   double Polish(PrimalIterate*) override { return kInfinity; }
   bool has_regions() const override { return false; }
+  InputPinning* input_pinning() override { return this; }
   void PinInput(int index, double value) override { pinned_value_[index] = value; }
   void ReleaseInputPins() override;
   void ReleaseWorkspace() override;

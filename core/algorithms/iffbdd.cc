@@ -49,7 +49,8 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(
                                               [](const ScalarPrior& p) { return p.kind != PriorKind::kL1; });
   uses_input_polish_ = inputs_constrained && outputs_are_bounds && options.polish_after_stable_iterations > 0;
   if (uses_input_polish_) {
-    input_polish_ = Ibffd::ForInputSubproblem(problem, options);
+    input_polish_ = std::make_unique<IbffdPolicy>(problem, /*check_outputs=*/true);
+    input_polish_region_.resize(static_cast<std::size_t>(graph_.N) * graph_.L);
     input_row_.assign(static_cast<std::size_t>(graph_.N) * graph_.L, -1);
     for (int r = 0; r < graph_.num_rows(); ++r) {
       const RowOrigin& o = graph_.row_origin[r];
@@ -80,16 +81,16 @@ void Iffbdd::ReleaseWorkspace() {
   fw_ = ForwardFilterWorkspace();
   workspace_held_ = false;
   if (input_polish_) {
-    released_policy_ = input_polish_->TakePolicyMemory();
+    released_policy_ = input_polish_->TakeMemory();
     input_polish_.reset();
   }
 }
 
 void Iffbdd::AcquireWorkspace(const Problem& problem) {
   if (uses_input_polish_ && !input_polish_) {
-    input_polish_ = Ibffd::ForInputSubproblem(problem, options_);
+    input_polish_ = std::make_unique<IbffdPolicy>(problem, /*check_outputs=*/true);
     input_polish_->set_interrupt(interrupt_);
-    input_polish_->RestorePolicy(std::move(released_policy_));
+    input_polish_->RestoreMemory(std::move(released_policy_));
     released_policy_ = {};
   }
   if (workspace_held_) return;
@@ -124,7 +125,7 @@ void Iffbdd::ColdStart() {
   }
   has_regions_ = false;
   has_duals_ = false;
-  if (input_polish_) input_polish_->ColdStart();
+  if (input_polish_) input_polish_->Forget();
   released_policy_.valid = false;
 }
 
@@ -138,7 +139,7 @@ void Iffbdd::ShiftWarmStart() {
     row_dual_(r) = row_dual_(src);
   }
   for (int n = 0; n < graph_.N; ++n) step_costate_.col(n) = step_costate_.col(n + 1);
-  if (input_polish_) input_polish_->ShiftWarmStart();
+  if (input_polish_) input_polish_->Shift();
   if (released_policy_.valid) ++released_policy_.shifts;
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
@@ -180,14 +181,8 @@ bool Iffbdd::OutputConstraintsInside() const {
 bool Iffbdd::StartInputPolish(bool carried) {
   // With an active output constraint the sub-problem would be the wrong one.
   if (!input_polish_ || !OutputConstraintsInside()) return false;
-  for (std::size_t i = 0; i < input_row_.size(); ++i) {
-    input_polish_->SetCarriedRegion(static_cast<int>(i), region_[input_row_[i]]);
-  }
-  if (carried) {
-    input_polish_->AdoptCarriedRegionsForPolish();
-  } else {
-    input_polish_->AdoptRegionsForPolish();
-  }
+  for (std::size_t i = 0; i < input_row_.size(); ++i) input_polish_region_[i] = region_[input_row_[i]];
+  input_polish_->StartPolish(carried);
   return true;
 }
 
@@ -195,12 +190,11 @@ void Iffbdd::AcceptPolishRegions() {
   if (!polishing_inputs_) {
     ActiveSetIteration::AcceptPolishRegions();
     // The sub-problem's carried policy belongs to an older active set now.
-    if (input_polish_) input_polish_->ColdStart();
+    if (input_polish_) input_polish_->Forget();
     return;
   }
-  input_polish_->AcceptPolishRegions();
   for (int r = 0; r < graph_.num_rows(); ++r) region_[r] = Region::kInside;  // outputs inactive
-  for (std::size_t i = 0; i < input_row_.size(); ++i) region_[input_row_[i]] = input_polish_->carried_region(static_cast<int>(i));
+  for (std::size_t i = 0; i < input_row_.size(); ++i) region_[input_row_[i]] = input_polish_region_[i];
   // This algorithm's duals are the last own pass's, not the accepted solution's.
   has_duals_ = false;
   polishing_inputs_ = false;
@@ -233,19 +227,17 @@ double Iffbdd::Polish(PrimalIterate* out) {
     polishing_inputs_ = false;
     decide_forward_next_ = false;
     for (int r = 0; r < graph_.num_rows(); ++r) polish_region_[r] = Region::kInside;
-    for (std::size_t i = 0; i < input_row_.size(); ++i) {
-      polish_region_[input_row_[i]] = input_polish_->polish_region(static_cast<int>(i));
-    }
+    for (std::size_t i = 0; i < input_row_.size(); ++i) polish_region_[input_row_[i]] = input_polish_region_[i];
   }
-  if (polishing_inputs_) return input_polish_->Polish(out);
+  if (polishing_inputs_) return input_polish_->Polish(&input_polish_region_, out);
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     row_factor_[r] = prior.kind == PriorKind::kNone ? ScalarFactor::GaussianPart(prior)
                                                     : PieceFactor(prior, prior.slope, polish_region_[r]);
   }
   if (decide_forward_next_) {
-    // Only the first pass: repeating the forward sweep in later corrections settled a few
-    // more steps in two passes but made others cycle (masses closed loop, up to 11 passes).
+    // Only the first pass: repeating the forward sweep in later corrections settles a few
+    // more steps in two passes but makes others cycle.
     decide_forward_next_ = false;
     RunForwardFilterDeciding(
         graph_, row_factor_.data(),

@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
-#include "core/algorithms/ibffd.h"
+#include "core/algorithms/ibffd_policy.h"
 #include "core/algorithms/outer_iteration.h"
 #include "core/message_passing/forward_filter.h"
 #include "core/model/factor_graph.h"
@@ -43,19 +43,16 @@ class Iffbdd final : public ActiveSetIteration {
   // The warm start's first polish pass decides each row's region in the forward filter,
   // knowing the rows before it in this pass and the carried duals of the rows after it
   // (DecideRowForward): when a new x[0] moves the active set, rows that depend on earlier
-  // rows' new pins get them in the same pass. Masses closed loop: warm steps finished in
-  // at most two passes 24 % -> 31 %, mean 3.0 -> 2.83 passes. (After cold iterations it
-  // did harm: corridor 41 -> 158 passes; there the duals are the NUP iterate's.)
-  //
+  // rows' new pins get them in the same pass. Only after a warm start: after cold
+  // iterations the duals are the NUP iterate's, and deciding with them costs passes.
   //
   // When every output constraint is inside in the regions a polish starts from (the last
   // solve's for a warm one, the iterate's for a cold one) and some input is constrained,
-  // the polish runs on the input sub-problem instead (Ibffd::ForInputSubproblem, warm with
-  // its carried policy): inactive output constraints change nothing there, and IBFFD's
-  // messages predict a moved input active set far better than carried duals do. A pass
-  // that finds an output outside its bounds hands the proposed input regions back to this
-  // algorithm's own polish. masses_N30 closed loop: warm median 3 -> 1 passes (see Ibffd);
-  // masses_N3000 cold 6 -> 4.
+  // the polish runs on the input sub-problem instead (IbffdPolicy with check_outputs, warm
+  // with its carried policy): inactive output constraints change nothing there, and
+  // IBFFD's messages predict a moved input active set far better than carried duals do. A
+  // pass that finds an output outside its bounds hands the proposed input regions back to
+  // this algorithm's own polish.
   void AdoptCarriedRegionsForPolish() override;
   void AcceptPolishRegions() override;
   bool NextPolishSolvesInputsOnly() const override { return input_polish_ && OutputConstraintsInside(); }
@@ -96,13 +93,15 @@ class Iffbdd final : public ActiveSetIteration {
   bool has_duals_ = false;
   bool decide_forward_next_ = false;
   // The warm polish on the input sub-problem (used when some input is constrained and every
-  // output prior is a box or half-space), and whether the current polish runs there. It is
-  // scratch: ReleaseWorkspace destroys it (idle masses_N30 sessions: 270 -> 180 KiB RSS) and
-  // keeps only its policy's memory; AcquireWorkspace rebuilds it from the problem.
+  // output prior is a box or half-space), its regions of the input scalars (n·L + l), and
+  // whether the current polish runs there. It is scratch: ReleaseWorkspace destroys it
+  // (most of an idle session's memory) and keeps only its policy's memory;
+  // AcquireWorkspace rebuilds it from the problem.
   SolverOptions options_;
   bool uses_input_polish_ = false;
-  std::unique_ptr<Ibffd> input_polish_;
-  Ibffd::PolicyMemory released_policy_;
+  std::unique_ptr<IbffdPolicy> input_polish_;
+  std::vector<Region> input_polish_region_;
+  IbffdPolicy::Memory released_policy_;
   bool polishing_inputs_ = false;
   std::vector<int> input_row_;  ///< the augmented row of input scalar n·L + l
 };

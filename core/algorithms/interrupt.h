@@ -1,12 +1,12 @@
 #ifndef NUPMPC_CORE_ALGORITHMS_INTERRUPT_H_
 #define NUPMPC_CORE_ALGORITHMS_INTERRUPT_H_
 
-// Time limits and cancellation inside a message-passing pass (issue 18).
+// Time limits and cancellation inside a message-passing pass.
 //
-// A solve's limits used to be checked between passes only; one pass of a large problem
-// (M = 300, L = 30, K = 300, N = 200: ~3 s) then held its worker long after the deadline.
-// Every per-step loop of every pass (forward filters, backward filters and smoothers,
-// polish passes, the objective evaluation, the discrete search) now polls an Interrupt
+// Checking a solve's limits between passes only is not enough: one pass of a large problem
+// takes seconds (O(N·M³)) and would hold its worker long after the deadline. Every per-step
+// loop of every pass (forward filters, backward filters and smoothers, polish passes, the
+// objective evaluation, the discrete search) therefore polls an Interrupt
 // every k time steps, with k chosen once per solve from the step's flop count so that
 // two polls are about kFlopsBetweenChecks apart: on a small problem (M = 2, N = 20) a
 // pass polls at most once, on a large one every step. A poll is a countdown; only every
@@ -82,6 +82,14 @@ class Interrupt {
   int pass_interval_ = INT_MAX;
   std::optional<SolveStatus> fired_;
 };
+
+// Between passes: whether `interrupt` fires now (reads the clock and the flag); if so its
+// reason becomes the summary's status.
+inline bool StopNow(Interrupt* interrupt, SolveSummary* summary) {
+  if (!interrupt->CheckNow()) return false;
+  summary->status = *interrupt->reason();
+  return true;
+}
 
 // The poll of one loop: call once per step; true (and from then on always true) when the
 // interrupt has fired, read every `interval` calls. A null interrupt never fires.

@@ -3,7 +3,8 @@
 
 #include "Eigen/Cholesky"
 #include "Eigen/Core"
-#include "core/algorithms/outer_iteration.h"
+#include "core/algorithms/interrupt.h"
+#include "core/algorithms/primal_iterate.h"
 #include "core/problem.h"
 
 namespace nupmpc::core {

@@ -5,20 +5,23 @@
 
 #include "Eigen/Core"
 #include "core/algorithms/interrupt.h"
+#include "core/algorithms/primal_iterate.h"
 #include "core/options.h"
 #include "core/priors/scalar_rules.h"
 #include "core/problem.h"
 
 namespace nupmpc::core {
 
-// The primal iterate every algorithm produces: x[0] and the inputs (L × N, column n = u[n]).
-struct PrimalIterate {
-  Eigen::VectorXd x0;
-  Eigen::MatrixXd u;
-  void Resize(int M, int L, int N) {
-    x0.setZero(M);
-    u.setZero(L, N);
-  }
+// Sequential rounding of binary inputs (SolverOptions.discrete_fixing_passes): pins input
+// scalar `index` (n·L + l) to `value` in the following passes, and releases all pins. Only
+// IAKE runs binary priors, so only it offers pins (OuterIteration::input_pinning()).
+class InputPinning {
+ public:
+  virtual void PinInput(int index, double value) = 0;
+  virtual void ReleaseInputPins() = 0;
+
+ protected:
+  ~InputPinning() = default;
 };
 
 // One NUP algorithm: its graph, its workspace and the per-scalar state it carries between
@@ -82,11 +85,8 @@ class OuterIteration {
   // How many scalars the active set covers (0 when the algorithm tracks none).
   virtual int decided_scalars() const { return 0; }
 
-  // Sequential rounding of binary inputs (SolverOptions.discrete_fixing_passes): pins input
-  // scalar `index` (n·L + l) to `value` in the following passes, and releases all pins.
-  // Only IAKE runs binary priors; the convex algorithms never see a pin request.
-  virtual void PinInput(int /*index*/, double /*value*/) {}
-  virtual void ReleaseInputPins() {}
+  // The algorithm's input pins (InputPinning), or null if it has none.
+  virtual InputPinning* input_pinning() { return nullptr; }
 
   // Idle sessions: frees the message-passing scratch (everything every pass recomputes;
   // the carried state and the graph stay), which is most of a session's memory.

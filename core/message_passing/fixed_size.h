@@ -34,9 +34,8 @@ decltype(auto) DispatchStateSize(int M, F&& f) {
 }
 
 // The state size to run an augmented model at. Eigen's fixed-size kernels are fastest at
-// whole multiples of the SIMD width: measured on AVX-512, one 15×15 time update plus 15
-// rank-1 updates takes 1.8× as long as the same work at 16×16 (13, 14 → 16 and 9–11 → 12
-// likewise). Padding with inert states (no dynamics, no input, no observation, zero
+// whole multiples of the SIMD width: a 15×15 time update with its rank-1 updates is slower
+// than the same work at 16×16 (13, 14 → 16 and 9–11 → 12 likewise). Padding with inert states (no dynamics, no input, no observation, zero
 // variance) leaves every message on the real states unchanged.
 constexpr int PaddedStateSize(int M) {
   if (M >= 9 && M <= 11) return 12;
@@ -61,8 +60,8 @@ Eigen::Map<Eigen::Matrix<double, Rows, Cols>> View(double* data, int rows, int c
 
 // dst = lhs · rhs for state-sized matrices. Even for fixed sizes Eigen takes its blocked
 // GEMM path (packing, made for large matrices) once rows + cols + depth ≥ 20; for 8..16
-// the coefficient-based product is 1.2–7× faster (microbenchmark, AVX-512). Dynamic sizes
-// (large M) keep GEMM.
+// the coefficient-based product is faster (no packing for matrices that fit in
+// registers and L1). Dynamic sizes (large M) keep GEMM.
 template <int MS, typename Dst, typename Lhs, typename Rhs>
 void StateProduct(Dst&& dst, const Lhs& lhs, const Rhs& rhs) {
   if constexpr (MS == Eigen::Dynamic) {

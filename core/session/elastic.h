@@ -12,9 +12,12 @@
 
 #include <vector>
 
+#include "core/algorithms/interrupt.h"
+#include "core/algorithms/objective.h"
 #include "core/options.h"
 #include "core/priors/scalar_prior.h"
 #include "core/problem.h"
+#include "core/solution.h"
 
 namespace nupmpc::core {
 
@@ -34,6 +37,53 @@ void SetBoundSlopes(const HardBounds& bounds, double slope, Problem* problem);
 inline bool ElasticFormApplies(const HardBounds& bounds, Algorithm algorithm) {
   return !bounds.empty() && algorithm == Algorithm::kIffbdd;
 }
+
+// The continuation of a solve on the elastic form: for the rest of the solve's pass budget
+// after the hard problem's loop stopped at its own budget unconverged. Holds what it
+// derives from the session's problem; the session's loop is reached through Solve.
+class ElasticFallback {
+ public:
+  // The session's side: its problem, algorithm, evaluator and iteration loop.
+  class Solve {
+   public:
+    virtual ~Solve() = default;
+    virtual Problem* mutable_problem() = 0;
+    // The output priors' slopes changed: the algorithm and the evaluator take them over.
+    virtual void OutputPriorsChanged() = 0;
+    // The algorithm forgets its carried state.
+    virtual void ColdStart() = 0;
+    // The session's iteration loop (polish included) on the current problem; leaves its
+    // plan as the session's best iterate.
+    virtual SolveSummary RunLoop(const SolveLimits& limits, bool warm) = 0;
+    // The best iterate against the current problem, not interrupted.
+    virtual ObjectiveEvaluator::Result EvaluatePlan() = 0;
+  };
+
+  // From the session's problem (whenever it is replaced), options and algorithm.
+  void Derive(const Problem& problem, const SolverOptions& options, Algorithm algorithm) {
+    FindHardOutputBounds(problem, &hard_bounds_);
+    slope_ = options.elastic_slope;
+    applies_ = slope_ > 0.0 && ElasticFormApplies(hard_bounds_, algorithm);
+  }
+  // Whether the fallback is on and the problem has bounds it can relax.
+  bool applies() const { return applies_; }
+
+  // Solves the elastic form with the budget max_iterations - summary->iterations (the
+  // time limit and the cancel flag act through `interrupt`), restores the hard bounds and
+  // reports the plan against them: `summary` becomes the whole solve's (kInfeasible when
+  // the elastic plan converged outside the hard bounds by more than `violation_tolerance`).
+  void Continue(Solve* solve,
+                Interrupt* interrupt,
+                const SolveLimits& limits,
+                int max_iterations,
+                double violation_tolerance,
+                SolveSummary* summary) const;
+
+ private:
+  HardBounds hard_bounds_;
+  double slope_ = 0.0;
+  bool applies_ = false;
+};
 
 }  // namespace nupmpc::core
 

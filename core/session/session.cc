@@ -6,9 +6,10 @@
 #include <limits>
 #include <utility>
 
-#include "absl/strings/str_cat.h"
+#include "core/algorithms/outer_iteration.h"
 #include "core/algorithms/select.h"
 #include "core/priors/scalar_rules.h"
+#include "core/session/discrete_search.h"
 #include "core/session/elastic.h"
 #include "core/session/footprint.h"
 #include "core/util/status_macros.h"
@@ -27,8 +28,6 @@ bool AnyInputConstrained(const Problem& p) {
   return false;
 }
 
-bool AllFinite(const PrimalIterate& it) { return it.x0.allFinite() && it.u.allFinite(); }
-
 bool AnyNonconvexPrior(const Problem& p) {
   const auto nonconvex = [](const ScalarPrior& prior) { return IsNonconvex(prior.kind); };
   return std::any_of(p.input_priors.begin(), p.input_priors.end(), nonconvex) ||
@@ -42,35 +41,41 @@ bool AnyBinaryInput(const Problem& p) {
 
 }  // namespace
 
-std::optional<SolveStatus> LimitReached(const SolveLimits& limits, double elapsed_seconds) {
-  if (limits.cancel != nullptr && limits.cancel->load(std::memory_order_relaxed)) return SolveStatus::kCancelled;
-  if (limits.time_limit_seconds > 0.0 && elapsed_seconds >= limits.time_limit_seconds) return SolveStatus::kTimeLimit;
-  return std::nullopt;
-}
+// The session's loop and algorithm as the discrete search and the elastic fallback see them.
+class Session::Hooks final : public DiscreteSearch::PinnedPasses, public ElasticFallback::Solve {
+ public:
+  explicit Hooks(Session* session) : s_(*session) {}
 
-const char* SolveStatusName(SolveStatus status) {
-  switch (status) {
-    case SolveStatus::kConverged: return "converged";
-    case SolveStatus::kIterationLimit: return "iteration_limit";
-    case SolveStatus::kTimeLimit: return "time_limit";
-    case SolveStatus::kNumericalError: return "numerical_error";
-    case SolveStatus::kCancelled: return "cancelled";
-    case SolveStatus::kInfeasible: return "infeasible";
+  void Pin(int index, double value) override { s_.algorithm_->input_pinning()->PinInput(index, value); }
+  void ReleasePins() override { s_.algorithm_->input_pinning()->ReleaseInputPins(); }
+  bool Run(SolveSummary* summary, PrimalIterate* out) override {
+    s_.algorithm_->Iterate(out);
+    if (s_.PassInterrupted(summary)) return false;
+    ++summary->iterations;
+    return true;
   }
-  return "unknown";
-}
 
-std::string SolveSummary::Describe() const {
-  return absl::StrCat(AlgorithmName(algorithm), ": ", SolveStatusName(status), " after ", iterations, " iterations",
-                      polished ? " (polished)" : "", elastic ? " (elastic)" : "", warm_started ? ", warm" : "", ", J = ", objective,
-                      ", max violation = ", max_violation,
-                      linearisations > 0 ? absl::StrCat(", ", linearisations, " linearisations, nonlinear violation = ",
-                                                        nonlinear_violation)
-                                         : "");
-}
+  Problem* mutable_problem() override { return &s_.problem_; }
+  void OutputPriorsChanged() override {
+    s_.algorithm_->RefreshOutputPriors(s_.problem_);
+    s_.evaluator_.Prepare(s_.problem_);
+  }
+  void ColdStart() override { s_.algorithm_->ColdStart(); }
+  SolveSummary RunLoop(const SolveLimits& limits, bool warm) override { return s_.RunLoop(limits, warm); }
+  ObjectiveEvaluator::Result EvaluatePlan() override { return s_.evaluator_.Evaluate(s_.problem_, s_.best_); }
+
+ private:
+  Session& s_;
+};
 
 Session::Session(Problem problem, SolverOptions options)
     : problem_(std::move(problem)), options_(options) {}
+
+Session::~Session() = default;
+
+Algorithm Session::algorithm() const { return algorithm_->algorithm(); }
+
+void Session::ReleaseWorkspace() { algorithm_->ReleaseWorkspace(); }
 
 absl::StatusOr<std::unique_ptr<Session>> Session::Create(Problem problem, SolverOptions options) {
   NUPMPC_RETURN_IF_ERROR(Validate(problem));
@@ -94,8 +99,7 @@ absl::Status Session::Rebuild() {
 void Session::DerivePriorFlags() {
   has_binary_inputs_ = AnyBinaryInput(problem_);
   has_nonconvex_priors_ = AnyNonconvexPrior(problem_);
-  FindHardOutputBounds(problem_, &hard_bounds_);
-  elastic_applies_ = options_.elastic_slope > 0.0 && ElasticFormApplies(hard_bounds_, algorithm_->algorithm());
+  elastic_.Derive(problem_, options_, algorithm_->algorithm());
   flops_per_step_ = EstimateFootprint(ShapeOf(problem_, algorithm_->algorithm())).flops_per_step;
 }
 
@@ -166,217 +170,11 @@ absl::Status Session::AdoptNewValues(bool was_input_constrained) {
   return absl::OkStatus();
 }
 
-double Session::RoundDiscreteStep(int n, bool pin) {
-  double gap = 0.0;
-  for (int first = 0; first < problem_.num_inputs; ++first) {
-    const ScalarPrior& prior = problem_.input_prior(n, first);
-    if (prior.kind != PriorKind::kBinary) continue;
-    // An M-level group is rounded as its sum: the nearest level.
-    const int last = GroupEnd(n, first);
-    const double a = prior.lower, b = prior.upper;
-    double sum = 0.0;
-    for (int j = first; j <= last; ++j) sum += (best_.u(j, n) - a) / (b - a);
-    const double high = std::clamp(std::round(sum), 0.0, static_cast<double>(last - first + 1));
-    gap = std::max(gap, std::abs(sum - high) * std::abs(b - a));
-    SetGroupLevel(n, first, last, static_cast<int>(high));
-    for (int j = first; pin && j <= last; ++j) algorithm_->PinInput(n * problem_.num_inputs + j, best_.u(j, n));
-    first = last;
-  }
-  return gap;
-}
-
-bool Session::StopNow(SolveSummary* summary) {
-  if (!interrupt_->CheckNow()) return false;
-  summary->status = *interrupt_->reason();
-  return true;
-}
-
 bool Session::PassInterrupted(SolveSummary* summary) {
   if (!interrupt_->fired()) return false;
   summary->status = *interrupt_->reason();
   pass_interrupted_ = true;
   return true;
-}
-
-void Session::MakeInputsDiscrete(SolveSummary* summary) {
-  const int N = problem_.horizon;
-  double gap = 0.0;
-  int rounded_steps = 0;
-  if (options_.discrete_fixing_passes > 0 && algorithm_->algorithm() == Algorithm::kIake) {
-    const int blocks = std::min(options_.discrete_fixing_blocks, N);
-    bool stopped = false;
-    for (int block = 0; block < blocks && !stopped; ++block) {
-      const int end = static_cast<int>((static_cast<long long>(block) + 1) * N / blocks);
-      for (; rounded_steps < end; ++rounded_steps) gap = std::max(gap, RoundDiscreteStep(rounded_steps, true));
-      if (rounded_steps == N) break;  // nothing left to make up for the rounding
-      for (int pass = 0; pass < options_.discrete_fixing_passes; ++pass) {
-        if (StopNow(summary)) {
-          stopped = true;
-          break;
-        }
-        algorithm_->Iterate(&current_);
-        if (PassInterrupted(summary)) {  // an incomplete pass: its plan is discarded
-          stopped = true;
-          break;
-        }
-        ++summary->iterations;
-        if (!AllFinite(current_)) break;  // keep the last finite plan; its rounded part stays
-        // The pinned inputs come back exactly as pinned; the rest is the re-solved plan.
-        std::swap(best_, current_);
-      }
-    }
-    algorithm_->ReleaseInputPins();
-  }
-  for (; rounded_steps < N; ++rounded_steps) gap = std::max(gap, RoundDiscreteStep(rounded_steps, false));
-  const ObjectiveEvaluator::Result r = SearchDiscreteNeighbours(summary);
-  summary->objective = r.objective;
-  summary->max_violation = r.max_violation;
-  summary->rounded = true;
-  summary->discrete_gap = gap;
-}
-
-int Session::GroupEnd(int n, int first) const {
-  int last = first;
-  while (problem_.input_prior(n, last).rounds_with_next) ++last;
-  return last;
-}
-
-bool Session::SameGroupAt(int n, int other, int first, int last) const {
-  const ScalarPrior& here = problem_.input_prior(n, first);
-  for (int j = first; j <= last; ++j) {
-    const ScalarPrior& next = problem_.input_prior(other, j);
-    if (next.kind != PriorKind::kBinary || next.lower != here.lower || next.upper != here.upper ||
-        next.rounds_with_next != (j < last)) {
-      return false;
-    }
-  }
-  return true;
-}
-
-int Session::GroupLevel(int n, int first, int last) const {
-  const ScalarPrior& prior = problem_.input_prior(n, first);
-  int level = 0;
-  for (int j = first; j <= last; ++j) level += best_.u(j, n) == prior.upper;
-  return level;
-}
-
-void Session::SetGroupLevel(int n, int first, int last, int level) {
-  const ScalarPrior& prior = problem_.input_prior(n, first);
-  for (int j = first; j <= last; ++j) best_.u(j, n) = j - first < level ? prior.upper : prior.lower;
-}
-
-ObjectiveEvaluator::Result Session::SearchDiscreteNeighbours(SolveSummary* summary) {
-  // The rounded plan's own evaluation is not interrupted: it is the one reported.
-  ObjectiveEvaluator::Result current = evaluator_.Evaluate(problem_, best_);
-  const double tolerance = options_.violation_tolerance * evaluator_.bound_scale();
-  // Lower violation first (beyond the tolerance), then lower J.
-  const auto better = [tolerance](const ObjectiveEvaluator::Result& trial, const ObjectiveEvaluator::Result& now) {
-    if (!std::isfinite(trial.objective) || !std::isfinite(trial.max_violation)) return false;
-    if (now.max_violation > tolerance || trial.max_violation > tolerance) {
-      return trial.max_violation < now.max_violation - 0.5 * tolerance;
-    }
-    return trial.objective < now.objective - 1e-12 * (1.0 + std::abs(now.objective));
-  };
-  // An interrupted evaluation is NaN: never better, so the move is undone (and every
-  // later one returns at once until the loops see the stop).
-  const auto try_move = [&](auto&& apply, auto&& undo) {
-    apply();
-    const ObjectiveEvaluator::Result trial = evaluator_.Evaluate(problem_, best_, interrupt_);
-    if (better(trial, current)) {
-      current = trial;
-      ++summary->discrete_moves;
-      return true;
-    }
-    undo();
-    return false;
-  };
-  const int N = problem_.horizon, L = problem_.num_inputs;
-  for (int sweep = 0; sweep < options_.discrete_search_sweeps; ++sweep) {
-    bool improved = false;
-    for (int n = 0; n < N; ++n) {
-      if (StopNow(summary)) return current;  // discrete, only less improved
-      for (int first = 0; first < L; ++first) {
-        if (problem_.input_prior(n, first).kind != PriorKind::kBinary) continue;
-        const int last = GroupEnd(n, first);
-        const int level = GroupLevel(n, first, last);
-        for (const int step : {-1, 1}) {
-          const int to = level + step;
-          if (to < 0 || to > last - first + 1) continue;
-          if (try_move([&] { SetGroupLevel(n, first, last, to); }, [&] { SetGroupLevel(n, first, last, level); })) {
-            improved = true;
-            break;
-          }
-        }
-        // Move one level between this step and the next one's same group (same binaries):
-        // a flap or a switch one step earlier or later, or a +1/-1 doublet, whose effect on
-        // an integrator's output stays local.
-        if (n + 1 < N && SameGroupAt(n, n + 1, first, last)) {
-          const int here = GroupLevel(n, first, last), next = GroupLevel(n + 1, first, last);
-          const int top = last - first + 1;
-          const auto set_pair = [&](int a, int b) {
-            SetGroupLevel(n, first, last, a);
-            SetGroupLevel(n + 1, first, last, b);
-          };
-          for (const int step : {-1, 1}) {
-            if (here + step < 0 || here + step > top || next - step < 0 || next - step > top) continue;
-            if (try_move([&] { set_pair(here + step, next - step); }, [&] { set_pair(here, next); })) {
-              improved = true;
-              break;
-            }
-          }
-        }
-        first = last;
-      }
-    }
-    if (!improved && options_.discrete_pair_reach > 0) improved = TryPairMove(summary, try_move);
-    if (!improved) break;
-  }
-  return current;  // best_'s evaluation (Solve() re-evaluates it for the returned trajectories)
-}
-
-bool Session::MoveOneLevel(int n, int direction, int first, int last) {
-  const int to = n + direction;
-  if (to < 0 || to >= problem_.horizon || !SameGroupAt(n, to, first, last)) return false;
-  const int here = GroupLevel(n, first, last), there = GroupLevel(to, first, last);
-  if (here == 0 || there == last - first + 1) return false;
-  SetGroupLevel(n, first, last, here - 1);
-  SetGroupLevel(to, first, last, there + 1);
-  return true;
-}
-
-template <typename TryMove>
-bool Session::TryPairMove(SolveSummary* summary, TryMove& try_move) {
-  const int N = problem_.horizon, L = problem_.num_inputs;
-  for (int n1 = 0; n1 < N; ++n1) {
-    if (StopNow(summary)) return false;
-    for (int first = 0; first < L; ++first) {
-      if (problem_.input_prior(n1, first).kind != PriorKind::kBinary) continue;
-      const int last = GroupEnd(n1, first);
-      if (GroupLevel(n1, first, last) > 0) {
-        const int reach = std::min(N - 1, n1 + options_.discrete_pair_reach);
-        for (int n2 = n1 + 1; n2 <= reach; ++n2) {
-          if (!SameGroupAt(n1, n2, first, last) || GroupLevel(n2, first, last) == 0) continue;
-          for (const int d1 : {-1, 1}) {
-            for (const int d2 : {-1, 1}) {
-              // Undone in reverse order, each move by its exact inverse.
-              if (!MoveOneLevel(n1, d1, first, last)) continue;
-              if (!MoveOneLevel(n2, d2, first, last)) {
-                MoveOneLevel(n1 + d1, -d1, first, last);
-                continue;
-              }
-              const auto undo = [&] {
-                MoveOneLevel(n2 + d2, -d2, first, last);
-                MoveOneLevel(n1 + d1, -d1, first, last);
-              };
-              if (try_move([] {}, undo)) return true;
-            }
-          }
-        }
-      }
-      first = last;
-    }
-  }
-  return false;
 }
 
 void Session::ShiftWarmStart() {
@@ -405,7 +203,7 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   if (!warm) algorithm_->ColdStart();
   algorithm_->AcquireWorkspace(problem_);
   const int max_iterations = IterationCap(limits);
-  const bool elastic_possible = elastic_applies_ && options_.elastic_after_iterations < max_iterations;
+  const bool elastic_possible = elastic_.applies() && options_.elastic_after_iterations < max_iterations;
   SolveLimits hard_limits = limits;
   if (elastic_possible) hard_limits.max_iterations = options_.elastic_after_iterations;
   SolveSummary summary;
@@ -415,10 +213,18 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
     summary = RunLoop(hard_limits, warm);
     if (elastic_possible && summary.status == SolveStatus::kIterationLimit &&
         summary.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
-      ContinueElastic(limits, max_iterations, &summary);
+      Hooks hooks(this);
+      elastic_.Continue(&hooks, interrupt_, limits, max_iterations,
+                        options_.violation_tolerance * evaluator_.bound_scale(), &summary);
     }
   }
-  if (has_binary_inputs_ && summary.has_plan) MakeInputsDiscrete(&summary);
+  if (has_binary_inputs_ && summary.has_plan) {
+    // The sequential fixing needs an algorithm that pins inputs (IAKE, the one that runs
+    // binary priors); without one every binary is rounded at once.
+    Hooks hooks(this);
+    DiscreteSearch search(problem_, options_, &evaluator_, interrupt_, &best_, &current_);
+    search.MakeInputsDiscrete(algorithm_->input_pinning() != nullptr ? &hooks : nullptr, &summary);
+  }
   // A limit reached anywhere (also inside an evaluation of the discrete search) is the status.
   if (interrupt.fired()) summary.status = *interrupt.reason();
   // A cancelled solve returns no plan, whatever it got to (the caller gave up on it).
@@ -453,37 +259,6 @@ int Session::IterationCap(const SolveLimits& limits) const {
   return limits.max_iterations > 0 ? std::min(limits.max_iterations, options_.max_iterations) : options_.max_iterations;
 }
 
-void Session::ContinueElastic(const SolveLimits& limits, int max_iterations, SolveSummary* summary) {
-  SolveLimits rest = limits;  // the time limit and cancel flag act through interrupt_
-  rest.max_iterations = max_iterations - summary->iterations;
-  if (StopNow(summary)) return;
-  // The same algorithm on the elastic form (ElasticFormApplies checked it), from a cold
-  // start: the hard problem's dual iterate may exceed the slope.
-  SetBoundSlopes(hard_bounds_, options_.elastic_slope, &problem_);
-  algorithm_->RefreshOutputPriors(problem_);
-  algorithm_->ColdStart();
-  evaluator_.Prepare(problem_);
-  const SolveSummary elastic = RunLoop(rest, /*warm=*/false);
-  // best_ is the elastic plan, or the hard loop's (a plan of this solve too).
-  summary->has_plan = summary->has_plan || elastic.has_plan;
-  SetBoundSlopes(hard_bounds_, kInfinity, &problem_);
-  algorithm_->RefreshOutputPriors(problem_);
-  evaluator_.Prepare(problem_);
-  // best_ is the elastic plan (or, if the elastic loop broke down, the hard one): judged
-  // against the hard bounds.
-  const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, best_);
-  summary->iterations += elastic.iterations;
-  summary->objective = r.objective;
-  summary->max_violation = r.max_violation;
-  summary->polished = elastic.polished;
-  summary->elastic = true;
-  summary->status = elastic.status;
-  if (elastic.status == SolveStatus::kConverged &&
-      r.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
-    summary->status = SolveStatus::kInfeasible;
-  }
-}
-
 SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   const int max_iterations = IterationCap(limits);
   const double violation_tolerance = options_.violation_tolerance * evaluator_.bound_scale();
@@ -493,7 +268,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   summary.status = SolveStatus::kIterationLimit;
   bool have_finite = false;  ///< best_ holds a complete, finite iterate of this loop
 
-  const auto stop_requested = [&]() { return StopNow(&summary); };
+  const auto stop_requested = [&]() { return StopNow(interrupt_, &summary); };
 
   // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
   // while the deciding residual keeps falling); true if it was accepted.

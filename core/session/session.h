@@ -7,8 +7,9 @@
 #include "Eigen/Core"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "core/algorithms/interrupt.h"
 #include "core/algorithms/objective.h"
-#include "core/algorithms/outer_iteration.h"
+#include "core/algorithms/primal_iterate.h"
 #include "core/options.h"
 #include "core/problem.h"
 #include "core/session/elastic.h"
@@ -16,6 +17,8 @@
 #include "core/solution.h"
 
 namespace nupmpc::core {
+
+class OuterIteration;  // core/algorithms/outer_iteration.h: the algorithm behind the session
 
 // A problem of fixed shape, the algorithm's workspace, and the warm-start state carried
 // from one solve to the next (acados' memory/workspace split; OSQP's three update levels):
@@ -35,10 +38,11 @@ namespace nupmpc::core {
 class Session final : public MpcSession {
  public:
   static absl::StatusOr<std::unique_ptr<Session>> Create(Problem problem, SolverOptions options = {});
+  ~Session() override;
 
   const Problem& problem() const override { return problem_; }
   const SolverOptions& options() const { return options_; }
-  Algorithm algorithm() const override { return algorithm_->algorithm(); }
+  Algorithm algorithm() const override;
 
   absl::Status SetInitialState(const Eigen::VectorXd& x0) override;
   // The state and prior changes of a control period, in place (no copy of the model);
@@ -53,13 +57,16 @@ class Session final : public MpcSession {
   void ResetWarmStart();
   // For idle sessions: frees the algorithm's scratch memory (most of the session's), keeps
   // the problem and the warm start. The next Solve() allocates it again before iterating.
-  void ReleaseWorkspace() override { algorithm_->ReleaseWorkspace(); }
+  void ReleaseWorkspace() override;
   bool has_warm_start() const { return has_warm_state_; }
 
   absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) override;
   absl::StatusOr<SolveSummary> Solve(Solution* solution) { return Solve(SolveLimits{}, solution); }
 
  private:
+  // The session's side of the discrete search and the elastic fallback (session.cc).
+  class Hooks;
+
   Session(Problem problem, SolverOptions options);
   absl::Status Rebuild();
   // After problem_'s values changed (Update, Apply): picks the algorithm for the new
@@ -67,51 +74,15 @@ class Session final : public MpcSession {
   // algorithm, or IFFBDD another graph), and prepares the evaluator. On error nothing but
   // problem_ has changed; the caller puts its previous values back.
   absl::Status AdoptNewValues(bool was_input_constrained);
-  // has_binary_inputs_, has_nonconvex_priors_, hard_bounds_, elastic_applies_ from problem_.
+  // has_binary_inputs_, has_nonconvex_priors_, elastic_, flops_per_step_ from problem_.
   void DerivePriorFlags();
   // The solve's pass budget: the limits' cap within the options' one.
   int IterationCap(const SolveLimits& limits) const;
+  // The iteration loop with the active-set polish; leaves its plan in best_.
   SolveSummary RunLoop(const SolveLimits& limits, bool warm);
-  // The elastic fallback (SolverOptions.elastic_slope) for the rest of the solve's budget
-  // after the hard problem's loop stopped unconverged: solves the elastic form, restores
-  // the hard bounds and reports the plan against them.
-  void ContinueElastic(const SolveLimits& limits, int max_iterations, SolveSummary* summary);
-  // Between passes: whether the solve's interrupt fires now (reads the clock and the flag);
-  // if so its reason becomes the summary's status.
-  bool StopNow(SolveSummary* summary);
   // After an algorithm call: whether the interrupt fired inside it (the pass is
   // incomplete: its iterate is discarded, the carried state is reset after the solve).
   bool PassInterrupted(SolveSummary* summary);
-  // Makes the binary inputs of the returned plan discrete (SolverOptions.discrete_fixing_*:
-  // at once, or block by block with re-solves in between) and re-evaluates it.
-  void MakeInputsDiscrete(SolveSummary* summary);
-  // Rounds the binaries of step n of best_ to their nearer levels (an M-level run as its
-  // sum), pins them in the algorithm if `pin`, and returns the largest distance moved.
-  double RoundDiscreteStep(int n, bool pin);
-  // The discrete local search (SolverOptions.discrete_search_sweeps) on the rounded best_;
-  // counts its moves in the summary (and a limit that stops it in its status) and returns
-  // the evaluation of the plan it ends with.
-  ObjectiveEvaluator::Result SearchDiscreteNeighbours(SolveSummary* summary);
-  // When the single moves are exhausted: moves two levels of the same binary group at
-  // once, each to a neighbouring step, for every pair of steps that carry a level at most
-  // SolverOptions.discrete_pair_reach apart (first improvement). On an integrator, one
-  // level moved earlier and a later one moved later lifts only the stretch between them:
-  // the correction a single move cannot make without shifting everything after it.
-  // `try_move` is the search's evaluate-and-keep-or-undo step.
-  template <typename TryMove>
-  bool TryPairMove(SolveSummary* summary, TryMove& try_move);
-  // Moves one level of the group at inputs first..last from step n to step n + direction
-  // (±1) if both steps carry that group, n has a level and the other step room for it.
-  bool MoveOneLevel(int n, int direction, int first, int last);
-  // Binary group (one binary, or an M-level run) starting at input l of step n: how many
-  // of its binaries are high, and setting that count.
-  int GroupLevel(int n, int first, int last) const;
-  void SetGroupLevel(int n, int first, int last, int level);
-  // The last input of the binary group that starts at input `first` of step n (an M-level
-  // run of binaries marked rounds_with_next, or the binary itself).
-  int GroupEnd(int n, int first) const;
-  // Whether step `other` has the same binary group as step n at inputs first..last.
-  bool SameGroupAt(int n, int other, int first, int last) const;
 
   Problem problem_;
   // Apply()'s scratch: the candidate priors are written here and swapped into problem_;
@@ -123,10 +94,9 @@ class Session final : public MpcSession {
   ObjectiveEvaluator evaluator_;
   PrimalIterate current_, candidate_, best_;
   bool has_warm_state_ = false;
-  bool has_binary_inputs_ = false;  ///< derived from problem_ whenever it is replaced
+  bool has_binary_inputs_ = false;     ///< derived from problem_ whenever it is replaced
   bool has_nonconvex_priors_ = false;  ///< likewise
-  HardBounds hard_bounds_;             ///< likewise: the hard output bounds
-  bool elastic_applies_ = false;       ///< likewise: the elastic fallback is on and applies
+  ElasticFallback elastic_;            ///< likewise: the hard output bounds
   double flops_per_step_ = 0.0;        ///< EstimateFootprint: sets the interrupt's poll interval
   // During Solve(): its interrupt (time limit, cancel flag), polled inside the passes too,
   // and whether it fired inside an algorithm call.
