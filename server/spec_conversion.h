@@ -64,10 +64,6 @@ void ResultToProto(const core::SolveSummary& summary, const core::Solution& solu
 
 v1::Algorithm AlgorithmToProto(core::Algorithm algorithm);
 
-// The spec of a core problem (for tools that read problems from files). Fails when a
-// component mixes prior kinds that one ComponentPrior cannot express.
-absl::StatusOr<v1::ProblemSpec> SpecFromProblem(const core::Problem& problem);
-
 }  // namespace nupmpc::server
 
 #endif  // NUPMPC_SERVER_SPEC_CONVERSION_H_

@@ -11,7 +11,7 @@
 #include "core/session/footprint.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
-#include "loadtest/benchmark_instance.h"
+#include "loadtest/instances/benchmark_instance.h"
 #include "tests/util/random_problem.h"
 
 namespace nupmpc::core {
