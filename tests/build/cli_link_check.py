@@ -76,6 +76,9 @@ def main():
     for x in failures:
         print(f"FORBIDDEN: the link line of {TARGET} names {x}")
 
+    if not os.path.exists(binary):
+        print(f"cli link check: {binary} does not exist (build it first)", file=sys.stderr)
+        return 1
     symbols = subprocess.run(["nm", "-C", binary], capture_output=True, text=True, check=True).stdout
     bad_symbols = sorted({m.group(0) for m in FORBIDDEN_SYMBOLS.finditer(symbols)})
     for s in bad_symbols:

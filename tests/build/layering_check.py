@@ -104,6 +104,10 @@ def check(source_dir):
                         findings.append(f"{where}: relative paths out of the folder are not allowed")
                         continue
                     target = room_of(included)
+                    if m.group(1) == '"' and os.path.exists(os.path.join(top, included)):
+                        # Found beside the including file first (the compiler looks there
+                        # before the include roots): its room is where it really is.
+                        target = room_of(os.path.normpath(os.path.join(rel_top, included)))
                     if target is not None:
                         if target not in ALLOWED[room]:
                             findings.append(f"{where}: {room}/ may include {describe(ALLOWED[room])} only "

@@ -37,6 +37,7 @@ plant server/step_solver.cc '#include "loadtest/core_baseline.h"'
 plant server/mpc_service.cc '#include "client/client.h"'
 plant loadtest/load_level.cc '#include "loadtest/bench/bench_report.h"'
 plant core/model/factor_graph.cc '#include "../../server/spec_conversion.h"'
+plant core/problem.cc '#include "gp/gp_model.h"'
 plant client/CMakeLists.txt 'target_include_directories(nupmpc_client PUBLIC ${PROJECT_SOURCE_DIR})'
 python3 "$check" "$work"
 echo "ok: the check fails on every planted forbidden include and passes without them"
