@@ -3,7 +3,9 @@
 
 // Reads the problem files the command-line tools accept: an instance in the
 // ../shared/benchmarks format (recognised by its "dims" key) or a ProblemSpec in proto
-// JSON.
+// JSON. Proto only: an instance becomes a v1::ProblemSpec directly (the one reader of the
+// instance format; the core view of an instance, loadtest/instances/, is this spec through
+// the server's conversion).
 
 #include <string>
 #include <vector>
@@ -16,6 +18,8 @@
 namespace nupmpc {
 
 struct ProblemFile {
+  std::string name;    ///< an instance's "name" and "family" (empty for a ProblemSpec file)
+  std::string family;
   v1::ProblemSpec spec;
   // The instance's recorded closed-loop initial states x1, one per step (empty when the
   // file has none, e.g. every ProblemSpec file).
@@ -23,6 +27,12 @@ struct ProblemFile {
 };
 
 absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path);
+
+// An instance in the ../shared/benchmarks format as a ProblemSpec: benchmark x_1 = x[0],
+// y_n = y[n-1] (no output prior at step N); R and Qy must be diagonal (the priors are per
+// scalar); per-step arrays that are constant are written as one value. INVALID_ARGUMENT
+// naming the file and the field for a malformed instance.
+absl::StatusOr<ProblemFile> LoadBenchmarkInstanceSpec(const std::string& path);
 
 // The file's text (NOT_FOUND when it cannot be read).
 absl::StatusOr<std::string> ReadTextFile(const std::string& path);

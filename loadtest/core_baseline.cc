@@ -4,8 +4,9 @@
 #include <chrono>
 #include <cmath>
 
-#include "core/session/session.h"
-#include "server/spec_conversion.h"
+#include "core/session/mpc_session.h"
+#include "loadtest/instances/benchmark_instance.h"
+#include "server/session_factory.h"
 
 namespace nupmpc::loadtest {
 
@@ -18,29 +19,26 @@ double Quantile(std::vector<double>& values, double q) {
 
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
                                                  const std::vector<std::vector<double>>& states, int rounds) {
-  server::SizeLimits no_limits;  // the server checks its limits; the baseline solves what it gets
-  no_limits.max_states = no_limits.max_inputs = no_limits.max_outputs = 1 << 20;
-  no_limits.max_horizon = no_limits.max_iterations = 1 << 30;
-  no_limits.max_scalars = 1LL << 40;
-  absl::StatusOr<core::Problem> problem = server::ProblemFromSpec(spec, no_limits);
-  if (!problem.ok()) return problem.status();
-  absl::StatusOr<core::SolverOptions> options = server::OptionsFromSpec(spec.options(), no_limits);
-  if (!options.ok()) return options.status();
-  absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(*problem, *options);
-  if (!session.ok()) return session.status();
+  // The session the server builds for this spec (Δu, multi-level, keep-out and GP specs
+  // included), without admission limits: the server checks its own; the baseline solves
+  // what it gets.
+  absl::StatusOr<server::BuiltSession> built = server::BuildSession(spec, bench::NoSizeLimits());
+  if (!built.ok()) return built.status();
+  core::MpcSession& session = *built->solver;
 
   core::Solution solution;
   std::vector<double> times_ms;
   std::uint64_t iterations = 0;
+  core::StepUpdate step;  // only a measured state, as a Step with only `state` is applied
   for (int round = 0; round < rounds; ++round) {
     for (std::size_t t = 0; t < states.size(); ++t) {
-      const Eigen::Map<const Eigen::VectorXd> x(states[t].data(), static_cast<Eigen::Index>(states[t].size()));
       core::SolveLimits limits;
       limits.warm_start = t > 0;
       const auto start = std::chrono::steady_clock::now();
-      if (absl::Status s = (*session)->SetInitialState(x); !s.ok()) return s;
-      (*session)->ShiftWarmStart();
-      absl::StatusOr<core::SolveSummary> summary = (*session)->Solve(limits, &solution);
+      step.state = Eigen::Map<const Eigen::VectorXd>(states[t].data(), static_cast<Eigen::Index>(states[t].size()));
+      if (absl::Status s = session.Apply(step); !s.ok()) return s;
+      session.ShiftWarmStart();
+      absl::StatusOr<core::SolveSummary> summary = session.Solve(limits, &solution);
       const auto stop = std::chrono::steady_clock::now();
       if (!summary.ok()) return summary.status();
       times_ms.push_back(std::chrono::duration<double, std::milli>(stop - start).count());

@@ -3,7 +3,7 @@
 
 // ProblemSpec → core conversion. Every spec a client sends passes through here before it
 // reaches the core: every error names the proto field path (e.g. "spec.model.a[2]") and
-// the rule. (SpecFromProblem, the other direction, is for tools that read problem files.)
+// the rule.
 
 #include "absl/status/statusor.h"
 #include "core/options.h"
@@ -50,10 +50,6 @@ absl::Status ComponentPriorsFromProto(const v1::ComponentPrior& component, int s
 
 // The solver options of a spec (defaults where fields are 0).
 absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& options, const SizeLimits& limits);
-
-// The spec of a core problem (for tools that read problems from files). Fails when a
-// component mixes prior kinds that one ComponentPrior cannot express.
-absl::StatusOr<v1::ProblemSpec> SpecFromProblem(const core::Problem& problem);
 
 }  // namespace nupmpc::server
 

@@ -8,7 +8,7 @@
 
 #include "core/session/session.h"
 #include "gtest/gtest.h"
-#include "loadtest/benchmark_instance.h"
+#include "loadtest/instances/benchmark_instance.h"
 #include "tests/util/test_names.h"
 
 namespace nupmpc::core {

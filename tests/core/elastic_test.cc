@@ -9,7 +9,7 @@
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "loadtest/benchmark_instance.h"
+#include "loadtest/instances/benchmark_instance.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::core {

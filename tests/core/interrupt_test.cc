@@ -11,7 +11,7 @@
 #include "core/session/footprint.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
-#include "loadtest/benchmark_instance.h"
+#include "loadtest/instances/benchmark_instance.h"
 #include "tests/util/random_problem.h"
 
 namespace nupmpc::core {
@@ -197,7 +197,9 @@ TEST_F(LargeSolve, ATimeLimitAfterSomePassesReturnsTheLastCompleteIterate) {
   const Eigen::VectorXd x0 = 0.5 * problem_.initial_mean;
   ASSERT_TRUE(session_->SetInitialState(x0).ok());
   SolveLimits limits;
-  limits.time_limit_seconds = 2.5 * pass_;
+  // Passes run slower when other tests share the cores: a limit of several passes still
+  // ends after at least one complete pass.
+  limits.time_limit_seconds = 4.5 * pass_;
   limits.warm_start = false;
   Solution solution;
   const auto t = Clock::now();
@@ -214,7 +216,7 @@ TEST_F(LargeSolve, ATimeLimitAfterSomePassesReturnsTheLastCompleteIterate) {
   EXPECT_TRUE(solution.inputs.allFinite() && solution.states.allFinite());
   // For this x[0]:
   EXPECT_EQ((solution.states.row(0).transpose() - x0).cwiseAbs().maxCoeff(), 0.0);
-  EXPECT_LT(took, limits.time_limit_seconds + 0.5 * pass_);
+  EXPECT_LT(took, limits.time_limit_seconds + pass_);  // within the pass it interrupted
   // The plan is the last complete iterate: the same as a solve capped at that many passes.
   SolveLimits capped;
   capped.max_iterations = s->iterations;

@@ -9,7 +9,7 @@
 #include "core/gp/hyperparameter_fit.h"
 #include "core/gp/lingp_scp.h"
 #include "gtest/gtest.h"
-#include "loadtest/gp_closed_loop.h"
+#include "loadtest/bench/gp/gp_closed_loop.h"
 
 namespace nupmpc::gp {
 namespace {

@@ -11,7 +11,7 @@
 #include "core/examples/scenarios/dac.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
-#include "loadtest/benchmark_instance.h"
+#include "loadtest/instances/benchmark_instance.h"
 #include "tests/util/test_names.h"
 
 namespace {

@@ -188,14 +188,10 @@ TEST_F(ReconnectFidelityTest, InputDifferenceSessionKeepsTheAppliedInputAndShift
   ExpectSamePlanAfterRestart(spec, steps, next);
 }
 
-// Disabled for a server bug outside the client: on a Δu session the server's shift
-// (ApplyPriorUpdate on the augmented problem) also moves u[0]'s prior to output step 0,
-// which carries the fixed u[-1]. The session that never restarted then has a prior on
-// u[-1] (here a constant ½·w·(u[-1] - target)², 0.037 more objective with the same plan;
-// with a moving bound on u, a bound on a fixed value) that no spec can state, so the
-// re-created session, whose resent step here does not shift, lacks it. Enable when the
-// server's shift leaves u[-1] without a prior.
-TEST_F(ReconnectFidelityTest, DISABLED_InputDifferenceSessionResentStepWithoutShift) {
+// A shift on a Δu session moves the priors on u[0..N-1] and leaves the fixed u[-1] free
+// (core::InputMappedSession): the re-created session, whose resent step does not shift,
+// then equals the one that never restarted.
+TEST_F(ReconnectFidelityTest, InputDifferenceSessionResentStepWithoutShift) {
   const v1::ProblemSpec spec = RateLimitedSpec();
   std::vector<v1::Step> steps = RateLimitedSteps(spec);
   v1::Step next = steps.back();

@@ -3,6 +3,7 @@
 // RESOURCE_EXHAUSTED naming the limit before anything is allocated; the server and its
 // other sessions keep serving, and closing sessions gives the budget back.
 #include <chrono>
+#include <cstdio>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -12,6 +13,7 @@
 #include "server/process_memory.h"
 #include "server/session_cost.h"
 #include "tests/server/service_fixture.h"
+#include "tests/util/random_problem.h"
 
 namespace nupmpc::testing {
 namespace {
@@ -235,6 +237,42 @@ TEST_F(ServiceAdmissionTest, ASessionBuiltAfterItsCallsDeadlineIsNotRegistered) 
   auto sessions = client_->ListSessions();
   ASSERT_TRUE(sessions.ok());
   EXPECT_TRUE(sessions->empty()) << sessions->size() << " sessions registered";
+}
+
+// A dense plant (the report's M = 300, L = 30, K = 300 shape, scaled to the test machine)
+// whose solve takes many times the call's deadline: the worker is free soon after the
+// deadline (the limits are polled inside the passes), not after the pass or the solve.
+// Measured against the same solve without a deadline, so the bound scales with the machine.
+TEST_F(ServiceAdmissionTest, ASolveFarLongerThanItsDeadlineFreesItsWorkerSoonAfterIt) {
+  server_->Shutdown();
+  server::ServerOptions options = DefaultOptions();
+  options.worker_threads = 1;
+  StartServer(options);
+  RandomProblemSpec shape;
+  shape.M = 120;
+  shape.L = 12;
+  shape.K = 120;
+  shape.N = 100;
+  shape.time_varying = false;  // one A: a small message for a large session
+  shape.seed = 11;
+  const v1::ProblemSpec dense = SpecOrDie(WithBoxes(RandomGaussianProblem(shape), 0.5, 0.2));
+  ASSERT_TRUE(client_->SolveOnce(bystander_spec_).ok());  // warm: connection and code paths
+
+  auto start = std::chrono::steady_clock::now();
+  absl::StatusOr<v1::SolveResult> full = client_->SolveOnce(dense);
+  const double full_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(full.ok()) << full.status();
+  const double deadline_s = full_s / 10.0;
+  Client impatient(target_, std::chrono::milliseconds(static_cast<int>(deadline_s * 1000.0) + 1));
+  start = std::chrono::steady_clock::now();
+  const absl::Status abandoned = impatient.SolveOnce(dense).status();
+  EXPECT_EQ(abandoned.code(), absl::StatusCode::kDeadlineExceeded) << abandoned;
+  absl::StatusOr<v1::SolveResult> next = client_->SolveOnce(bystander_spec_);  // waits for the only worker
+  const double free_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(next.ok()) << next.status();
+  std::printf("full solve %.3f s (%u passes); with a %.3f s deadline the worker answered the next call %.3f s in\n",
+              full_s, full->iterations(), deadline_s, free_s);
+  EXPECT_LT(free_s, deadline_s + full_s / 5.0) << "the worker stayed with the abandoned solve";
 }
 
 }  // namespace

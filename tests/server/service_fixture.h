@@ -10,7 +10,8 @@
 
 #include "client/client.h"
 #include "gtest/gtest.h"
-#include "loadtest/benchmark_instance.h"
+#include "loadtest/instances/benchmark_instance.h"
+#include "loadtest/instances/spec_from_problem.h"
 #include "server/grpc_server.h"
 #include "server/spec_conversion.h"
 #include "spdlog/spdlog.h"
@@ -28,7 +29,7 @@ inline bench::BenchmarkInstance LoadInstanceOrDie(const std::string& name) {
 }
 
 inline v1::ProblemSpec SpecOrDie(const core::Problem& problem) {
-  absl::StatusOr<v1::ProblemSpec> spec = server::SpecFromProblem(problem);
+  absl::StatusOr<v1::ProblemSpec> spec = bench::SpecFromProblem(problem);
   EXPECT_TRUE(spec.ok()) << spec.status();
   return *std::move(spec);
 }

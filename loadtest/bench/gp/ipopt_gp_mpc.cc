@@ -1,4 +1,4 @@
-#include "loadtest/ipopt_gp_mpc.h"
+#include "loadtest/bench/gp/ipopt_gp_mpc.h"
 
 #include <chrono>
 #include <cmath>

@@ -22,7 +22,7 @@
 #include "core/examples/csv_table.h"
 #include "core/examples/scenarios/gp_tanh.h"
 #include "core/gp/hyperparameter_fit.h"
-#include "loadtest/gp_closed_loop.h"
+#include "loadtest/bench/gp/gp_closed_loop.h"
 
 ABSL_FLAG(std::string, sizes, "500,700,900,1100,1300,1500", "training-set sizes N");
 ABSL_FLAG(int, steps, 100, "closed-loop steps per run");

@@ -1,5 +1,5 @@
-#ifndef NUPMPC_LOADTEST_GP_CLOSED_LOOP_H_
-#define NUPMPC_LOADTEST_GP_CLOSED_LOOP_H_
+#ifndef NUPMPC_LOADTEST_BENCH_GP_GP_CLOSED_LOOP_H_
+#define NUPMPC_LOADTEST_BENCH_GP_GP_CLOSED_LOOP_H_
 
 // The closed loop of [Nghiem] §V, run twice on the tanh plant with the same measurement
 // noise: once driven by linGP-SCP (on the NUP core), once by Ipopt on the full NLP. In the
@@ -43,4 +43,4 @@ absl::StatusOr<GpComparison> RunGpClosedLoops(const gp::GpModel& model, const gp
 
 }  // namespace nupmpc::bench
 
-#endif  // NUPMPC_LOADTEST_GP_CLOSED_LOOP_H_
+#endif  // NUPMPC_LOADTEST_BENCH_GP_GP_CLOSED_LOOP_H_

@@ -1,5 +1,5 @@
-#ifndef NUPMPC_LOADTEST_BENCH_REPORT_H_
-#define NUPMPC_LOADTEST_BENCH_REPORT_H_
+#ifndef NUPMPC_LOADTEST_BENCH_BENCH_REPORT_H_
+#define NUPMPC_LOADTEST_BENCH_BENCH_REPORT_H_
 
 #include <string>
 #include <vector>
@@ -33,4 +33,4 @@ double MeasureGemmGflops(int n);
 
 }  // namespace nupmpc::bench
 
-#endif  // NUPMPC_LOADTEST_BENCH_REPORT_H_
+#endif  // NUPMPC_LOADTEST_BENCH_BENCH_REPORT_H_

@@ -1,5 +1,5 @@
-#ifndef NUPMPC_LOADTEST_IPOPT_GP_MPC_H_
-#define NUPMPC_LOADTEST_IPOPT_GP_MPC_H_
+#ifndef NUPMPC_LOADTEST_BENCH_GP_IPOPT_GP_MPC_H_
+#define NUPMPC_LOADTEST_BENCH_GP_IPOPT_GP_MPC_H_
 
 // The peer for linGP-SCP: the full GP-MPC NLP ([Nghiem] (21)) solved by Ipopt (Debian's
 // coinor-libipopt, MUMPS, limited-memory Hessian). Single shooting: the variables are the
@@ -49,4 +49,4 @@ class IpoptGpMpc {
 
 }  // namespace nupmpc::bench
 
-#endif  // NUPMPC_LOADTEST_IPOPT_GP_MPC_H_
+#endif  // NUPMPC_LOADTEST_BENCH_GP_IPOPT_GP_MPC_H_

@@ -13,8 +13,8 @@
 #include "absl/strings/str_format.h"
 #include "cli/program_flags.h"
 #include "core/session/session.h"
-#include "loadtest/benchmark_instance.h"
-#include "loadtest/bench_report.h"
+#include "loadtest/bench/bench_report.h"
+#include "loadtest/instances/benchmark_instance.h"
 
 ABSL_FLAG(bool, json, false, "print one JSON object per instance per line");
 ABSL_FLAG(std::string, reference, "", "reference.json (default: the one beside each file)");

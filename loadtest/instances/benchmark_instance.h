@@ -1,5 +1,5 @@
-#ifndef NUPMPC_LOADTEST_BENCHMARK_INSTANCE_H_
-#define NUPMPC_LOADTEST_BENCHMARK_INSTANCE_H_
+#ifndef NUPMPC_LOADTEST_INSTANCES_BENCHMARK_INSTANCE_H_
+#define NUPMPC_LOADTEST_INSTANCES_BENCHMARK_INSTANCE_H_
 
 #include <map>
 #include <optional>
@@ -9,11 +9,18 @@
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/problem.h"
+#include "server/spec_conversion.h"
 
 namespace nupmpc::bench {
 
-// One instance file in the format of shared/benchmarks/README.md, converted to a core
-// Problem (benchmark x_1 = x[0], y_n = y[n-1]; no output prior at step N; R and Qy must be
+// The test data of ../shared/benchmarks for the core benchmarks and the tests, in the
+// core's terms. An instance file is read once, by the proto-only reader of the command-line
+// tools (client/problem_file.h: the instance as a v1::ProblemSpec and its recorded
+// closed-loop states); its core Problem is that spec through the server's conversion
+// (server::ProblemFromSpec), so every tool and test solves the problem the service would.
+
+// One instance file in the format of shared/benchmarks/README.md as a core Problem
+// (benchmark x_1 = x[0], y_n = y[n-1]; no output prior at step N; R and Qy must be
 // diagonal, since the core's priors are per scalar).
 struct BenchmarkInstance {
   std::string name;
@@ -26,6 +33,10 @@ struct BenchmarkInstance {
 };
 
 absl::StatusOr<BenchmarkInstance> LoadBenchmarkInstance(const std::string& path);
+
+// Size limits that admit any spec (tools and tests solve what they are given; the server
+// checks its own limits).
+server::SizeLimits NoSizeLimits();
 
 // One entry of reference.json.
 struct Reference {
@@ -41,4 +52,4 @@ absl::StatusOr<std::map<std::string, Reference>> LoadReferences(const std::strin
 
 }  // namespace nupmpc::bench
 
-#endif  // NUPMPC_LOADTEST_BENCHMARK_INSTANCE_H_
+#endif  // NUPMPC_LOADTEST_INSTANCES_BENCHMARK_INSTANCE_H_

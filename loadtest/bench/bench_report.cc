@@ -1,4 +1,4 @@
-#include "loadtest/bench_report.h"
+#include "loadtest/bench/bench_report.h"
 
 #include <algorithm>
 #include <chrono>
@@ -11,7 +11,7 @@
 #include "Eigen/Core"
 #include "absl/strings/str_format.h"
 #include "core/session/session.h"
-#include "loadtest/benchmark_instance.h"
+#include "loadtest/instances/benchmark_instance.h"
 
 namespace nupmpc::bench {
 namespace {

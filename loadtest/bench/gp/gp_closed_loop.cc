@@ -1,10 +1,10 @@
-#include "loadtest/gp_closed_loop.h"
+#include "loadtest/bench/gp/gp_closed_loop.h"
 
 #include <cmath>
 #include <random>
 
 #include "core/examples/scenarios/gp_tanh.h"
-#include "loadtest/ipopt_gp_mpc.h"
+#include "loadtest/bench/gp/ipopt_gp_mpc.h"
 
 namespace nupmpc::bench {
 namespace {
