@@ -5,13 +5,10 @@
 // the plant went without a fresh plan. And a step whose result carries no plan
 // (SolveResult.has_plan false) is never applied: the CLI holds the last input.
 #include <fcntl.h>
-#include <netinet/in.h>
 #include <signal.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <arpa/inet.h>
 
 #include <chrono>
 #include <cstdio>
@@ -28,51 +25,18 @@
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "tests/util/server_process.h"
 
 namespace nupmpc::testing {
 namespace {
 
-// A free loopback port: bind to port 0 and ask which one the kernel chose.
-int FreePort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t length = sizeof(address);
-  if (bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) != 0 ||
-      getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) != 0) {
-    close(fd);
-    return 0;
-  }
-  close(fd);
-  return ntohs(address.sin_port);
-}
-
 std::string Target(int port) { return "127.0.0.1:" + std::to_string(port); }
 
-// nupmpc-server on 127.0.0.1:port; killed (SIGKILL) when destroyed if still running.
-class ServerProcess {
- public:
-  explicit ServerProcess(int port) {
-    pid_ = fork();
-    if (pid_ == 0) {
-      const std::string address = "--address=" + Target(port);
-      execl(NUPMPC_SERVER_BINARY, NUPMPC_SERVER_BINARY, address.c_str(), "--log_level=warn", "--threads=1",
-            static_cast<char*>(nullptr));
-      _exit(127);
-    }
-  }
-  ~ServerProcess() { Kill(); }
-  void Kill() {
-    if (pid_ <= 0) return;
-    kill(pid_, SIGKILL);
-    waitpid(pid_, nullptr, 0);
-    pid_ = -1;
-  }
-
- private:
-  pid_t pid_ = -1;
-};
+// nupmpc-server with one worker on 127.0.0.1:port; killed (SIGKILL) when destroyed.
+std::unique_ptr<ServerProcess> StartServer(int port) {
+  return std::make_unique<ServerProcess>(NUPMPC_SERVER_BINARY, port,
+                                         std::vector<std::string>{"--log_level=warn", "--threads=1"});
+}
 
 bool WaitUntilServing(int port) {
   auto channel = grpc::CreateChannel(Target(port), grpc::InsecureChannelCredentials());
@@ -167,8 +131,8 @@ CliRun RunCli(int port, const std::string& spec, std::vector<std::string> flags,
 // Kills the server when the CLI has printed step `kill_at`, waits `down_for`, starts it
 // again on the same port, and lets the run finish.
 CliRun RunThroughRestart(std::chrono::milliseconds down_for, int steps, int kill_at) {
-  const int port = FreePort();
-  auto server = std::make_unique<ServerProcess>(port);
+  const int port = FreeLoopbackPort();
+  auto server = StartServer(port);
   EXPECT_TRUE(WaitUntilServing(port));
   const std::string spec = WriteSpec("masses_N30_spec.json");
   bool restarted = false;
@@ -176,7 +140,7 @@ CliRun RunThroughRestart(std::chrono::milliseconds down_for, int steps, int kill
     if (restarted || step < kill_at) return;
     server->Kill();
     std::this_thread::sleep_for(down_for);
-    server = std::make_unique<ServerProcess>(port);
+    server = StartServer(port);
     restarted = true;
   });
   EXPECT_TRUE(restarted) << "the run ended before step " << kill_at;
@@ -220,8 +184,8 @@ TEST(ClosedLoopRestart, ServerKilledAndBackAfter5s) {
 // The budget bounds the wait: with the server gone for good, the CLI gives up after about
 // --reconnect_budget_s and exits 1 naming the attempts.
 TEST(ClosedLoopRestart, GivesUpWhenTheBudgetIsSpent) {
-  const int port = FreePort();
-  auto server = std::make_unique<ServerProcess>(port);
+  const int port = FreeLoopbackPort();
+  auto server = StartServer(port);
   ASSERT_TRUE(WaitUntilServing(port));
   const std::string spec = WriteSpec("masses_N30_spec.json");
   const CliRun run = RunCli(port, spec, {"--steps=400", "--reconnect_budget_s=1"}, [&](int step) {
@@ -252,8 +216,8 @@ TEST(ClosedLoopNoPlan, AStepWithoutAPlanHoldsTheLastInput) {
   const std::filesystem::path path = ScratchPath("masses_N30_bad_state.json");
   std::ofstream(path) << instance.dump();
 
-  const int port = FreePort();
-  ServerProcess server(port);
+  const int port = FreeLoopbackPort();
+  const std::unique_ptr<ServerProcess> server = StartServer(port);
   ASSERT_TRUE(WaitUntilServing(port));
   const CliRun run = RunCli(port, path.string(), {}, [](int) {});
   EXPECT_EQ(run.exit_code, 0) << run.stderr_text;

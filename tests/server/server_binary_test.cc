@@ -1,15 +1,13 @@
 // The nupmpc-server binary as deployed: health reports SERVING, reflection lists the
 // service, flags and environment configure it, and SIGTERM drains it to exit 0.
-#include <arpa/inet.h>
-#include <netinet/in.h>
 #include <signal.h>
-#include <sys/socket.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <chrono>
+#include <memory>
 #include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "client/client.h"
 #include "gmock/gmock.h"
@@ -17,70 +15,25 @@
 #include "gtest/gtest.h"
 #include "protos/health_subset.grpc.pb.h"
 #include "protos/reflection_subset.grpc.pb.h"
+#include "tests/util/server_process.h"
 
 namespace nupmpc::testing {
 namespace {
 
-// Picks a free loopback port: bind to port 0 and ask which one the kernel chose.
-int FreePort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t length = sizeof(address);
-  if (bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) != 0 ||
-      getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) != 0) {
-    close(fd);
-    return 0;
-  }
-  close(fd);
-  return ntohs(address.sin_port);
+// The deployed binary with NUPMPC_THREADS set: the environment configures it too.
+std::unique_ptr<ServerProcess> StartServer(const char* threads_env) {
+  return std::make_unique<ServerProcess>(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
+                                         std::vector<std::string>{"--log_level=warn", "--grace_period_s=2"},
+                                         std::vector<std::pair<std::string, std::string>>{{"NUPMPC_THREADS", threads_env}});
 }
-
-class ServerProcess {
- public:
-  explicit ServerProcess(int port, const char* threads_env) : port_(port) {
-    pid_ = fork();
-    if (pid_ == 0) {
-      if (threads_env != nullptr) setenv("NUPMPC_THREADS", threads_env, 1);
-      const std::string address = "--address=127.0.0.1:" + std::to_string(port);
-      execl(NUPMPC_SERVER_BINARY, NUPMPC_SERVER_BINARY, address.c_str(), "--log_level=warn", "--grace_period_s=2",
-            static_cast<char*>(nullptr));
-      _exit(127);
-    }
-  }
-  ~ServerProcess() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-  }
-  std::string target() const { return "127.0.0.1:" + std::to_string(port_); }
-  // Sends `signal` and returns the exit status (-1 if it did not exit within 10 s).
-  int StopWith(int signal) {
-    kill(pid_, signal);
-    for (int i = 0; i < 1000; ++i) {
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return -1;
-  }
-
- private:
-  int port_;
-  pid_t pid_ = -1;
-};
 
 bool WaitUntilServing(const std::shared_ptr<grpc::Channel>& channel) {
   return channel->WaitForConnected(std::chrono::system_clock::now() + std::chrono::seconds(10));
 }
 
 TEST(ServerBinaryTest, HealthReflectionEnvironmentAndGracefulSigterm) {
-  ServerProcess server(FreePort(), /*threads_env=*/"3");
+  const std::unique_ptr<ServerProcess> started = StartServer(/*threads_env=*/"3");
+  ServerProcess& server = *started;
   auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
   ASSERT_TRUE(WaitUntilServing(channel));
 
