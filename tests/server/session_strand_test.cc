@@ -6,6 +6,8 @@
 #include <atomic>
 #include <chrono>
 #include <future>
+#include <mutex>
+#include <thread>
 #include <vector>
 
 #include "gmock/gmock.h"
@@ -88,6 +90,76 @@ TEST(SessionStrand, RefusesBeyondTheWaitBoundAndFailsWhatThePoolRefuses) {
   stopper.join();
   EXPECT_EQ(ran.load() + failures.load(), SessionStrand::kMaxWaiting);
   EXPECT_EQ(strand->waiting(), 0);
+}
+
+// Closing and compaction run as the strand's work: at once on the calling thread when the
+// session is idle; a close waits for the task in flight and runs before the waiting ones;
+// compaction skips a busy session.
+TEST(SessionStrand, ExclusiveWorkRunsNowWhenIdleAndRightAfterTheTaskInFlightOtherwise) {
+  WorkerPool pool(/*threads=*/2, /*queue_capacity=*/64);
+  auto strand = std::make_shared<SessionStrand>();
+  const std::thread::id caller = std::this_thread::get_id();
+  std::thread::id ran_on;
+  SessionStrand::RunExclusive(strand, pool, [&] { ran_on = std::this_thread::get_id(); });
+  EXPECT_EQ(ran_on, caller);
+  bool compacted = false;
+  EXPECT_TRUE(SessionStrand::RunNowIfIdle(strand, pool, [&] { compacted = true; }));
+  EXPECT_TRUE(compacted);
+
+  std::promise<void> started, release;
+  std::shared_future<void> released = release.get_future().share();
+  std::vector<int> order;
+  std::mutex order_mu;
+  const auto record = [&](int i) {
+    std::lock_guard<std::mutex> lock(order_mu);
+    order.push_back(i);
+  };
+  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
+                                      started.set_value();
+                                      released.wait();
+                                      record(0);
+                                    }))
+                  .ok());
+  started.get_future().wait();
+  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] { record(2); })).ok());
+  EXPECT_FALSE(SessionStrand::RunNowIfIdle(strand, pool, [&] { record(-1); }));  // busy: skipped
+  std::promise<void> closed;
+  SessionStrand::RunExclusive(strand, pool, [&] {
+    record(1);
+    closed.set_value();
+  });
+  EXPECT_EQ(strand->waiting(), 2);
+  release.set_value();
+  EXPECT_EQ(closed.get_future().wait_for(10s), std::future_status::ready);
+  for (int spin = 0; spin < 1000 && strand->waiting() > 0; ++spin) std::this_thread::sleep_for(1ms);
+  pool.Shutdown();
+  EXPECT_THAT(order, ::testing::ElementsAre(0, 1, 2));
+}
+
+// A close queued behind a task still runs when the pool refuses it at its turn.
+TEST(SessionStrand, ExclusiveWorkRunsEvenWhenThePoolRefusesIt) {
+  WorkerPool pool(/*threads=*/1, /*queue_capacity=*/64);
+  auto strand = std::make_shared<SessionStrand>();
+  std::promise<void> started, release;
+  std::shared_future<void> released = release.get_future().share();
+  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
+                                      started.set_value();
+                                      released.wait();
+                                    }))
+                  .ok());
+  started.get_future().wait();
+  std::atomic<bool> closed{false};
+  SessionStrand::RunExclusive(strand, pool, [&] { closed = true; });
+  std::thread stopper([&] { pool.Shutdown(); });  // refuses new tasks, then waits for the running one
+  bool refusing = false;
+  for (int spin = 0; spin < 10000 && !refusing; ++spin) {
+    refusing = pool.TrySubmit([] {}).code() == absl::StatusCode::kUnavailable;
+    if (!refusing) std::this_thread::sleep_for(1ms);
+  }
+  EXPECT_TRUE(refusing);
+  release.set_value();
+  stopper.join();
+  EXPECT_TRUE(closed);
 }
 
 }  // namespace
