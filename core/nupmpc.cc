@@ -12,4 +12,11 @@ absl::StatusOr<std::unique_ptr<MpcSession>> CreateSession(Problem problem, Solve
   return std::unique_ptr<MpcSession>(std::move(session));
 }
 
+absl::StatusOr<std::unique_ptr<MpcSession>> CreateSession(Problem problem, InputMap map, SolverOptions options) {
+  const Dimensions caller = DimensionsOf(problem);
+  NUPMPC_ASSIGN_OR_RETURN(Problem mapped, MapInputs(std::move(problem), map));
+  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<MpcSession> inner, CreateSession(std::move(mapped), options));
+  return InputMappedSession::Wrap(std::move(inner), std::move(map), caller);
+}
+
 }  // namespace nupmpc::core

@@ -2,8 +2,8 @@
 #define NUPMPC_CORE_NUPMPC_H_
 
 // The core's public facade for embedding it in a program: everything needed to describe a
-// problem (Problem, ScalarPrior), choose options (SolverOptions, SolveLimits), create a
-// session and solve it (MpcSession, Solution, SolveSummary). The algorithms behind a
+// problem (Problem, ScalarPrior, InputMap), choose options (SolverOptions, SolveLimits),
+// create a session, step it (StepUpdate) and solve it (MpcSession, Solution, SolveSummary). The algorithms behind a
 // session (core/algorithms/) and its internals (core/session/session.h) stay out of
 // sight: code that includes only this header depends on nothing but this interface.
 //
@@ -18,7 +18,9 @@
 #include "core/options.h"
 #include "core/priors/scalar_prior.h"
 #include "core/problem.h"
+#include "core/session/input_mapped_session.h"
 #include "core/session/mpc_session.h"
+#include "core/session/step_update.h"
 #include "core/solution.h"
 
 namespace nupmpc::core {
@@ -27,6 +29,11 @@ namespace nupmpc::core {
 // FAILED_PRECONDITION naming the field), picks the algorithm (SolverOptions.algorithm) and
 // allocates everything the solves need.
 absl::StatusOr<std::unique_ptr<MpcSession>> CreateSession(Problem problem, SolverOptions options = {});
+
+// The same for a problem whose inputs are multi-level or carry priors on their differences
+// (`map`): the session solves MapInputs(problem, map) and the caller states, updates
+// (MpcSession::Apply) and reads its own inputs, outputs and states.
+absl::StatusOr<std::unique_ptr<MpcSession>> CreateSession(Problem problem, InputMap map, SolverOptions options = {});
 
 }  // namespace nupmpc::core
 

@@ -10,6 +10,8 @@
 #error "core/nupmpc.h exposes core/session/session.h"
 #endif
 
+#include <cmath>
+
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 
@@ -52,6 +54,35 @@ TEST(Facade, RejectsAnInvalidProblemNamingTheField) {
   const absl::StatusOr<std::unique_ptr<MpcSession>> session = CreateSession(std::move(p));
   ASSERT_FALSE(session.ok());
   EXPECT_THAT(std::string(session.status().message()), ::testing::HasSubstr("Problem.A"));
+}
+
+// Input differences through the facade: |u[n] - u[n-1]| <= 0.2 from u[-1] = 0.5, with the
+// caller's one input in the plan, and a step that moves x[0] and gives u[-1].
+TEST(Facade, CreatesAnInputDifferenceSessionThatKeepsItsRateLimit) {
+  const Problem base = BoundedDoubleIntegrator();
+  InputMap map;
+  map.differences = true;
+  map.difference_priors.assign(static_cast<std::size_t>(base.horizon), ScalarPrior::Box(-0.2, 0.2));
+  map.previous_input = Eigen::VectorXd::Constant(1, 0.5);
+  absl::StatusOr<std::unique_ptr<MpcSession>> session = CreateSession(base, map);
+  ASSERT_TRUE(session.ok()) << session.status();
+  EXPECT_EQ((*session)->dimensions().num_inputs, 1);
+  for (const double previous : {0.5, -0.3}) {
+    StepUpdate step;
+    step.state = Eigen::VectorXd::Constant(2, 1.0);
+    step.previous_input = Eigen::VectorXd::Constant(1, previous);
+    ASSERT_TRUE((*session)->Apply(step).ok());
+    Solution plan;
+    const absl::StatusOr<SolveSummary> summary = (*session)->Solve(SolveLimits{}, &plan);
+    ASSERT_TRUE(summary.ok() && summary->has_plan) << summary.status();
+    ASSERT_EQ(plan.inputs.cols(), 1);
+    ASSERT_EQ(plan.states.cols(), 2);
+    EXPECT_LE(std::abs(plan.inputs(0, 0) - previous), 0.2 + 1e-9);
+    for (int n = 1; n < plan.inputs.rows(); ++n) {
+      EXPECT_LE(std::abs(plan.inputs(n, 0) - plan.inputs(n - 1, 0)), 0.2 + 1e-9) << "step " << n;
+    }
+    EXPECT_EQ(plan.states(0, 0), 1.0);
+  }
 }
 
 }  // namespace
