@@ -155,6 +155,13 @@ absl::Status ValidatePriors(const Problem& p) {
   }
   for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
     NUPMPC_RETURN_IF_ERROR(ValidatePrior(p.output_priors[i], "Problem.output_priors", static_cast<int>(i)));
+  }
+  return CheckPriorGrouping(p);
+}
+
+absl::Status CheckPriorGrouping(const Problem& p) {
+  const int L = p.num_inputs;
+  for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
     if (p.output_priors[i].rounds_with_next) {
       return absl::InvalidArgumentError(
           absl::StrCat("Problem.output_priors[", i, "].rounds_with_next: only binary inputs are rounded"));

@@ -75,9 +75,11 @@ struct Problem {
 // e.g. "Problem.A[3]: expected 4x4, got 4x3".
 absl::Status Validate(const Problem& problem);
 
-// The prior arrays' part of Validate: their sizes, each prior, and how binaries of one
-// step are grouped (rounds_with_next).
+// The prior arrays' part of Validate: their sizes, each prior, and CheckPriorGrouping.
 absl::Status ValidatePriors(const Problem& problem);
+// How the priors of one step combine: binaries grouped into an M-level input
+// (rounds_with_next) are binaries with the same levels; outputs are never grouped.
+absl::Status CheckPriorGrouping(const Problem& problem);
 
 // FAILED_PRECONDITION unless `update` has `session`'s shape: dimensions, horizon, which
 // matrices vary per step, terminal cost present. A session's problem may only be replaced

@@ -145,7 +145,9 @@ absl::Status Session::Apply(const StepUpdate& update) {
   };
   if (update.state.has_value()) scratch_state_ = *update.state;
   swap_candidate();
-  absl::Status adopted = ValidatePriors(problem_);
+  // Each new prior was checked by CheckPriorChanges and a shift only moves checked ones:
+  // what is left is how the new priors combine.
+  absl::Status adopted = CheckPriorGrouping(problem_);
   if (adopted.ok()) adopted = AdoptNewValues(was_input_constrained);
   if (!adopted.ok()) swap_candidate();  // the previous values again
   return adopted;

@@ -49,7 +49,7 @@ absl::Status CheckStepState(int num_states, const Eigen::VectorXd& state);
 
 // Checks the prior changes of `update` against a session with L inputs, K outputs and
 // horizon N: indices in range, one prior per step, each prior valid. Does not check how
-// the new priors combine (ValidatePriors on the result does).
+// the new priors combine (CheckPriorGrouping on the result does).
 absl::Status CheckPriorChanges(int L, int K, int N, const StepUpdate& update);
 
 // Writes the prior changes (checked by CheckPriorChanges) into the prior arrays of a

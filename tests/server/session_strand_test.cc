@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <future>
 #include <mutex>
 #include <thread>
@@ -23,6 +24,29 @@ SessionStrand::Task Task(std::function<void()> run, std::atomic<int>* failures =
             if (failures != nullptr) ++*failures;
           }};
 }
+
+// A task of `strand` that is running (the constructor returns once it started) and
+// blocks its worker until Release(); then it runs `after`.
+class TaskInFlight {
+ public:
+  TaskInFlight(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, std::function<void()> after = [] {})
+      : released_(release_.get_future().share()) {
+    std::future<void> running = started_.get_future();
+    EXPECT_TRUE(SessionStrand::Submit(strand, pool, Task([this, after = std::move(after)] {
+                                        started_.set_value();
+                                        released_.wait();
+                                        after();
+                                      }))
+                    .ok());
+    running.wait();
+  }
+  void Release() { release_.set_value(); }
+
+ private:
+  // Members, not locals: the task still uses them after the constructor has returned.
+  std::promise<void> started_, release_;
+  std::shared_future<void> released_;
+};
 
 TEST(SessionStrand, WaitingTasksHoldNoWorkerAndRunInOrder) {
   WorkerPool pool(/*threads=*/2, /*queue_capacity=*/64);
@@ -67,14 +91,7 @@ TEST(SessionStrand, WaitingTasksHoldNoWorkerAndRunInOrder) {
 TEST(SessionStrand, RefusesBeyondTheWaitBoundAndFailsWhatThePoolRefuses) {
   WorkerPool pool(/*threads=*/1, /*queue_capacity=*/64);
   auto strand = std::make_shared<SessionStrand>();
-  std::promise<void> started, release;
-  std::shared_future<void> released = release.get_future().share();
-  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
-                                      started.set_value();
-                                      released.wait();
-                                    }))
-                  .ok());
-  started.get_future().wait();
+  TaskInFlight in_flight(strand, pool);
   std::atomic<int> ran{0}, failures{0};
   for (int i = 0; i < SessionStrand::kMaxWaiting; ++i) {
     ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] { ++ran; }, &failures)).ok());
@@ -86,7 +103,7 @@ TEST(SessionStrand, RefusesBeyondTheWaitBoundAndFailsWhatThePoolRefuses) {
   // Shutting down while tasks wait for the session: each is answered exactly once.
   std::thread stopper([&] { pool.Shutdown(); });
   std::this_thread::sleep_for(20ms);  // Shutdown() has stopped accepting before the first task ends
-  release.set_value();
+  in_flight.Release();
   stopper.join();
   EXPECT_EQ(ran.load() + failures.load(), SessionStrand::kMaxWaiting);
   EXPECT_EQ(strand->waiting(), 0);
@@ -106,21 +123,13 @@ TEST(SessionStrand, ExclusiveWorkRunsNowWhenIdleAndRightAfterTheTaskInFlightOthe
   EXPECT_TRUE(SessionStrand::RunNowIfIdle(strand, pool, [&] { compacted = true; }));
   EXPECT_TRUE(compacted);
 
-  std::promise<void> started, release;
-  std::shared_future<void> released = release.get_future().share();
   std::vector<int> order;
   std::mutex order_mu;
   const auto record = [&](int i) {
     std::lock_guard<std::mutex> lock(order_mu);
     order.push_back(i);
   };
-  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
-                                      started.set_value();
-                                      released.wait();
-                                      record(0);
-                                    }))
-                  .ok());
-  started.get_future().wait();
+  TaskInFlight in_flight(strand, pool, [&] { record(0); });
   ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] { record(2); })).ok());
   EXPECT_FALSE(SessionStrand::RunNowIfIdle(strand, pool, [&] { record(-1); }));  // busy: skipped
   std::promise<void> closed;
@@ -129,7 +138,7 @@ TEST(SessionStrand, ExclusiveWorkRunsNowWhenIdleAndRightAfterTheTaskInFlightOthe
     closed.set_value();
   });
   EXPECT_EQ(strand->waiting(), 2);
-  release.set_value();
+  in_flight.Release();
   EXPECT_EQ(closed.get_future().wait_for(10s), std::future_status::ready);
   for (int spin = 0; spin < 1000 && strand->waiting() > 0; ++spin) std::this_thread::sleep_for(1ms);
   pool.Shutdown();
@@ -140,14 +149,7 @@ TEST(SessionStrand, ExclusiveWorkRunsNowWhenIdleAndRightAfterTheTaskInFlightOthe
 TEST(SessionStrand, ExclusiveWorkRunsEvenWhenThePoolRefusesIt) {
   WorkerPool pool(/*threads=*/1, /*queue_capacity=*/64);
   auto strand = std::make_shared<SessionStrand>();
-  std::promise<void> started, release;
-  std::shared_future<void> released = release.get_future().share();
-  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
-                                      started.set_value();
-                                      released.wait();
-                                    }))
-                  .ok());
-  started.get_future().wait();
+  TaskInFlight in_flight(strand, pool);
   std::atomic<bool> closed{false};
   SessionStrand::RunExclusive(strand, pool, [&] { closed = true; });
   std::thread stopper([&] { pool.Shutdown(); });  // refuses new tasks, then waits for the running one
@@ -157,7 +159,7 @@ TEST(SessionStrand, ExclusiveWorkRunsEvenWhenThePoolRefusesIt) {
     if (!refusing) std::this_thread::sleep_for(1ms);
   }
   EXPECT_TRUE(refusing);
-  release.set_value();
+  in_flight.Release();
   stopper.join();
   EXPECT_TRUE(closed);
 }
