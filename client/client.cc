@@ -4,6 +4,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "client/session_routing.h"
 #include "client/spec_update.h"
 
 namespace nupmpc {
@@ -41,9 +42,10 @@ void Client::SetDeadline(grpc::ClientContext* context) const {
 template <typename Request, typename Response>
 absl::StatusOr<Response> Client::Unary(
     grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-    const Request& request) {
+    const Request& request, const std::string& session_id) {
   grpc::ClientContext context;
   SetDeadline(&context);
+  if (!session_id.empty()) RouteToSession(&context, session_id);
   Response response;
   const grpc::Status s = (stub_.get()->*method)(&context, request, &response);
   if (!s.ok()) return FromGrpc(s);
@@ -58,17 +60,18 @@ absl::StatusOr<v1::SolveResult> Client::SolveOnce(const v1::ProblemSpec& spec) {
   return std::move(*response->mutable_result());
 }
 
-absl::StatusOr<v1::CreateSessionResponse> Client::CreateSession(const v1::ProblemSpec& spec) {
+absl::StatusOr<v1::CreateSessionResponse> Client::CreateSession(const v1::ProblemSpec& spec, std::string session_id) {
   v1::CreateSessionRequest request;
   *request.mutable_spec() = spec;
-  return Unary(&v1::MpcService::Stub::CreateSession, request);
+  request.set_session_id(session_id.empty() ? NewSessionId() : std::move(session_id));
+  return Unary(&v1::MpcService::Stub::CreateSession, request, request.session_id());
 }
 
 absl::StatusOr<v1::SolveResult> Client::Solve(const std::string& session_id, const v1::Step& step) {
   v1::SolveRequest request;
   request.set_session_id(session_id);
   *request.mutable_step() = step;
-  auto response = Unary(&v1::MpcService::Stub::Solve, request);
+  auto response = Unary(&v1::MpcService::Stub::Solve, request, session_id);
   if (!response.ok()) return response.status();
   return std::move(*response->mutable_result());
 }
@@ -84,7 +87,7 @@ absl::StatusOr<v1::GetServerInfoResponse> Client::GetServerInfo() {
 absl::StatusOr<v1::SessionInfo> Client::GetSession(const std::string& session_id) {
   v1::GetSessionRequest request;
   request.set_session_id(session_id);
-  auto response = Unary(&v1::MpcService::Stub::GetSession, request);
+  auto response = Unary(&v1::MpcService::Stub::GetSession, request, session_id);
   if (!response.ok()) return response.status();
   return response->session();
 }
@@ -98,7 +101,7 @@ absl::StatusOr<std::vector<v1::SessionInfo>> Client::ListSessions() {
 absl::Status Client::CloseSession(const std::string& session_id) {
   v1::CloseSessionRequest request;
   request.set_session_id(session_id);
-  return Unary(&v1::MpcService::Stub::CloseSession, request).status();
+  return Unary(&v1::MpcService::Stub::CloseSession, request, session_id).status();
 }
 
 absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession(const v1::ProblemSpec& spec, ReconnectOptions reconnect) {
@@ -207,6 +210,13 @@ absl::Status Session::BrokenStreamStatusLocked(const char* what) {
     return absl::UnavailableError(absl::StrCat("the Control stream was cancelled by the server (", what, "): ",
                                                s.error_message()));
   }
+  // The server ends every stream with a status; UNKNOWN is gRPC's word for a stream that
+  // ended without one ("No status received"): what a balancer does to the streams of a
+  // replica that died. The session is gone with the replica.
+  if (s.error_code() == grpc::StatusCode::UNKNOWN) {
+    return absl::UnavailableError(absl::StrCat("the Control stream ended without a status (", what,
+                                               "; a balancer whose replica went away?): ", s.error_message()));
+  }
   return absl::Status(static_cast<absl::StatusCode>(s.error_code()),
                       absl::StrCat("the Control stream broke (", what, "): ", s.error_message()));
 }
@@ -235,14 +245,10 @@ absl::StatusOr<v1::SolveResult> Session::Step(const v1::Step& step) {
   if (!result.ok() && IsRetryable(result.status())) {
     // The stream (or the server) went away: re-create the session from the spec and
     // resend the step, with back-off, until the budget is spent.
-    const auto clock = [this] { return reconnect_.now ? reconnect_.now() : std::chrono::steady_clock::now(); };
-    const auto start = clock();
     TearDownLocked();
-    int attempts = 0;
-    bool reattached = false;
-    const absl::Status outage = RetryWithBackoff(
+    const absl::Status outage = RideOutOutage(
         reconnect_, result.status(),
-        [&](std::chrono::milliseconds timeout) -> absl::Status {
+        [&](std::chrono::milliseconds timeout, bool* answered) -> absl::Status {
           // A channel whose connection attempts were refused while the server was down
           // keeps failing calls at once until its own back-off (1 s growing ×1.6 to 2 min)
           // lets it try again: seconds after the server is back. So every attempt is made
@@ -257,20 +263,12 @@ absl::StatusOr<v1::SolveResult> Session::Step(const v1::Step& step) {
           }
           if (absl::Status s = ConnectLocked(timeout); !s.ok()) return s;
           result = StepOnceLocked(step);
-          reattached = result.ok() || !IsRetryable(result.status());
+          *answered = result.ok() || !IsRetryable(result.status());
           return result.status();
         },
-        &attempts);
-    const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(clock() - start);
-    stats_.attempts += attempts;
-    stats_.total += took;
-    stats_.longest = std::max(stats_.longest, took);
-    if (reattached) {
-      ++stats_.reconnects;  // `result` is the resent step's answer (or its own error)
-    } else {
-      if (IsRetryable(outage)) ++stats_.failed_outages;
-      result = outage;
-    }
+        &stats_);
+    // Answered: `result` is the resent step's answer (or its own error).
+    if (!outage.ok()) result = outage;
   }
   if (result.ok()) ApplyStepToSpec(step, *result, &spec_);
   return result;

@@ -8,8 +8,9 @@
 //   v1::Step step;  step.add_state(...);               // measured x[0]
 //   auto result = (*session)->Step(step);              // u = result->inputs() (N×L)
 //
-// A Session survives a server restart: when its stream breaks (a retryable error, see
-// client/reconnect.h) it reconnects with exponential back-off and jitter within a budget
+// A Session survives a server restart, and the loss of its replica behind a balancer:
+// when its stream breaks (UNAVAILABLE, a cancellation it did not make, or a stream that
+// ended without a status, as a balancer ends those of a dead replica) it reconnects with exponential back-off and jitter within a budget
 // (ReconnectOptions, default 50 ms doubling to 2 s, ±20 %, 30 s), re-creates the session
 // from the spec it holds (kept current with every answered step by ApplyStepToSpec,
 // client/spec_update.h: state, references, bounds, shifts, GP reference, Δu's u[-1]),
@@ -53,7 +54,11 @@ class Client {
                   std::chrono::milliseconds default_deadline = std::chrono::milliseconds(0));
 
   absl::StatusOr<v1::SolveResult> SolveOnce(const v1::ProblemSpec& spec);
-  absl::StatusOr<v1::CreateSessionResponse> CreateSession(const v1::ProblemSpec& spec);
+  // Creates a session under `session_id` (empty: a new random id, NewSessionId). This and
+  // every call below that names a session carry the id in the x-nupmpc-session header, so
+  // a balancer that routes by it sends them all to the replica holding the session
+  // (client/session_routing.h). AddressedSession adds failover on top.
+  absl::StatusOr<v1::CreateSessionResponse> CreateSession(const v1::ProblemSpec& spec, std::string session_id = {});
   absl::StatusOr<v1::SolveResult> Solve(const std::string& session_id, const v1::Step& step);
   absl::StatusOr<v1::GetServerInfoResponse> GetServerInfo();
   absl::StatusOr<v1::FitGpModelResponse> FitGpModel(const v1::FitGpModelRequest& request);
@@ -71,25 +76,18 @@ class Client {
 
  private:
   void SetDeadline(grpc::ClientContext* context) const;
-  // One blocking unary call with the default deadline.
+  // One blocking unary call with the default deadline, routed to `session_id`'s replica
+  // when not empty.
   template <typename Request, typename Response>
   absl::StatusOr<Response> Unary(
       grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-      const Request& request);
+      const Request& request, const std::string& session_id = {});
   std::string target_;  // empty when built from a channel
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::MpcService::Stub> stub_;
   std::chrono::milliseconds default_deadline_;
   friend class Session;
-};
-
-// What a Session's reconnects cost so far.
-struct ReconnectStats {
-  int reconnects = 0;  // outages ridden through (session re-created, step answered)
-  int attempts = 0;    // attempts made, successful or not
-  int failed_outages = 0;  // outages that spent the budget (Step returned UNAVAILABLE)
-  std::chrono::milliseconds total{0};    // from each break to its step's answer (or giving up)
-  std::chrono::milliseconds longest{0};  // the longest such outage
+  friend class AddressedSession;
 };
 
 class Session {

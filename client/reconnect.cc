@@ -74,4 +74,26 @@ absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Statu
                                              " ms); last error: ", last.ToString()));
 }
 
+absl::Status RideOutOutage(const ReconnectOptions& options, const absl::Status& cause,
+                           const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
+                           ReconnectStats* stats) {
+  const auto now = [&] { return options.now ? options.now() : std::chrono::steady_clock::now(); };
+  const auto start = now();
+  int attempts = 0;
+  bool answered = false;
+  const absl::Status outage = RetryWithBackoff(
+      options, cause, [&](std::chrono::milliseconds timeout) { return recreate_and_resend(timeout, &answered); },
+      &attempts);
+  const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(now() - start);
+  stats->attempts += attempts;
+  stats->total += took;
+  stats->longest = std::max(stats->longest, took);
+  if (answered) {
+    ++stats->reconnects;
+    return absl::OkStatus();
+  }
+  if (IsRetryable(outage)) ++stats->failed_outages;
+  return outage;
+}
+
 }  // namespace nupmpc

@@ -83,6 +83,25 @@ absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Statu
                               const std::function<absl::Status(std::chrono::milliseconds)>& attempt,
                               int* attempts = nullptr);
 
+// What a session's reconnects cost so far (nupmpc::Session, AddressedSession).
+struct ReconnectStats {
+  int reconnects = 0;  // outages ridden through (session re-created, step answered)
+  int attempts = 0;    // attempts made, successful or not
+  int failed_outages = 0;  // outages that spent the budget (the step returned UNAVAILABLE)
+  std::chrono::milliseconds total{0};    // from each break to its step's answer (or giving up)
+  std::chrono::milliseconds longest{0};  // the longest such outage
+};
+
+// One outage of a session, from the error that broke a step (`cause`) to that step's
+// answer: RetryWithBackoff over `recreate_and_resend`, which re-creates the session and
+// resends the step, sets *answered once the server answered the resent step (with a
+// result or with an error of the step's own), and returns that call's status. Books the
+// outage into `stats`. Returns OK when the step was answered (the caller holds the
+// answer), else the error that ended the outage.
+absl::Status RideOutOutage(const ReconnectOptions& options, const absl::Status& cause,
+                           const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
+                           ReconnectStats* stats);
+
 }  // namespace nupmpc
 
 #endif  // NUPMPC_CLIENT_RECONNECT_H_

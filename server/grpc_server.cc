@@ -51,6 +51,8 @@ void GrpcServer::Janitor() {
   }
 }
 
+void GrpcServer::ReportNotServing() { server_->GetHealthCheckService()->SetServingStatus(false); }
+
 void GrpcServer::Shutdown() {
   {
     std::lock_guard<std::mutex> lock(janitor_mu_);

@@ -22,6 +22,9 @@ class GrpcServer {
 
   int port() const { return port_; }
   ServerState& state() { return *state_; }
+  // The first step of a stop behind a load balancer: grpc.health.v1 says NOT_SERVING (the
+  // balancer's checks move new calls away) while every call is still served.
+  void ReportNotServing();
   // Graceful stop: refuse new work (UNAVAILABLE, health NOT_SERVING), give in-flight calls
   // `grace_period_s` to finish, cancel the rest, stop the workers. Idempotent.
   void Shutdown();

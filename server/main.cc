@@ -1,6 +1,8 @@
 // nupmpc-server: the nupmpc.v1 gRPC service. Configuration: --help (flags; environment
 // variables NUPMPC_* as fallbacks). SIGTERM/SIGINT drain and exit 0.
+#include <cmath>
 #include <csignal>
+#include <ctime>
 
 #include "cli/program_flags.h"
 #include "server/grpc_server.h"
@@ -29,7 +31,15 @@ int main(int argc, char** argv) {
                flags->options.queue_capacity, flags->options.max_sessions);
   int signal = 0;
   sigwait(&stop_signals, &signal);
-  spdlog::info("signal {}: draining (grace {} s)", signal, flags->options.grace_period_s);
+  if (flags->drain_delay_s > 0) {
+    spdlog::info("signal {}: reporting NOT_SERVING for {} s, still serving (a second signal drains at once)", signal,
+                 flags->drain_delay_s);
+    (*server)->ReportNotServing();
+    const double whole_s = std::floor(flags->drain_delay_s);
+    const timespec wait{static_cast<time_t>(whole_s), static_cast<long>((flags->drain_delay_s - whole_s) * 1e9)};
+    sigtimedwait(&stop_signals, nullptr, &wait);
+  }
+  spdlog::info("draining (grace {} s)", flags->options.grace_period_s);
   (*server)->Shutdown();
   spdlog::info("stopped");
   return 0;

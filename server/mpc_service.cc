@@ -21,13 +21,19 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
   auto* call = UnaryCall<v1::CreateSessionRequest, v1::CreateSessionResponse>::Start(state_, context, raw_request,
                                                                                     raw_response);
   if (!call->Parsed()) return call;
+  if (const std::string& requested = call->request().session_id(); !requested.empty()) {
+    if (absl::Status form = CheckSessionIdForm(requested); !form.ok()) {
+      call->Reply(form);
+      return call;
+    }
+  }
   ServerState* state = state_;
   const v1::CreateSessionRequest* request = &call->request();
   v1::CreateSessionResponse* response = call->response();
   call->RunOnPool("CreateSession", /*is_solve=*/false, [state, request, response](const CallContext& c) {
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
         CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
-                          &state->registry, c, /*owned_by_stream=*/false);
+                          &state->registry, c, /*owned_by_stream=*/false, request->session_id());
     if (!entry.ok()) return entry.status();
     response->set_session_id((*entry)->id);
     *response->mutable_dimensions() = (*entry)->dims;

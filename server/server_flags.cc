@@ -23,6 +23,9 @@ ABSL_FLAG(int, max_horizon, 100000, "largest horizon N (env NUPMPC_MAX_HORIZON)"
 ABSL_FLAG(int, max_states, 1000, "largest state dimension (env NUPMPC_MAX_STATES)");
 ABSL_FLAG(int, max_iterations, 100000, "largest per-solve iteration cap (env NUPMPC_MAX_ITERATIONS)");
 ABSL_FLAG(double, grace_period_s, 5, "on SIGTERM/SIGINT: time for in-flight solves (env NUPMPC_GRACE_PERIOD_S)");
+ABSL_FLAG(double, drain_delay_s, 0,
+          "on SIGTERM/SIGINT: report NOT_SERVING on grpc.health.v1 this long while still serving, so load balancers "
+          "move new calls away, before draining; a second signal ends the delay (env NUPMPC_DRAIN_DELAY_S)");
 ABSL_FLAG(int, memory_budget_mb, 0,
           "memory all sessions and calls in flight may reserve, by estimate, before requests are refused with "
           "RESOURCE_EXHAUSTED; 0: 3/4 of the smaller of physical memory and the cgroup limit (env NUPMPC_MEMORY_BUDGET_MB)");
@@ -81,7 +84,7 @@ const cli::ProgramInfo& ServerProgram() {
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   for (const char* name : {"address", "threads", "queue_capacity", "max_sessions", "session_idle_timeout_s",
                            "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states",
-                           "max_iterations", "grace_period_s", "memory_budget_mb", "max_session_memory_mb",
+                           "max_iterations", "grace_period_s", "drain_delay_s", "memory_budget_mb", "max_session_memory_mb",
                            "max_pass_gflop", "max_control_streams", "max_stream_answers", "max_streams_per_connection",
                            "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
@@ -108,12 +111,13 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.max_stream_answers = absl::GetFlag(FLAGS_max_stream_answers);
   o.max_streams_per_connection = absl::GetFlag(FLAGS_max_streams_per_connection);
   out.log_level = absl::GetFlag(FLAGS_log_level);
+  out.drain_delay_s = absl::GetFlag(FLAGS_drain_delay_s);
   for (const absl::Status& s :
        {RequireAtLeast("threads", o.worker_threads, 1), RequireAtLeast("queue_capacity", o.queue_capacity, 1),
         RequireAtLeast("max_sessions", o.max_sessions, 1), RequireAtLeast("session_idle_timeout_s", o.session_idle_timeout_s, 0.001),
         RequireAtLeast("max_message_bytes", o.max_message_bytes, 1024), RequireAtLeast("max_horizon", o.size_limits.max_horizon, 1),
         RequireAtLeast("max_states", o.size_limits.max_states, 1), RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
-        RequireAtLeast("grace_period_s", o.grace_period_s, 0.0),
+        RequireAtLeast("grace_period_s", o.grace_period_s, 0.0), RequireAtLeast("drain_delay_s", out.drain_delay_s, 0.0),
         RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
         RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0),
         RequireAtLeast("memory_budget_mb", absl::GetFlag(FLAGS_memory_budget_mb), 0),

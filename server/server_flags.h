@@ -11,10 +11,12 @@ namespace nupmpc::server {
 
 // Parses the command line (absl flags). A flag not given on the command line falls back to
 // the environment variable NUPMPC_<FLAG IN UPPER CASE> (e.g. NUPMPC_ADDRESS), then to its
-// default. Returns the options and the log level.
+// default. Returns the options and what main does with the process: the log level and
+// how long SIGTERM reports NOT_SERVING before it drains.
 struct ParsedFlags {
   ServerOptions options;
   std::string log_level;
+  double drain_delay_s = 0.0;
 };
 // --help and unknown flags exit here (cli/program_flags.h); a value out of range or a bad
 // environment variable is an error status.

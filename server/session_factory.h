@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/call_context.h"
@@ -34,12 +35,14 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
                                           MemoryBudget* budget = nullptr);
 
 // CreateSession and a Control stream's spec: BuildSession, then registers the session
-// unless the call's deadline passed or its client cancelled meanwhile (nobody could reach
-// a session registered then).
+// (under `requested_id` when not empty, see SessionRegistry::Add) unless the call's
+// deadline passed or its client cancelled meanwhile (nobody could reach a session
+// registered then).
 absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::ProblemSpec& spec, const SizeLimits& limits,
                                                                 GpModelCache* gp_models, MemoryBudget* budget,
                                                                 SessionRegistry* registry, const CallContext& call,
-                                                                bool owned_by_stream);
+                                                                bool owned_by_stream,
+                                                                absl::string_view requested_id = {});
 
 }  // namespace nupmpc::server
 

@@ -37,7 +37,8 @@ std::string SessionRegistry::NewId() {
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
                                                                    double default_time_limit_ms,
-                                                                   bool owned_by_stream, SessionMemory memory) {
+                                                                   bool owned_by_stream, SessionMemory memory,
+                                                                   absl::string_view requested_id) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owned_by_stream = owned_by_stream;
   entry->default_time_limit_ms = default_time_limit_ms;
@@ -55,9 +56,17 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_p
     return absl::ResourceExhaustedError(
         absl::StrCat("the server holds its maximum of ", max_sessions_, " sessions; close one or retry later"));
   }
-  do {
-    entry->id = NewId();
-  } while (sessions_.count(entry->id) > 0);
+  if (!requested_id.empty()) {
+    entry->id = absl::AsciiStrToLower(requested_id);
+    if (sessions_.count(entry->id) > 0) {
+      return absl::AlreadyExistsError(absl::StrCat("session_id ", QuoteSessionId(requested_id),
+                                                   ": a session with this id exists; draw another one"));
+    }
+  } else {
+    do {
+      entry->id = NewId();
+    } while (sessions_.count(entry->id) > 0);
+  }
   sessions_.emplace(entry->id, entry);
   return entry;
 }

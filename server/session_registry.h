@@ -72,10 +72,12 @@ class SessionRegistry {
   // `pool` runs the sessions' strands (closing or compacting a busy session queues on it).
   SessionRegistry(int max_sessions, WorkerPool& pool) : max_sessions_(max_sessions), pool_(pool) {}
 
-  // RESOURCE_EXHAUSTED when full.
+  // RESOURCE_EXHAUSTED when full. The session gets `requested_id` (a form CheckSessionIdForm
+  // accepts: the client drew it, see CreateSessionRequest.session_id) or, when empty, a new
+  // random id; ALREADY_EXISTS when `requested_id` is taken.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver,
                                                     double default_time_limit_ms, bool owned_by_stream,
-                                                    SessionMemory memory = {});
+                                                    SessionMemory memory = {}, absl::string_view requested_id = {});
   // INVALID_ARGUMENT for malformed ids, NOT_FOUND for unknown (or closed, or expired) ones.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id) const;
   // Removes the session at once; frees its solver and gives its memory back now, or right

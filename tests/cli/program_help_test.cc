@@ -37,6 +37,7 @@ const Program kPrograms[] = {
     {"nupmpc", "--format=<string>", "NUPMPC_SERVER"},
     {"nupmpc-bench", "--repeat=<int>", ""},
     {"nupmpc-loadtest", "--concurrency=<int>", "NUPMPC_SERVER"},
+    {"nupmpc-scaleout-probe", "--streams=<int>", "NUPMPC_SERVER"},
     {"nupmpc-gp-bench", "--sizes=<string>", ""},
     {"nupmpc-example-dac", "--out_dir=<string>", ""},
     {"nupmpc-example-corridor", "--out_dir=<string>", ""},

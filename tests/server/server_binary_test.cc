@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "client/client.h"
+#include "client/problem_file.h"
 #include "gmock/gmock.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
@@ -63,6 +64,50 @@ TEST(ServerBinaryTest, HealthReflectionEnvironmentAndGracefulSigterm) {
   EXPECT_EQ(info->limits().worker_threads(), 3u);  // from NUPMPC_THREADS
   EXPECT_EQ(info->api_version(), "nupmpc.v1");
 
+  EXPECT_EQ(server.StopWith(SIGTERM), 0);
+}
+
+grpc::health::v1::HealthCheckResponse::ServingStatus HealthOf(grpc::health::v1::Health::Stub& health) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(2));
+  grpc::health::v1::HealthCheckResponse response;
+  if (!health.Check(&context, {}, &response).ok()) return grpc::health::v1::HealthCheckResponse::UNKNOWN;
+  return response.status();
+}
+
+// What a load balancer needs to follow a stop: after SIGTERM the health check says
+// NOT_SERVING for --drain_delay_s while every call is still served; a second signal
+// ends the delay, and the server drains and exits 0.
+TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
+  ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(), {"--log_level=warn", "--grace_period_s=2"},
+                       {{"NUPMPC_DRAIN_DELAY_S", "60"}});
+  auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
+  ASSERT_TRUE(WaitUntilServing(channel));
+  auto health = grpc::health::v1::Health::NewStub(channel);
+  ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::SERVING);
+  Client client(channel);
+  absl::StatusOr<ProblemFile> masses = LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  ASSERT_TRUE(masses.ok()) << masses.status();
+  const v1::ProblemSpec& spec = masses->spec;
+  auto created = client.CreateSession(spec);
+  ASSERT_TRUE(created.ok()) << created.status();
+
+  server.Signal(SIGTERM);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (HealthOf(*health) == grpc::health::v1::HealthCheckResponse::SERVING &&
+         std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::NOT_SERVING);
+  // Still serving: the existing session solves, and a new one can be made.
+  v1::Step step;
+  *step.mutable_state() = spec.initial_state().mean();
+  auto solved = client.Solve(created->session_id(), step);
+  ASSERT_TRUE(solved.ok()) << solved.status();
+  EXPECT_TRUE(solved->has_plan());
+  EXPECT_TRUE(client.CreateSession(spec).ok());
+
+  // The second signal ends the 60 s delay: exit 0 well within StopWith's 10 s.
   EXPECT_EQ(server.StopWith(SIGTERM), 0);
 }
 

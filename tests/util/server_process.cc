@@ -51,6 +51,10 @@ void ServerProcess::Kill() {
   pid_ = -1;
 }
 
+void ServerProcess::Signal(int signal) {
+  if (pid_ > 0) kill(pid_, signal);
+}
+
 int ServerProcess::StopWith(int signal) {
   if (pid_ <= 0) return -1;
   kill(pid_, signal);

@@ -27,6 +27,8 @@ class ServerProcess {
   std::string target() const { return "127.0.0.1:" + std::to_string(port_); }
   // SIGKILL and reap; nothing if it already stopped.
   void Kill();
+  // Sends `signal` without waiting for the process.
+  void Signal(int signal);
   // Sends `signal` and returns the exit status (128 + signal if killed by one; -1 if it
   // did not exit within 10 s).
   int StopWith(int signal);

@@ -1,0 +1,213 @@
+#include "loadtest/failover_probe.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "client/addressed_session.h"
+#include "client/client.h"
+#include "core/session/mpc_session.h"
+#include "loadtest/core_baseline.h"
+#include "loadtest/instances/benchmark_instance.h"
+#include "nlohmann/json.hpp"
+#include "server/session_factory.h"
+
+namespace nupmpc::loadtest {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+v1::Step StepFor(const std::vector<double>& state) {
+  v1::Step step;
+  step.mutable_state()->Add(state.begin(), state.end());
+  return step;
+}
+
+std::string CodeName(const absl::Status& status) { return absl::StatusCodeToString(status.code()); }
+
+// The largest difference between a converged plan and the core's own cold solve of the
+// same spec from the same state, relative to the plan's size; NaN when the core did not
+// converge (nothing to compare with).
+double DifferenceFromCore(const v1::ProblemSpec& spec, const std::vector<double>& state,
+                          const v1::SolveResult& result) {
+  v1::ProblemSpec from_state = spec;
+  from_state.mutable_initial_state()->mutable_mean()->Assign(state.begin(), state.end());
+  absl::StatusOr<server::BuiltSession> built = server::BuildSession(from_state, bench::NoSizeLimits());
+  if (!built.ok()) return std::nan("");
+  core::Solution plan;
+  core::SolveLimits cold;
+  cold.warm_start = false;
+  absl::StatusOr<core::SolveSummary> summary = built->solver->Solve(cold, &plan);
+  if (!summary.ok() || summary->status != core::SolveStatus::kConverged) return std::nan("");
+  const Eigen::Index L = plan.inputs.cols();
+  if (result.inputs_size() != plan.inputs.size()) return std::numeric_limits<double>::infinity();
+  double largest = 1.0, difference = 0.0;
+  for (int i = 0; i < result.inputs_size(); ++i) {
+    const double core_value = plan.inputs(i / L, i % L);
+    largest = std::max(largest, std::abs(core_value));
+    difference = std::max(difference, std::abs(result.inputs(i) - core_value));
+  }
+  return difference / largest;
+}
+
+struct StreamOutcome {
+  std::uint64_t steps = 0, failed = 0, no_plan = 0, verified = 0, mismatched = 0;
+  double max_difference = 0.0;
+  std::map<std::string, std::uint64_t> errors;
+  ReconnectStats reconnect;
+  std::vector<double> round_trip_ms;
+};
+
+StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& config, int index,
+                           Clock::time_point until) {
+  StreamOutcome out;
+  Client client(work.target);  // its own connection, as a separate plant computer would have
+  absl::StatusOr<std::unique_ptr<Session>> session = client.OpenSession(work.spec);
+  if (!session.ok()) {
+    ++out.failed;
+    ++out.errors[CodeName(session.status())];
+    return out;
+  }
+  // Streams start at different states, so they do not all solve the same step.
+  std::size_t next = static_cast<std::size_t>(index) % work.states.size();
+  while (Clock::now() < until) {
+    const std::vector<double>& state = work.states[next];
+    next = (next + 1) % work.states.size();
+    const Clock::time_point sent = Clock::now();
+    absl::StatusOr<v1::SolveResult> result = (*session)->Step(StepFor(state));
+    if (!result.ok()) {
+      // Each failure on stderr: the report has the counts, the log says why.
+      std::fprintf(stderr, "stream %d: step failed: %s\n", index, result.status().ToString().c_str());
+      ++out.failed;
+      ++out.errors[CodeName(result.status())];
+      continue;
+    }
+    out.round_trip_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - sent).count());
+    ++out.steps;
+    if (!HasPlan(*result)) {
+      ++out.no_plan;
+      continue;
+    }
+    if (config.verify_every > 0 && out.steps % static_cast<std::uint64_t>(config.verify_every) == 0 &&
+        result->status() == v1::SOLVE_STATUS_CONVERGED) {
+      const double difference = DifferenceFromCore(work.spec, state, *result);
+      if (!std::isnan(difference)) {
+        ++out.verified;
+        out.max_difference = std::max(out.max_difference, difference);
+        if (!(difference <= 1e-9)) ++out.mismatched;
+      }
+    }
+  }
+  out.reconnect = (*session)->reconnect_stats();
+  (void)(*session)->Close();
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<StreamsProbeReport> RunStreamsProbe(const ProbeWorkload& work, const StreamsProbeConfig& config) {
+  if (config.streams < 1) return absl::InvalidArgumentError("streams: must be at least 1");
+  if (work.states.empty()) return absl::InvalidArgumentError("the instance has no states to send");
+  const Clock::time_point start = Clock::now();
+  const Clock::time_point until =
+      start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config.duration_s));
+  std::vector<StreamOutcome> outcomes(static_cast<std::size_t>(config.streams));
+  std::vector<std::thread> threads;
+  for (int i = 0; i < config.streams; ++i) {
+    threads.emplace_back([&, i] { outcomes[static_cast<std::size_t>(i)] = RunOneStream(work, config, i, until); });
+  }
+  for (std::thread& t : threads) t.join();
+  const double elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
+
+  StreamsProbeReport report;
+  report.streams = config.streams;
+  std::vector<double> round_trips;
+  for (const StreamOutcome& o : outcomes) {
+    report.steps += o.steps;
+    report.failed_steps += o.failed;
+    report.no_plan += o.no_plan;
+    for (const auto& [code, n] : o.errors) report.errors[code] += n;
+    report.reconnects += o.reconnect.reconnects;
+    report.longest_outage_s = std::max(report.longest_outage_s, o.reconnect.longest.count() / 1000.0);
+    if (o.reconnect.reconnects > 0 || o.reconnect.attempts > 0 || o.failed > 0) {
+      ++report.affected_streams;
+      report.max_failed_per_affected = std::max(report.max_failed_per_affected, o.failed);
+    }
+    report.verified += o.verified;
+    report.mismatched += o.mismatched;
+    report.max_plan_difference = std::max(report.max_plan_difference, o.max_difference);
+    round_trips.insert(round_trips.end(), o.round_trip_ms.begin(), o.round_trip_ms.end());
+  }
+  report.solves_per_s = static_cast<double>(report.steps) / std::max(elapsed_s, 1e-9);
+  report.p50_ms = Quantile(round_trips, 0.50);
+  report.p99_ms = Quantile(round_trips, 0.99);
+  return report;
+}
+
+absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work, int sessions, int solves_each) {
+  if (sessions < 1 || solves_each < 1) return absl::InvalidArgumentError("sessions, solves: must be at least 1");
+  Client client(work.target);
+  AddressedProbeReport report;
+  report.sessions = sessions;
+  std::vector<std::unique_ptr<AddressedSession>> opened;
+  for (int i = 0; i < sessions; ++i) {
+    absl::StatusOr<std::unique_ptr<AddressedSession>> s = AddressedSession::Create(&client, work.spec);
+    if (!s.ok()) return absl::Status(s.status().code(), absl::StrCat("creating session ", i + 1, ": ", s.status().message()));
+    opened.push_back(*std::move(s));
+  }
+  // Round by round, so consecutive calls of one session are far apart and interleaved
+  // with every other session's.
+  for (int round = 0; round < solves_each; ++round) {
+    for (std::size_t i = 0; i < opened.size(); ++i) {
+      const std::vector<double>& state = work.states[(i + static_cast<std::size_t>(round)) % work.states.size()];
+      absl::StatusOr<v1::SolveResult> result = opened[i]->Step(StepFor(state));
+      if (result.ok()) {
+        ++report.solves;
+      } else {
+        ++report.failed;
+        ++report.errors[CodeName(result.status())];
+      }
+    }
+  }
+  for (const std::unique_ptr<AddressedSession>& s : opened) {
+    report.recreated += s->reconnect_stats().reconnects;
+    absl::StatusOr<v1::SessionInfo> info = client.GetSession(s->id());
+    if (!info.ok() || info->solves() != static_cast<std::uint64_t>(solves_each)) ++report.miscounted;
+  }
+  return report;
+}
+
+std::string ToJson(const StreamsProbeReport& r) {
+  nlohmann::json j = {{"probe", "streams"},
+                      {"streams", r.streams},
+                      {"steps", r.steps},
+                      {"failed_steps", r.failed_steps},
+                      {"no_plan", r.no_plan},
+                      {"errors", r.errors},
+                      {"affected_streams", r.affected_streams},
+                      {"max_failed_per_affected_stream", r.max_failed_per_affected},
+                      {"reconnects", r.reconnects},
+                      {"longest_outage_s", r.longest_outage_s},
+                      {"verified", r.verified},
+                      {"mismatched", r.mismatched},
+                      {"max_plan_difference", r.max_plan_difference},
+                      {"solves_per_s", r.solves_per_s},
+                      {"p50_ms", r.p50_ms},
+                      {"p99_ms", r.p99_ms}};
+  return j.dump();
+}
+
+std::string ToJson(const AddressedProbeReport& r) {
+  nlohmann::json j = {{"probe", "addressed"}, {"sessions", r.sessions}, {"solves", r.solves},
+                      {"failed", r.failed},   {"errors", r.errors},     {"recreated", r.recreated},
+                      {"miscounted", r.miscounted}};
+  return j.dump();
+}
+
+}  // namespace nupmpc::loadtest

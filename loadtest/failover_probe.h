@@ -1,0 +1,71 @@
+#ifndef NUPMPC_LOADTEST_FAILOVER_PROBE_H_
+#define NUPMPC_LOADTEST_FAILOVER_PROBE_H_
+
+// What deploy/scaleout-test.sh asks of several replicas behind a balancer, measured through
+// the client library as a controller would use it (nupmpc::Session, AddressedSession):
+//  * streams: C Control streams step through an instance's closed-loop states for a
+//    while; replicas may die or drain meanwhile. Per stream: steps answered, steps failed
+//    (returned to the caller as errors) and sessions re-created; and a sample of plans
+//    checked against the core solving the same state from scratch.
+//  * addressed: S sessions created with client-drawn ids and each solved R times by id:
+//    every call must reach its session (no re-creation, each session counts R solves).
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "nupmpc/v1/nupmpc.pb.h"
+
+namespace nupmpc::loadtest {
+
+struct ProbeWorkload {
+  std::string target;
+  v1::ProblemSpec spec;
+  std::vector<std::vector<double>> states;  ///< cycled through
+};
+
+struct StreamsProbeConfig {
+  int streams = 24;
+  double duration_s = 20.0;
+  int verify_every = 25;  ///< every k-th answered step of a stream is checked (0: none)
+};
+
+struct StreamsProbeReport {
+  int streams = 0;
+  std::uint64_t steps = 0;         ///< answered with a result
+  std::uint64_t failed_steps = 0;  ///< returned as errors
+  std::uint64_t no_plan = 0;       ///< results without a plan
+  std::map<std::string, std::uint64_t> errors;  ///< by code name
+  int affected_streams = 0;        ///< streams that re-created their session or had a failed step
+  std::uint64_t max_failed_per_affected = 0;
+  int reconnects = 0;              ///< sessions re-created, over all streams
+  double longest_outage_s = 0.0;
+  std::uint64_t verified = 0;      ///< plans compared with the core
+  std::uint64_t mismatched = 0;    ///< of those, differing by more than 1e-9 (relative)
+  double max_plan_difference = 0.0;
+  double solves_per_s = 0.0;
+  double p50_ms = 0.0, p99_ms = 0.0;  ///< round trip of answered steps
+};
+
+absl::StatusOr<StreamsProbeReport> RunStreamsProbe(const ProbeWorkload& work, const StreamsProbeConfig& config);
+
+struct AddressedProbeReport {
+  int sessions = 0;
+  std::uint64_t solves = 0;         ///< answered
+  std::uint64_t failed = 0;         ///< returned as errors
+  std::map<std::string, std::uint64_t> errors;
+  int recreated = 0;                ///< sessions re-created (a call missed its session)
+  int miscounted = 0;               ///< sessions whose server-side solve count is not R
+};
+
+absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work, int sessions, int solves_each);
+
+// The reports as one-line JSON objects.
+std::string ToJson(const StreamsProbeReport& report);
+std::string ToJson(const AddressedProbeReport& report);
+
+}  // namespace nupmpc::loadtest
+
+#endif  // NUPMPC_LOADTEST_FAILOVER_PROBE_H_

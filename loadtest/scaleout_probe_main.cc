@@ -1,0 +1,75 @@
+// nupmpc-scaleout-probe: the client's view of several replicas behind a balancer, for
+// deploy/scaleout-test.sh. Prints one JSON object: see loadtest/failover_probe.h.
+//
+//   nupmpc-scaleout-probe --server BALANCER --probe streams [--streams 24] [--duration_s 20]
+//   nupmpc-scaleout-probe --server BALANCER --probe addressed [--sessions 50] [--solves 20]
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "absl/flags/flag.h"
+#include "cli/program_flags.h"
+#include "client/problem_file.h"
+#include "loadtest/failover_probe.h"
+
+ABSL_FLAG(std::string, server, "localhost:50051", "balancer (or server) address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, instance, "../shared/benchmarks/masses_N30.json", "instance whose closed-loop states are sent");
+ABSL_FLAG(std::string, probe, "streams", "streams: Control streams through failures; addressed: calls by session id");
+ABSL_FLAG(int, streams, 24, "streams probe: concurrent Control streams, each on its own connection");
+ABSL_FLAG(double, duration_s, 20.0, "streams probe: how long every stream keeps stepping");
+ABSL_FLAG(int, verify_every, 25, "streams probe: check every k-th plan of a stream against the core (0: none)");
+ABSL_FLAG(int, sessions, 50, "addressed probe: sessions created with client-drawn ids");
+ABSL_FLAG(int, solves, 20, "addressed probe: Solve calls by id per session");
+
+namespace {
+
+const nupmpc::cli::ProgramInfo kProgram{
+    .name = "nupmpc-scaleout-probe",
+    .summary = "nupmpc-scaleout-probe: drives replicas behind a balancer through the client library and reports, "
+               "as one JSON object, what a controller would have seen: steps answered and failed, sessions "
+               "re-created after a replica was lost, and a sample of plans checked against the core solving the "
+               "same state (--probe streams); or whether calls addressed by session id all reached their session "
+               "(--probe addressed). Used by deploy/scaleout-test.sh.",
+    .usage = "nupmpc-scaleout-probe --server HOST:PORT [--probe streams|addressed] [--instance FILE] ...",
+    .environment = {{"NUPMPC_SERVER", "address when --server is not given"}},
+    .max_arguments = 0,
+};
+
+int Fail(const std::string& what, const absl::Status& s) {
+  std::fprintf(stderr, "nupmpc-scaleout-probe: %s: %s\n", what.c_str(), s.ToString().c_str());
+  return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  namespace lt = nupmpc::loadtest;
+  if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
+  nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
+  absl::StatusOr<nupmpc::ProblemFile> file = nupmpc::LoadProblemFile(absl::GetFlag(FLAGS_instance));
+  if (!file.ok()) return Fail("--instance", file.status());
+  lt::ProbeWorkload work{absl::GetFlag(FLAGS_server), file->spec, file->closed_loop_states};
+  if (work.states.empty()) {
+    const auto& mean = file->spec.initial_state().mean();
+    work.states.emplace_back(mean.begin(), mean.end());
+  }
+  const std::string probe = absl::GetFlag(FLAGS_probe);
+  if (probe == "streams") {
+    lt::StreamsProbeConfig config;
+    config.streams = absl::GetFlag(FLAGS_streams);
+    config.duration_s = absl::GetFlag(FLAGS_duration_s);
+    config.verify_every = absl::GetFlag(FLAGS_verify_every);
+    absl::StatusOr<lt::StreamsProbeReport> report = lt::RunStreamsProbe(work, config);
+    if (!report.ok()) return Fail("streams probe", report.status());
+    std::printf("%s\n", lt::ToJson(*report).c_str());
+    return 0;
+  }
+  if (probe == "addressed") {
+    absl::StatusOr<lt::AddressedProbeReport> report =
+        lt::RunAddressedProbe(work, absl::GetFlag(FLAGS_sessions), absl::GetFlag(FLAGS_solves));
+    if (!report.ok()) return Fail("addressed probe", report.status());
+    std::printf("%s\n", lt::ToJson(*report).c_str());
+    return 0;
+  }
+  return Fail("--probe", absl::InvalidArgumentError("must be streams or addressed"));
+}
