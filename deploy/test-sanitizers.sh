@@ -28,7 +28,7 @@ server_tests=(service_solve_test service_validation_test service_transform_test 
               service_gp_test control_stream_lifetime_test worker_pool_test session_strand_test loadtest_test
               server_binary_test service_admission_test service_stream_bounds_test service_malformed_bytes_test
               memory_budget_test client_reconnect_test closed_loop_restart_test reconnect_fidelity_test
-              client_spec_update_test)
+              client_spec_update_test session_routing_test)
 targets=()
 for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-asan -j "$(nproc)" "${targets[@]}"
@@ -36,5 +36,6 @@ export ASAN_OPTIONS=detect_leaks=1:detect_stack_use_after_return=1:strict_init_o
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 cd build-asan
 # The tests of targets not built above show up as <target>_NOT_BUILT.
-ctest --output-on-failure -j "$(nproc)" --timeout 1200 -LE build \
+# Labels build (checks of the sources) and deploy (real processes from build/, not these).
+ctest --output-on-failure -j "$(nproc)" --timeout 1200 -LE "build|deploy" \
   -E "_NOT_BUILT$|EveryInstanceThroughSolveOnceAndASessionMatchesTheCore|IdleSessionsGrowTheServersMemoryAndGiveItBack"
