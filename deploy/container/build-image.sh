@@ -121,6 +121,9 @@ source_url=$(git remote get-url origin 2>/dev/null || true)
 
 # Network: the build stages only run apt-get. Host networking avoids needing a working
 # bridge/CNI set-up (iptables, netns), which sandboxes often lack.
+# Labels: the Containerfile sets them from the build args, but buildah 1.28 reuses a cached
+# LABEL layer when only an ARG's value changed (a new commit or version kept the old
+# labels); --label is applied at commit, after the cache, so the values here always win.
 say "image: nupmpc:$version (CPU baseline $baseline, -j$jobs, base $base_image, runtime $runtime)"
 start=$(date +%s)
 "${podman_run[@]}" build --pull=never --layers --network host "${ulimits[@]}" \
@@ -131,6 +134,10 @@ start=$(date +%s)
   --build-arg NUPMPC_VERSION="$version" \
   --build-arg NUPMPC_REVISION="$revision" \
   --build-arg NUPMPC_SOURCE="$source_url" \
+  --label org.opencontainers.image.version="$version" \
+  --label org.opencontainers.image.revision="$revision" \
+  --label org.opencontainers.image.source="$source_url" \
+  --label io.nupmpc.cpu-baseline="$baseline" \
   -t "nupmpc:$version" -t nupmpc:latest \
   -f deploy/container/Containerfile .
 build_s=$(( $(date +%s) - start ))

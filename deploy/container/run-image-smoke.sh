@@ -45,39 +45,49 @@ cleanup() { "${podman_run[@]}" rm -f --time 0 "$name" >/dev/null 2>&1 || true; }
 trap cleanup EXIT
 
 # Readiness: grpc.health.v1.Health/Check with raw bytes (request: empty message; response
-# 08 01: status SERVING) through Debian's python3-grpcio, polled every 10 ms with a short
-# reconnect back-off (gRPC's default of 1 s would dominate the measurement). Without it,
-# the first successful `nupmpc info` (GetServerInfo) stands in for SERVING.
+# 08 01: status SERVING) through Debian's python3-grpcio. The poller starts (and imports
+# grpc, ~0.1 s) before `podman run`, and every attempt uses a fresh channel, so neither
+# Python's start-up nor gRPC's reconnect back-off (1 s and growing) enters the measurement.
+# Without python3-grpcio, the first successful `nupmpc info` (GetServerInfo) from inside
+# the container stands in for SERVING.
 health_py='
 import sys, time
 import grpc
-options = [("grpc.initial_reconnect_backoff_ms", 10), ("grpc.min_reconnect_backoff_ms", 10),
-           ("grpc.max_reconnect_backoff_ms", 50)]
-channel = grpc.insecure_channel(sys.argv[1], options=options)
-check = channel.unary_unary("/grpc.health.v1.Health/Check")
+print("ready", flush=True)
 deadline = time.monotonic() + float(sys.argv[2])
 while time.monotonic() < deadline:
-    try:
-        if check(b"", timeout=0.5) == b"\x08\x01":
-            print(time.time_ns()); sys.exit(0)
-    except grpc.RpcError:
-        pass
-    time.sleep(0.01)
+    with grpc.insecure_channel(sys.argv[1]) as channel:
+        try:
+            if channel.unary_unary("/grpc.health.v1.Health/Check")(b"", timeout=0.25) == b"\x08\x01":
+                print(time.time_ns(), flush=True); sys.exit(0)
+        except grpc.RpcError:
+            pass
+    time.sleep(0.005)
 sys.exit(1)
 '
 health_python=
 for py in /usr/bin/python3 python3; do
   if "$py" -c 'import grpc' 2>/dev/null; then health_python=$py; break; fi
 done
-wait_serving() {  # prints the wall-clock ns of the first SERVING answer
+poll_out=$(mktemp)
+poller=
+trap 'cleanup; [ -z "$poller" ] || kill "$poller" 2>/dev/null; rm -f "$poll_out"' EXIT
+if [ -n "$health_python" ]; then
+  "$health_python" -c "$health_py" "$address" 30 >"$poll_out" &
+  poller=$!
+  until grep -q ready "$poll_out"; do sleep 0.01; done
+fi
+wait_serving() {  # sets t_serving: the wall-clock ns of the first SERVING answer
   if [ -n "$health_python" ]; then
-    "$health_python" -c "$health_py" "$address" 30
-    return
+    wait "$poller" || return 1
+    poller=
+    t_serving=$(tail -n 1 "$poll_out")
+    return 0
   fi
   local end=$(( $(date +%s) + 30 ))
   while [ "$(date +%s)" -lt "$end" ]; do
     if "${podman_run[@]}" exec "$name" /usr/local/bin/nupmpc --server "$address" --deadline_ms 500 info >/dev/null 2>&1; then
-      now_ns; return 0
+      t_serving=$(now_ns); return 0
     fi
     sleep 0.02
   done
@@ -89,11 +99,17 @@ t_run=$(now_ns)
 "${podman_run[@]}" run -d --name "$name" --network host "${ulimits[@]}" \
   -e NUPMPC_ADDRESS="$address" -e NUPMPC_GRACE_PERIOD_S="$grace" "$image" >/dev/null
 t_detached=$(now_ns)
-if t_serving=$(wait_serving); then
+if wait_serving; then
   startup_ms=$(ms_between "$t_run" "$t_serving")
   t_started=$("${podman_run[@]}" inspect --format '{{.State.StartedAt.UnixNano}}' "$name")
   process_ms=$(ms_between "$t_started" "$t_serving")
-  say "SERVING on $address ${startup_ms} ms after \`podman run\` (podman run itself $(ms_between "$t_run" "$t_detached") ms; ${process_ms} ms after the container process started)" \
+  # The server's own "listening" log line (spdlog's local time: UTC in the container)
+  # separates the server's start-up from the poller's.
+  listening=$("${podman_run[@]}" logs "$name" 2>&1 | sed -n 's/^\[\([0-9-]* [0-9:.]*\)\] \[info\] nupmpc-server .* listening on.*/\1/p' | head -n 1)
+  listening_ms='?'
+  [ -n "$listening" ] && listening_ms=$(ms_between "$t_started" "$(TZ=UTC date -d "$listening" +%s%N)")
+  say "SERVING on $address ${startup_ms} ms after \`podman run\` (podman run itself $(ms_between "$t_run" "$t_detached") ms;" \
+      "${process_ms} ms after the container process started, which logged 'listening' after ${listening_ms} ms)" \
       "$([ -n "$health_python" ] && echo '[grpc.health.v1]' || echo '[GetServerInfo]')"
 else
   startup_ms=
