@@ -45,7 +45,7 @@ nupmpc_podman_setup() {
   fi
   podman_base=(podman)
   if [ "$storage_choice" = vfs ]; then
-    podman_base+=(--storage-driver vfs --root /var/lib/containers/storage-vfs)
+    podman_base+=(--storage-driver vfs --root /var/lib/containers/storage-vfs --runroot /run/containers/storage-vfs)
     nupmpc_podman_say "storage: vfs in /var/lib/containers/storage-vfs (every layer a full copy)"
   fi
   NUPMPC_PODMAN_STORAGE=$storage_choice
