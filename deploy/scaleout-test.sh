@@ -102,7 +102,7 @@ for n in r1 r2 r3; do
   spread+="$n $got  "
   [ "$got" -gt 0 ] || fail "replica $n got no stream ($spread)"
 done
-say "spread of $streams streams (calls per replica): $spread"
+say "spread: calls per replica during the load test ($streams Control streams plus its health checks and info calls): $spread"
 python3 - "$level" <<'PY'
 import json, sys
 l = json.loads(sys.argv[1])
