@@ -11,7 +11,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   liblbfgs-dev coinor-libipopt-dev
   clang libclang-rt-14-dev
-  haproxy python3-yaml python3-kubernetes yamllint
+  haproxy python3-yaml python3-kubernetes yamllint libcpp-httplib-dev
 )
 
 missing=()

@@ -33,12 +33,12 @@ ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* co
 
 void ControlStream::Begin() {
   if (state_->draining.load()) {
-    Finish(state_->ToGrpc(absl::UnavailableError("the server is shutting down")));
+    Finish(state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down")));
     return;
   }
   counted_ = true;
   if (state_->control_streams.fetch_add(1) >= state_->options.max_control_streams) {
-    Finish(state_->ToGrpc(absl::ResourceExhaustedError(
+    Finish(state_->ToGrpc(Rpc::kControl, absl::ResourceExhaustedError(
         absl::StrCat("the server has its maximum of ", state_->options.max_control_streams,
                      " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
     return;
@@ -109,7 +109,7 @@ void ControlStream::OnReadDone(bool ok) {
   if (first_message && !parsed.ok()) {
     {
       std::lock_guard<std::mutex> lock(mu_);
-      final_status_ = state_->ToGrpc(parsed);
+      final_status_ = state_->ToGrpc(Rpc::kControl, parsed);
       phase_ = Phase::kEnding;
     }
     Pump();
@@ -123,14 +123,14 @@ void ControlStream::OnReadDone(bool ok) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!parsed.ok()) {
-      QueueWriteLocked(ErrorResponse(0, state_->ToGrpc(parsed)));
+      QueueWriteLocked(ErrorResponse(0, state_->ToGrpc(Rpc::kControl, parsed)));
     } else if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
       QueueWriteLocked(ErrorResponse(
           request.sequence(),
-          state_->ToGrpc(absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
+          state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
     } else if (!request.has_step()) {
       QueueWriteLocked(ErrorResponse(
-          request.sequence(), state_->ToGrpc(absl::InvalidArgumentError("step: required after the first message"))));
+          request.sequence(), state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
     } else {
       EnqueueStepLocked(std::move(request));
     }
@@ -154,7 +154,7 @@ void ControlStream::StartAttach(v1::ControlRequest first) {
   if (queued.ok()) return;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    final_status_ = state_->ToGrpc(queued);
+    final_status_ = state_->ToGrpc(Rpc::kControl, queued);
     phase_ = Phase::kEnding;
   }
   Pump();
@@ -171,7 +171,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!entry.ok()) {
-      final_status_ = state_->ToGrpc(entry.status());
+      final_status_ = state_->ToGrpc(Rpc::kControl, entry.status());
       phase_ = Phase::kEnding;
     } else {
       entry_ = *std::move(entry);
@@ -194,7 +194,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
 void ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
   if (state_->draining.load()) {
     QueueWriteLocked(
-        ErrorResponse(request.sequence(), state_->ToGrpc(absl::UnavailableError("the server is shutting down"))));
+        ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
     return;
   }
   if (parked_.has_value()) {
@@ -218,29 +218,28 @@ void ControlStream::StartSolveLocked() {
   const absl::Status queued = SessionStrand::Submit(
       entry_->strand, state_->pool,
       {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
-         self->SolveOnPool(std::move(request));
-         self->state_->metrics.RecordSolve(
-             std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+         self->SolveOnPool(std::move(request), queued_at);
        },
        [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
        entry_->last_solve_ms.load(std::memory_order_relaxed)});
   if (!queued.ok()) {
     solving_ = false;
-    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(queued)));
+    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, queued)));
   }
 }
 
 void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused) {
   {
     std::lock_guard<std::mutex> lock(mu_);
-    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(refused)));
+    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, refused)));
     solving_ = false;
     if (parked_.has_value()) StartSolveLocked();
   }
   Pump();
 }
 
-void ControlStream::SolveOnPool(v1::ControlRequest request) {
+void ControlStream::SolveOnPool(v1::ControlRequest request, Clock::time_point queued_at) {
+  const auto started_at = Clock::now();
   CallContext call;
   call.deadline = SteadyDeadline(*context_);
   call.cancel = &cancelled_;
@@ -248,12 +247,16 @@ void ControlStream::SolveOnPool(v1::ControlRequest request) {
   response.set_sequence(request.sequence());
   const absl::Status status = RunCatchingExceptions(
       "Control", [&] { return SolveStep(*entry_, request.step(), call, response.mutable_result()); });
+  if (status.ok()) {
+    state_->metrics.RecordSolve(response.result(), std::chrono::duration<double>(started_at - queued_at).count(),
+                                std::chrono::duration<double>(Clock::now() - queued_at).count());
+  }
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (status.ok()) {
       QueueWriteLocked(std::move(response));
     } else {
-      QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(status)));
+      QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
     }
     solving_ = false;
     if (parked_.has_value()) StartSolveLocked();

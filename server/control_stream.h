@@ -63,7 +63,7 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   // Accepts a step: solve it now, or park it (superseding the parked one). Called with mu_.
   void EnqueueStepLocked(v1::ControlRequest request);
   void StartSolveLocked();
-  void SolveOnPool(v1::ControlRequest request);
+  void SolveOnPool(v1::ControlRequest request, Clock::time_point queued_at);
   // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
   void QueueWriteLocked(v1::ControlResponse response);

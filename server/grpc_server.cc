@@ -3,6 +3,7 @@
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "server/metrics_exposition.h"
 #include "server/process_memory.h"
 #include "spdlog/spdlog.h"
 
@@ -26,6 +27,14 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
     return absl::UnavailableError(absl::StrCat("could not listen on ", options.address));
   }
   s->server_->GetHealthCheckService()->SetServingStatus(true);
+  if (!options.metrics_address.empty()) {
+    ServerState* state = s->state_.get();
+    absl::StatusOr<std::unique_ptr<MetricsHttpServer>> metrics = MetricsHttpServer::Start(
+        options.metrics_address, [state] { return RenderPrometheusMetrics(*state); },
+        [state] { return state->serving.load(); });
+    if (!metrics.ok()) return metrics.status();
+    s->metrics_ = *std::move(metrics);
+  }
   s->janitor_ = std::thread([raw = s.get()] { raw->Janitor(); });
   return s;
 }
@@ -51,7 +60,10 @@ void GrpcServer::Janitor() {
   }
 }
 
-void GrpcServer::ReportNotServing() { server_->GetHealthCheckService()->SetServingStatus(false); }
+void GrpcServer::ReportNotServing() {
+  state_->serving.store(false);
+  server_->GetHealthCheckService()->SetServingStatus(false);
+}
 
 void GrpcServer::Shutdown() {
   {
@@ -62,11 +74,12 @@ void GrpcServer::Shutdown() {
   janitor_wake_.notify_all();
   if (janitor_.joinable()) janitor_.join();
   state_->draining.store(true);
-  server_->GetHealthCheckService()->SetServingStatus(false);
+  ReportNotServing();
   const auto grace = std::chrono::duration_cast<std::chrono::milliseconds>(
       std::chrono::duration<double>(state_->options.grace_period_s));
   server_->Shutdown(std::chrono::system_clock::now() + grace);
   state_->pool.Shutdown();
+  metrics_.reset();  // last: scrapes see the drain to its end
 }
 
 }  // namespace nupmpc::server

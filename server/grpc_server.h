@@ -8,6 +8,7 @@
 
 #include "absl/status/statusor.h"
 #include "grpcpp/grpcpp.h"
+#include "server/metrics_http.h"
 #include "server/mpc_service.h"
 #include "server/server_context.h"
 
@@ -21,6 +22,8 @@ class GrpcServer {
   ~GrpcServer();
 
   int port() const { return port_; }
+  // The metrics endpoint's port (0: none, ServerOptions::metrics_address empty).
+  int metrics_port() const { return metrics_ != nullptr ? metrics_->port() : 0; }
   ServerState& state() { return *state_; }
   // The first step of a stop behind a load balancer: grpc.health.v1 says NOT_SERVING (the
   // balancer's checks move new calls away) while every call is still served.
@@ -37,6 +40,7 @@ class GrpcServer {
   std::unique_ptr<ServerState> state_;
   std::unique_ptr<MpcServiceImpl> service_;
   std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<MetricsHttpServer> metrics_;
   int port_ = 0;
   std::mutex janitor_mu_;
   std::condition_variable janitor_wake_;

@@ -30,7 +30,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
   ServerState* state = state_;
   const v1::CreateSessionRequest* request = &call->request();
   v1::CreateSessionResponse* response = call->response();
-  call->RunOnPool("CreateSession", /*is_solve=*/false, [state, request, response](const CallContext& c) {
+  call->RunOnPool("CreateSession", /*solve_result=*/nullptr, [state, request, response](const CallContext& c) {
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
         CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
                           &state->registry, c, /*owned_by_stream=*/false, request->session_id());
@@ -71,7 +71,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
   const v1::Step* step = &call->request().step();
   v1::SolveResult* result = call->response()->mutable_result();
   call->RunOnPool(
-      "Solve", /*is_solve=*/true,
+      "Solve", result,
       [entry = *std::move(entry), step, result](const CallContext& c) { return SolveStep(*entry, *step, c, result); },
       session);
   return call;
@@ -85,7 +85,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::SolveOnce(grpc::CallbackServerContext*
   ServerState* state = state_;
   const v1::ProblemSpec* spec = &call->request().spec();
   v1::SolveResult* result = call->response()->mutable_result();
-  call->RunOnPool("SolveOnce", /*is_solve=*/true, [state, spec, result](const CallContext& c) {
+  call->RunOnPool("SolveOnce", result, [state, spec, result](const CallContext& c) {
     return server::SolveOnce(*spec, state->options.size_limits, c, result, &state->gp_models, &state->budget);
   });
   return call;
@@ -166,7 +166,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::FitGpModel(grpc::CallbackServerContext
   v1::FitGpModelResponse* response = call->response();
   // O(P³) per iteration: on the pool like a solve, never in the reaction; its O(P²)
   // matrices are reserved in the memory budget first.
-  call->RunOnPool("FitGpModel", /*is_solve=*/false, [state, request, response](const CallContext& c) -> absl::Status {
+  call->RunOnPool("FitGpModel", /*solve_result=*/nullptr, [state, request, response](const CallContext& c) -> absl::Status {
     NUPMPC_ASSIGN_OR_RETURN(const gp::FitOptions fit_limits, FitLimits(&c));
     NUPMPC_ASSIGN_OR_RETURN(const std::int64_t fit_bytes,
                             GpFitBytes(request->model(), "model", state->options.size_limits));

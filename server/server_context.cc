@@ -2,9 +2,9 @@
 
 namespace nupmpc::server {
 
-grpc::Status ServerState::ToGrpc(const absl::Status& status) {
+grpc::Status ServerState::ToGrpc(Rpc rpc, const absl::Status& status) {
   if (status.ok()) return grpc::Status::OK;
-  metrics.RecordError(status.code());
+  metrics.RecordError(rpc, status.code());
   // absl and gRPC share the canonical code numbering.
   return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
 }

@@ -31,6 +31,7 @@ struct ServerOptions {
   int max_control_streams = 1000;         ///< open Control streams, server-wide
   int max_stream_answers = 16;            ///< answers a Control stream queues before it stops reading
   int max_streams_per_connection = 100;   ///< HTTP/2 concurrent streams (calls) per client connection
+  std::string metrics_address;            ///< HTTP /metrics, /healthz, /readyz; empty: none
   SizeLimits size_limits;
 };
 
@@ -49,11 +50,12 @@ struct ServerState {
   Metrics metrics;
   GpModelCache gp_models;  ///< factorised GP models shared by the sessions that use them
   std::atomic<bool> draining{false};
+  std::atomic<bool> serving{true};  ///< what grpc.health.v1 reports (false from SIGTERM on)
   std::atomic<int> control_streams{0};  ///< open Control streams
   std::atomic<std::uint64_t> stream_read_pauses{0};  ///< times a stream stopped reading (flow control)
 
-  // An absl::Status as a gRPC status, counted when it is an error.
-  grpc::Status ToGrpc(const absl::Status& status);
+  // An absl::Status of `rpc` as a gRPC status, counted when it is an error.
+  grpc::Status ToGrpc(Rpc rpc, const absl::Status& status);
   void FillLimits(v1::ServerLimits* out) const;
 };
 

@@ -39,6 +39,9 @@ ABSL_FLAG(int, max_stream_answers, 16,
           "(env NUPMPC_MAX_STREAM_ANSWERS)");
 ABSL_FLAG(int, max_streams_per_connection, 100,
           "concurrent calls on one client connection (env NUPMPC_MAX_STREAMS_PER_CONNECTION)");
+ABSL_FLAG(std::string, metrics_address, "",
+          "HTTP endpoint for operators: GET /metrics (Prometheus text), /healthz, /readyz; HOST:PORT or :PORT "
+          "(e.g. :9464); empty: off (env NUPMPC_METRICS_ADDRESS)");
 ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error|off (env NUPMPC_LOG_LEVEL)");
 
 namespace nupmpc::server {
@@ -86,7 +89,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                            "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states",
                            "max_iterations", "grace_period_s", "drain_delay_s", "memory_budget_mb", "max_session_memory_mb",
                            "max_pass_gflop", "max_control_streams", "max_stream_answers", "max_streams_per_connection",
-                           "log_level"}) {
+                           "metrics_address", "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
   cli::ParseProgramFlags(ServerProgram(), argc, argv);
@@ -110,6 +113,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.max_control_streams = absl::GetFlag(FLAGS_max_control_streams);
   o.max_stream_answers = absl::GetFlag(FLAGS_max_stream_answers);
   o.max_streams_per_connection = absl::GetFlag(FLAGS_max_streams_per_connection);
+  o.metrics_address = absl::GetFlag(FLAGS_metrics_address);
   out.log_level = absl::GetFlag(FLAGS_log_level);
   out.drain_delay_s = absl::GetFlag(FLAGS_drain_delay_s);
   for (const absl::Status& s :

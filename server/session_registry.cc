@@ -68,6 +68,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_p
     } while (sessions_.count(entry->id) > 0);
   }
   sessions_.emplace(entry->id, entry);
+  created_total_.fetch_add(1, std::memory_order_relaxed);
   return entry;
 }
 
@@ -125,6 +126,7 @@ int SessionRegistry::CompactIdle(double idle_seconds) {
       ++compacted;
     });
   }
+  compacted_total_.fetch_add(static_cast<std::uint64_t>(compacted), std::memory_order_relaxed);
   return compacted;
 }
 
@@ -146,6 +148,7 @@ int SessionRegistry::ExpireIdle(double idle_seconds) {
   }
   int closed = 0;
   for (const std::string& id : expired) closed += Close(id).ok() ? 1 : 0;
+  expired_total_.fetch_add(static_cast<std::uint64_t>(closed), std::memory_order_relaxed);
   return closed;
 }
 

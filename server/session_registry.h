@@ -93,8 +93,12 @@ class SessionRegistry {
   int CompactIdle(double idle_seconds);
   int size() const;
   int max_sessions() const { return max_sessions_; }
-  // Sessions closed since start (explicitly, with their stream, or by expiry).
+  // Since start: sessions created; closed (explicitly, with their stream, or by expiry);
+  // of those, expired; and compactions (a session compacts again after each use).
+  std::uint64_t created_total() const { return created_total_.load(std::memory_order_relaxed); }
   std::uint64_t closed_total() const { return closed_total_.load(std::memory_order_relaxed); }
+  std::uint64_t expired_total() const { return expired_total_.load(std::memory_order_relaxed); }
+  std::uint64_t compacted_total() const { return compacted_total_.load(std::memory_order_relaxed); }
 
  private:
   static std::string NewId();
@@ -102,7 +106,10 @@ class SessionRegistry {
   WorkerPool& pool_;
   mutable std::mutex mu_;
   std::unordered_map<std::string, std::shared_ptr<SessionEntry>> sessions_;
+  std::atomic<std::uint64_t> created_total_{0};
   std::atomic<std::uint64_t> closed_total_{0};
+  std::atomic<std::uint64_t> expired_total_{0};
+  std::atomic<std::uint64_t> compacted_total_{0};
 };
 
 }  // namespace nupmpc::server

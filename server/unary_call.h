@@ -4,6 +4,7 @@
 #include <atomic>
 #include <functional>
 #include <string>
+#include <type_traits>
 
 #include "absl/status/status.h"
 #include "grpcpp/grpcpp.h"
@@ -13,6 +14,26 @@
 #include "server/step_solver.h"
 
 namespace nupmpc::server {
+
+// Which RPC a request type belongs to (the label of its error counter).
+template <class Request>
+struct RpcOf;
+template <>
+struct RpcOf<v1::CreateSessionRequest> : std::integral_constant<Rpc, Rpc::kCreateSession> {};
+template <>
+struct RpcOf<v1::SolveRequest> : std::integral_constant<Rpc, Rpc::kSolve> {};
+template <>
+struct RpcOf<v1::SolveOnceRequest> : std::integral_constant<Rpc, Rpc::kSolveOnce> {};
+template <>
+struct RpcOf<v1::GetSessionRequest> : std::integral_constant<Rpc, Rpc::kGetSession> {};
+template <>
+struct RpcOf<v1::ListSessionsRequest> : std::integral_constant<Rpc, Rpc::kListSessions> {};
+template <>
+struct RpcOf<v1::CloseSessionRequest> : std::integral_constant<Rpc, Rpc::kCloseSession> {};
+template <>
+struct RpcOf<v1::GetServerInfoRequest> : std::integral_constant<Rpc, Rpc::kGetServerInfo> {};
+template <>
+struct RpcOf<v1::FitGpModelRequest> : std::integral_constant<Rpc, Rpc::kFitGpModel> {};
 
 // One unary call of MpcService, taken as raw bytes (server/raw_messages.h): bytes that do
 // not parse are answered with INVALID_ARGUMENT naming the expected type. The call owns its
@@ -37,15 +58,16 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
 
   // Sends the response (when `status` is OK) or the error.
   void Reply(const absl::Status& status) {
-    Finish(state_->ToGrpc(status.ok() ? SerializeRaw(response_, raw_response_) : status));
+    Finish(state_->ToGrpc(RpcOf<Request>::value, status.ok() ? SerializeRaw(response_, raw_response_) : status));
   }
 
   // Runs `work` on the worker pool (RESOURCE_EXHAUSTED when the queue is full), through
   // `session`'s strand when given (one at a time per session), catching what escapes it.
-  // `is_solve`: counted in the solve counters and latency histogram. A client that cancels
-  // raises the flag the solver checks.
-  void RunOnPool(const char* name, bool is_solve, std::function<absl::Status(const CallContext&)> work,
-                 const SessionEntry* session = nullptr) {
+  // `solve_result`: where `work` writes a solve's result, recorded in the solve metrics
+  // when the work succeeds (nullptr: not a solve). A client that cancels raises the flag
+  // the solver checks.
+  void RunOnPool(const char* name, const v1::SolveResult* solve_result,
+                 std::function<absl::Status(const CallContext&)> work, const SessionEntry* session = nullptr) {
     if (state_->draining.load()) {
       Reply(absl::UnavailableError("the server is shutting down"));
       return;
@@ -53,10 +75,12 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     call_.deadline = SteadyDeadline(*context_);
     call_.cancel = &cancelled_;
     const auto queued_at = Clock::now();
-    auto run = [this, name, is_solve, work = std::move(work), queued_at] {
+    auto run = [this, name, solve_result, work = std::move(work), queued_at] {
+      const auto started_at = Clock::now();
       const absl::Status status = RunCatchingExceptions(name, [&] { return work(call_); });
-      if (status.ok() && is_solve) {
-        state_->metrics.RecordSolve(std::chrono::duration<double, std::milli>(Clock::now() - queued_at).count());
+      if (status.ok() && solve_result != nullptr) {
+        state_->metrics.RecordSolve(*solve_result, std::chrono::duration<double>(started_at - queued_at).count(),
+                                    std::chrono::duration<double>(Clock::now() - queued_at).count());
       }
       Reply(status);
     };

@@ -69,6 +69,7 @@ void WorkerPool::Run() {
       queued_ms_ = queue_.empty() ? 0.0 : queued_ms_ - task.expected_ms;  // no drift when empty
     }
     const auto start = std::chrono::steady_clock::now();
+    busy_.fetch_add(1, std::memory_order_relaxed);
     // Requests catch their own exceptions (RunCatchingExceptions) and answer with them;
     // this only keeps a worker alive should a task's bookkeeping throw anyway.
     try {
@@ -79,6 +80,8 @@ void WorkerPool::Run() {
       spdlog::error("worker: a task ended with an unknown exception");
     }
     const double took_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    busy_.fetch_sub(1, std::memory_order_relaxed);
+    busy_seconds_.fetch_add(took_ms / 1000.0, std::memory_order_relaxed);
     std::lock_guard<std::mutex> lock(mu_);
     average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
   }

@@ -1,13 +1,15 @@
 #ifndef NUPMPC_SERVER_WORKER_POOL_H_
 #define NUPMPC_SERVER_WORKER_POOL_H_
 
-#include "absl/status/status.h"
+#include <atomic>
 #include <condition_variable>
 #include <deque>
 #include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
+
+#include "absl/status/status.h"
 
 namespace nupmpc::server {
 
@@ -35,6 +37,10 @@ class WorkerPool {
   int threads() const { return static_cast<int>(threads_.size()); }
   int queue_capacity() const { return capacity_; }
   int queued() const;
+  // For the metrics: workers running a task now, and the seconds all of them spent running
+  // tasks since start (its rate over the worker count is the pool's utilisation).
+  int busy() const { return busy_.load(std::memory_order_relaxed); }
+  double busy_seconds() const { return busy_seconds_.load(std::memory_order_relaxed); }
 
  private:
   void Run();
@@ -51,6 +57,8 @@ class WorkerPool {
   double queued_ms_ = 0.0;         ///< sum of the queued tasks' expected_ms
   double average_task_ms_ = 0.0;   ///< exponentially weighted, of finished tasks
   bool stopping_ = false;
+  std::atomic<int> busy_{0};
+  std::atomic<double> busy_seconds_{0.0};
   std::vector<std::thread> threads_;
 };
 

@@ -1,0 +1,44 @@
+#include "server/metrics_http.h"
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "httplib.h"
+
+namespace nupmpc::server {
+
+absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(const std::string& address,
+                                                                            std::function<std::string()> render_metrics,
+                                                                            std::function<bool()> ready) {
+  const std::size_t colon = address.rfind(':');
+  int port = -1;
+  if (colon == std::string::npos || !absl::SimpleAtoi(address.substr(colon + 1), &port) || port < 0 || port > 65535) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--metrics_address \"", address, "\": expected HOST:PORT or :PORT (e.g. :9464)"));
+  }
+  std::string host = address.substr(0, colon);
+  if (host.empty()) host = "0.0.0.0";
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+
+  std::unique_ptr<MetricsHttpServer> s(new MetricsHttpServer());
+  s->http_ = std::make_unique<httplib::Server>();
+  s->http_->Get("/metrics", [render = std::move(render_metrics)](const httplib::Request&, httplib::Response& res) {
+    res.set_content(render(), "text/plain; version=0.0.4; charset=utf-8");
+  });
+  s->http_->Get("/healthz", [](const httplib::Request&, httplib::Response& res) { res.set_content("ok\n", "text/plain"); });
+  s->http_->Get("/readyz", [ready = std::move(ready)](const httplib::Request&, httplib::Response& res) {
+    const bool is_ready = ready();
+    res.status = is_ready ? 200 : 503;
+    res.set_content(is_ready ? "ready\n" : "not serving\n", "text/plain");
+  });
+  s->port_ = port == 0 ? s->http_->bind_to_any_port(host) : (s->http_->bind_to_port(host, port) ? port : -1);
+  if (s->port_ <= 0) return absl::UnavailableError(absl::StrCat("--metrics_address \"", address, "\": could not listen"));
+  s->thread_ = std::thread([http = s->http_.get()] { http->listen_after_bind(); });
+  return s;
+}
+
+MetricsHttpServer::~MetricsHttpServer() {
+  if (http_ != nullptr) http_->stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,40 @@
+#ifndef NUPMPC_SERVER_METRICS_HTTP_H_
+#define NUPMPC_SERVER_METRICS_HTTP_H_
+
+// The operators' HTTP endpoint (--metrics_address): GET /metrics in the Prometheus text
+// format, /healthz (200 while the process runs) and /readyz (200 while the gRPC health
+// service says SERVING, 503 from SIGTERM on), on a thread of its own (cpp-httplib), so a
+// scrape never waits for a solver worker.
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "absl/status/statusor.h"
+
+namespace httplib {
+class Server;
+}
+
+namespace nupmpc::server {
+
+class MetricsHttpServer {
+ public:
+  // `address` is HOST:PORT or :PORT (all interfaces); port 0 picks a free one.
+  static absl::StatusOr<std::unique_ptr<MetricsHttpServer>> Start(const std::string& address,
+                                                                  std::function<std::string()> render_metrics,
+                                                                  std::function<bool()> ready);
+  ~MetricsHttpServer();  // stops and joins
+  int port() const { return port_; }
+
+ private:
+  MetricsHttpServer() = default;
+  std::unique_ptr<httplib::Server> http_;
+  std::thread thread_;
+  int port_ = 0;
+};
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_METRICS_HTTP_H_
