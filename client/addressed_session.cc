@@ -22,6 +22,9 @@ absl::Status AsFailoverCause(const grpc::Status& s, const char* what) {
   return absl::Status(code, absl::StrCat(what, ": ", s.error_message()));
 }
 
+// Closing is best effort for a replica that may be gone: never wait long.
+constexpr std::chrono::milliseconds kCloseTimeout{2000};
+
 void SetTimeout(grpc::ClientContext* context, std::chrono::milliseconds timeout) {
   if (timeout.count() > 0) context->set_deadline(std::chrono::system_clock::now() + timeout);
 }
@@ -57,7 +60,17 @@ absl::Status AddressedSession::CreateLocked(std::chrono::milliseconds timeout) {
   RouteToSession(&context, request.session_id());
   v1::CreateSessionResponse response;
   const grpc::Status s = client_->stub().CreateSession(&context, request, &response);
-  if (!s.ok()) return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
+  if (!s.ok()) {
+    return absl::Status(static_cast<absl::StatusCode>(s.error_code()), absl::StrCat("CreateSession: ", s.error_message()));
+  }
+  if (response.session_id() != request.session_id()) {
+    // A server from before CreateSessionRequest.session_id drew its own id: a balancer would
+    // send the later calls elsewhere, and every step would re-create the session.
+    CloseQuietly(response.session_id());
+    return absl::FailedPreconditionError(
+        "CreateSession: the server ignores CreateSessionRequest.session_id (an older server); addressed sessions "
+        "need it");
+  }
   id_ = response.session_id();
   return absl::OkStatus();
 }
@@ -77,8 +90,26 @@ absl::StatusOr<v1::SolveResult> AddressedSession::SolveLocked(const v1::Step& st
   return std::move(*response.mutable_result());
 }
 
+void AddressedSession::CloseQuietly(const std::string& id) {
+  v1::CloseSessionRequest request;
+  request.set_session_id(id);
+  grpc::ClientContext context;
+  SetTimeout(&context, kCloseTimeout);
+  RouteToSession(&context, id);
+  v1::CloseSessionResponse response;
+  (void)client_->stub().CloseSession(&context, request, &response);
+}
+
 absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
   std::lock_guard<std::mutex> lock(mu_);
+  // A step that failed without an answer may have been applied by the server, so the spec
+  // held for re-creating the session may lag behind it: a step that keeps the previous
+  // state ("empty keeps it") is then refused rather than re-created from an older state.
+  if (spec_may_lag_ && step.state().empty()) {
+    return absl::FailedPreconditionError(
+        "Step.state: empty after a step that failed; send the measured state (the session may have to be "
+        "re-created, and its last state is not known for sure)");
+  }
   absl::StatusOr<v1::SolveResult> result = SolveLocked(step, client_->default_deadline_);
   if (!result.ok() && IsRetryable(result.status()) && !id_.empty()) {
     const absl::Status outage = RideOutOutage(
@@ -90,12 +121,22 @@ absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
           if (absl::Status s = CreateLocked(timeout); !s.ok()) return s;
           result = SolveLocked(step, timeout);
           *answered = result.ok() || !IsRetryable(result.status());
+          // Not answered: the next attempt makes another session; do not leave this one
+          // holding memory on its replica until it expires.
+          if (!*answered) CloseQuietly(id_);
           return result.status();
         },
         &stats_);
     if (!outage.ok()) result = outage;
   }
-  if (result.ok()) ApplyStepToSpec(step, *result, &spec_);
+  if (result.ok()) {
+    ApplyStepToSpec(step, *result, &spec_);
+    if (!step.state().empty()) spec_may_lag_ = false;
+  } else if (!absl::IsInvalidArgument(result.status()) && !absl::IsFailedPrecondition(result.status())) {
+    // Those two are refusals before anything changed; after others the step may have been
+    // applied (e.g. a deadline during the solve).
+    spec_may_lag_ = true;
+  }
   return result;
 }
 
@@ -103,7 +144,14 @@ absl::Status AddressedSession::Close() {
   std::lock_guard<std::mutex> lock(mu_);
   if (id_.empty()) return absl::OkStatus();
   const std::string id = std::exchange(id_, std::string());
-  return client_->CloseSession(id);
+  v1::CloseSessionRequest request;
+  request.set_session_id(id);
+  grpc::ClientContext context;
+  SetTimeout(&context, kCloseTimeout);
+  RouteToSession(&context, id);
+  v1::CloseSessionResponse response;
+  const grpc::Status s = client_->stub().CloseSession(&context, request, &response);
+  return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
 }
 
 }  // namespace nupmpc

@@ -16,7 +16,12 @@
 // answers, and the step is resent, with the back-off of ReconnectOptions
 // (client/reconnect.h). Step() thus returns that step's own result, or an error: never a
 // plan computed for another state. A new id rather than the old one, so that a replica
-// that comes back with a stale copy is never reached again.
+// that comes back with a stale copy is never reached again. After a step that failed
+// (other than a refusal), the next step must carry its state: the server may have applied
+// the failed one, so the spec held may lag behind it.
+//
+// Solve calls have the client's default deadline (none by default: a solve may take long);
+// re-creations are bounded by ReconnectOptions.attempt_timeout, closes by 2 s.
 
 #include <memory>
 #include <mutex>
@@ -48,12 +53,15 @@ class AddressedSession {
   // CreateSession under a new id, bounded by `timeout`.
   absl::Status CreateLocked(std::chrono::milliseconds timeout);
   absl::StatusOr<v1::SolveResult> SolveLocked(const v1::Step& step, std::chrono::milliseconds timeout);
+  // CloseSession on `id`, best effort, with a short deadline.
+  void CloseQuietly(const std::string& id);
 
   Client* client_;
   v1::ProblemSpec spec_;
   ReconnectOptions reconnect_;
   mutable std::mutex mu_;
   std::string id_;  // empty once closed
+  bool spec_may_lag_ = false;  // a step failed unanswered since the last one with a state
   ReconnectStats stats_;
 };
 

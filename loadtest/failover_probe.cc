@@ -76,6 +76,7 @@ StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& 
   }
   // Streams start at different states, so they do not all solve the same step.
   std::size_t next = static_cast<std::size_t>(index) % work.states.size();
+  int reconnects_seen = 0;
   while (Clock::now() < until) {
     const std::vector<double>& state = work.states[next];
     next = (next + 1) % work.states.size();
@@ -94,8 +95,12 @@ StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& 
       ++out.no_plan;
       continue;
     }
-    if (config.verify_every > 0 && out.steps % static_cast<std::uint64_t>(config.verify_every) == 0 &&
-        result->status() == v1::SOLVE_STATUS_CONVERGED) {
+    // The step resent after a re-creation is the one the rule is about: always checked.
+    const int reconnects = (*session)->reconnect_stats().reconnects;
+    const bool resent = reconnects != reconnects_seen;
+    reconnects_seen = reconnects;
+    const bool sampled = config.verify_every > 0 && out.steps % static_cast<std::uint64_t>(config.verify_every) == 0;
+    if ((resent || sampled) && result->status() == v1::SOLVE_STATUS_CONVERGED) {
       const double difference = DifferenceFromCore(work.spec, state, *result);
       if (!std::isnan(difference)) {
         ++out.verified;

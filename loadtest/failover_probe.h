@@ -29,7 +29,7 @@ struct ProbeWorkload {
 struct StreamsProbeConfig {
   int streams = 24;
   double duration_s = 20.0;
-  int verify_every = 25;  ///< every k-th answered step of a stream is checked (0: none)
+  int verify_every = 25;  ///< every k-th answered step of a stream is checked (0: none), and every resent one
 };
 
 struct StreamsProbeReport {

@@ -1,5 +1,7 @@
 // nupmpc-server: the nupmpc.v1 gRPC service. Configuration: --help (flags; environment
 // variables NUPMPC_* as fallbacks). SIGTERM/SIGINT drain and exit 0.
+#include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <ctime>
@@ -35,9 +37,16 @@ int main(int argc, char** argv) {
     spdlog::info("signal {}: reporting NOT_SERVING for {} s, still serving (a second signal drains at once)", signal,
                  flags->drain_delay_s);
     (*server)->ReportNotServing();
-    const double whole_s = std::floor(flags->drain_delay_s);
-    const timespec wait{static_cast<time_t>(whole_s), static_cast<long>((flags->drain_delay_s - whole_s) * 1e9)};
-    sigtimedwait(&stop_signals, nullptr, &wait);
+    // Until the delay is over or a second stop signal comes; other interruptions (EINTR,
+    // e.g. after SIGSTOP/SIGCONT) wait on for the rest of the delay.
+    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(flags->drain_delay_s);
+    for (;;) {
+      const double left_s = std::chrono::duration<double>(until - std::chrono::steady_clock::now()).count();
+      if (left_s <= 0) break;
+      const double whole_s = std::floor(left_s);
+      const timespec wait{static_cast<time_t>(whole_s), static_cast<long>((left_s - whole_s) * 1e9)};
+      if (sigtimedwait(&stop_signals, nullptr, &wait) >= 0 || errno != EINTR) break;
+    }
   }
   spdlog::info("draining (grace {} s)", flags->options.grace_period_s);
   (*server)->Shutdown();

@@ -22,7 +22,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
                                                                                     raw_response);
   if (!call->Parsed()) return call;
   if (const std::string& requested = call->request().session_id(); !requested.empty()) {
-    if (absl::Status form = CheckSessionIdForm(requested); !form.ok()) {
+    if (absl::Status form = CheckRequestedSessionId(requested); !form.ok()) {
       call->Reply(form);
       return call;
     }

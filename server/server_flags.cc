@@ -61,9 +61,15 @@ absl::Status ApplyEnvironment(const char* name) {
   return absl::OkStatus();
 }
 
+// Written as !(value >= bound) so that NaN is refused too.
 template <typename T>
 absl::Status RequireAtLeast(const char* name, T value, T minimum) {
-  if (value < minimum) return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be >= ", minimum));
+  if (!(value >= minimum)) return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be >= ", minimum));
+  return absl::OkStatus();
+}
+template <typename T>
+absl::Status RequireAtMost(const char* name, T value, T maximum) {
+  if (!(value <= maximum)) return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be <= ", maximum));
   return absl::OkStatus();
 }
 
@@ -122,6 +128,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
         RequireAtLeast("max_message_bytes", o.max_message_bytes, 1024), RequireAtLeast("max_horizon", o.size_limits.max_horizon, 1),
         RequireAtLeast("max_states", o.size_limits.max_states, 1), RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
         RequireAtLeast("grace_period_s", o.grace_period_s, 0.0), RequireAtLeast("drain_delay_s", out.drain_delay_s, 0.0),
+        RequireAtMost("drain_delay_s", out.drain_delay_s, 3600.0),
         RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
         RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0),
         RequireAtLeast("memory_budget_mb", absl::GetFlag(FLAGS_memory_budget_mb), 0),

@@ -57,7 +57,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_p
         absl::StrCat("the server holds its maximum of ", max_sessions_, " sessions; close one or retry later"));
   }
   if (!requested_id.empty()) {
-    entry->id = absl::AsciiStrToLower(requested_id);
+    entry->id = std::string(requested_id);
     if (sessions_.count(entry->id) > 0) {
       return absl::AlreadyExistsError(absl::StrCat("session_id ", QuoteSessionId(requested_id),
                                                    ": a session with this id exists; draw another one"));
@@ -76,6 +76,16 @@ std::string QuoteSessionId(absl::string_view id) {
   constexpr std::size_t kShown = 8;
   if (id.size() <= kShown) return absl::StrCat("\"", absl::CHexEscape(id), "\"");
   return absl::StrCat("\"", absl::CHexEscape(id.substr(0, kShown)), "...\" (", id.size(), " characters)");
+}
+
+absl::Status CheckRequestedSessionId(absl::string_view id) {
+  const bool lower_hex =
+      std::all_of(id.begin(), id.end(), [](char c) { return absl::ascii_isdigit(c) || (c >= 'a' && c <= 'f'); });
+  if (id.size() == kSessionIdLength && lower_hex) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat("CreateSessionRequest.session_id ", QuoteSessionId(id), ": must be ",
+                                                 kSessionIdLength,
+                                                 " lower-case hex digits drawn at random, or empty for an id the "
+                                                 "server draws"));
 }
 
 absl::Status CheckSessionIdForm(absl::string_view id) {

@@ -62,6 +62,10 @@ struct SessionEntry {
 inline constexpr std::size_t kSessionIdLength = 32;
 // INVALID_ARGUMENT for anything else (checked before any lookup).
 absl::Status CheckSessionIdForm(absl::string_view id);
+// A client-drawn id (CreateSessionRequest.session_id): the form the server's own ids have,
+// 32 lower-case hex digits, so that the id a balancer hashed is the one every later call
+// sends. INVALID_ARGUMENT naming the field otherwise.
+absl::Status CheckRequestedSessionId(absl::string_view id);
 // An id as error messages show it: at most its first 8 characters, escaped, and its length.
 std::string QuoteSessionId(absl::string_view id);
 

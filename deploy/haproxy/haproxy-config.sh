@@ -67,7 +67,8 @@ defaults
   # A Control stream lives as long as its controller: no idle timeout short of an hour.
   timeout client 1h
   timeout server 1h
-  timeout check 1s
+  # Only a replica that hangs waits this out: answers, SERVING or not, are decided at once.
+  timeout check 2s
   # A request whose replica cannot be connected to is sent to another one.
   option redispatch 1
   retries 2
@@ -95,6 +96,10 @@ cat <<CONFIG
 backend pinned
   balance hdr(x-nupmpc-session)
   hash-type consistent
+  # A call whose replica cannot be reached fails (UNAVAILABLE) rather than reaching a
+  # replica without its session: the client re-creates the session either way, and a
+  # CreateSession sent elsewhere would leave an orphan there.
+  no option redispatch
 CONFIG
 i=0
 for r in "${replicas[@]}"; do

@@ -3,7 +3,9 @@
 
     deploy/haproxy/haproxy-stat.py SOCKET [BACKEND]     (default backend: streams)
 
-One line per server: name, status (UP, DOWN, ...), current and total sessions (for the
+One line per server: name, status (UP, DOWN, ...), current and total sessions, and the
+last health check's result (e.g. L7OK, L7RSP: an answer other than SERVING, L4CON: no
+connection). For the
 HTTP/2 backends of deploy/haproxy/haproxy-config.sh a session is one gRPC call: a Control
 stream or a unary call). Used by deploy/scaleout-test.sh to show how calls spread.
 """
@@ -34,7 +36,7 @@ def main():
     backend = sys.argv[2] if len(sys.argv) == 3 else "streams"
     for row in show_stat(sys.argv[1]):
         if row["pxname"] == backend and row["svname"] not in ("FRONTEND", "BACKEND"):
-            print(row["svname"], row["status"].split(" ")[0], row["scur"], row["stot"])
+            print(row["svname"], row["status"].split(" ")[0], row["scur"], row["stot"], row["check_status"] or "-")
     return 0
 
 

@@ -111,16 +111,39 @@ TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
   EXPECT_EQ(server.StopWith(SIGTERM), 0);
 }
 
-TEST(ServerBinaryTest, BadFlagValuesAreRefusedAtStartup) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    execl(NUPMPC_SERVER_BINARY, NUPMPC_SERVER_BINARY, "--threads=0", static_cast<char*>(nullptr));
-    _exit(127);
+// One SIGTERM: NOT_SERVING at once, and the process serves out the whole delay before it
+// drains and exits 0.
+TEST(ServerBinaryTest, OneSigtermServesOutTheDrainDelayThenExits) {
+  ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
+                       {"--log_level=warn", "--grace_period_s=1", "--drain_delay_s=1"});
+  auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
+  ASSERT_TRUE(WaitUntilServing(channel));
+  auto health = grpc::health::v1::Health::NewStub(channel);
+  ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::SERVING);
+  const auto signalled = std::chrono::steady_clock::now();
+  server.Signal(SIGTERM);
+  auto seen = grpc::health::v1::HealthCheckResponse::SERVING;
+  while ((seen = HealthOf(*health)) == grpc::health::v1::HealthCheckResponse::SERVING &&
+         std::chrono::steady_clock::now() < signalled + std::chrono::seconds(10)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 2);
+  EXPECT_EQ(seen, grpc::health::v1::HealthCheckResponse::NOT_SERVING);
+  EXPECT_EQ(server.StopWith(0), 0);  // signal 0: only waits for the exit
+  EXPECT_GE(std::chrono::steady_clock::now() - signalled, std::chrono::seconds(1));
+}
+
+TEST(ServerBinaryTest, BadFlagValuesAreRefusedAtStartup) {
+  for (const char* bad : {"--threads=0", "--drain_delay_s=nan", "--drain_delay_s=1e9", "--grace_period_s=-1"}) {
+    const pid_t pid = fork();
+    if (pid == 0) {
+      execl(NUPMPC_SERVER_BINARY, NUPMPC_SERVER_BINARY, bad, "--log_level=off", static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ASSERT_TRUE(WIFEXITED(status)) << bad;
+    EXPECT_EQ(WEXITSTATUS(status), 2) << bad;
+  }
 }
 
 }  // namespace

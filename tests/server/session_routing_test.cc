@@ -6,6 +6,7 @@
 #include <cmath>
 #include <string>
 
+#include "absl/strings/ascii.h"
 #include "client/addressed_session.h"
 #include "client/session_routing.h"
 #include "gtest/gtest.h"
@@ -32,9 +33,12 @@ TEST_F(ServiceTest, ASessionTakesTheIdItsClientDrew) {
   auto again = client_->CreateSession(spec, id);
   EXPECT_EQ(again.status().code(), absl::StatusCode::kAlreadyExists);
   EXPECT_NE(again.status().message().find("session_id"), std::string::npos) << again.status();
-  auto malformed = client_->CreateSession(spec, "not-an-id");
-  EXPECT_EQ(malformed.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(malformed.status().message().find("session_id"), std::string::npos) << malformed.status();
+  for (const std::string& bad : {std::string("not-an-id"), absl::AsciiStrToUpper(NewSessionId())}) {
+    auto malformed = client_->CreateSession(spec, bad);
+    EXPECT_EQ(malformed.status().code(), absl::StatusCode::kInvalidArgument) << bad;
+    EXPECT_NE(malformed.status().message().find("CreateSessionRequest.session_id"), std::string::npos)
+        << malformed.status();
+  }
   EXPECT_EQ(server_->state().registry.size(), 1);  // the refused calls created nothing
 
   // Without an id the client draws a fresh one each time.
