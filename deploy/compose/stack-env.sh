@@ -1,0 +1,55 @@
+# shellcheck shell=bash
+# Sourced by up.sh, down.sh and smoke.sh (from the repository root): podman for the compose
+# stack on this machine, and what the balancer sees.
+#   nupmpc_stack_setup          podman-env.sh's setup (podman_base: podman with the storage
+#                               options); exports CONTAINERS_CONF if up.sh wrote it
+#   nupmpc_stack_runtime IMAGE  the runtime that runs IMAGE (podman-env.sh), written with the
+#                               ulimits into CONTAINERS_CONF for `podman kube play`
+#   stack_servers [BACKEND]     one line per replica from HAProxy's stats: name, status,
+#                               last check, current and total calls (default backend streams)
+#
+# Why a containers.conf: `podman kube play` (4.3) has no --ulimit or --runtime option, and
+# the containers it starts would get podman's default nofile=1048576, which the runtime may not
+# set under this sandbox's hard limit (crun: "setrlimit RLIMIT_NOFILE: Operation not
+# permitted"), and crun, which refuses this cgroup v1/v2 hybrid (podman-env.sh says more).
+# containers.conf's default_ulimits and runtime are what kube play honours. The file stays in
+# /run: conmon's clean-up (and with it a restart after a crash) runs podman with the same
+# environment after this script has exited.
+# shellcheck disable=SC2034  # used by the scripts that source this file
+stack_yaml=deploy/compose/nupmpc-stack.yaml
+stack_pod=nupmpc-stack
+stack_conf_dir=/run/nupmpc-compose
+
+nupmpc_stack_setup() {
+  nupmpc_podman_tag=${nupmpc_podman_tag:-compose}
+  # shellcheck source=deploy/container/podman-env.sh
+  . deploy/container/podman-env.sh
+  nupmpc_podman_setup
+  if [ -f "$stack_conf_dir/containers.conf" ]; then export CONTAINERS_CONF=$stack_conf_dir/containers.conf; fi
+}
+
+nupmpc_stack_runtime() {
+  nupmpc_podman_runtime "$1" || return 1
+  mkdir -p "$stack_conf_dir"
+  # ulimits holds "--ulimit" "nofile=N:N" "--ulimit" "nproc=M:M" (podman-env.sh).
+  cat >"$stack_conf_dir/containers.conf" <<CONF
+# Written by deploy/compose/stack-env.sh for \`podman kube play\` of the nupmpc stack.
+[containers]
+default_ulimits = ["${ulimits[1]}", "${ulimits[3]}"]
+[engine]
+runtime = "$NUPMPC_PODMAN_RUNTIME"
+CONF
+  export CONTAINERS_CONF=$stack_conf_dir/containers.conf
+}
+
+# The stats socket is TCP on the pod's loopback (NUPMPC_BALANCER_STATS in the YAML): the
+# balancer image has bash, whose /dev/tcp reads it, and no socat or python.
+stack_servers() {
+  "${podman_base[@]}" exec "$stack_pod-balancer" \
+      bash -c 'exec 3<>/dev/tcp/127.0.0.1/50059 && echo "show stat" >&3 && cat <&3' 2>/dev/null |
+    awk -F, -v backend="${1:-streams}" '
+      NR == 1 { sub(/^# /, ""); for (i = 1; i <= NF; i++) col[$i] = i; next }
+      $1 == backend && $2 != "FRONTEND" && $2 != "BACKEND" {
+        check = $col["check_status"] == "" ? "-" : $col["check_status"]
+        print $2, $col["status"], check, $col["scur"], $col["stot"] }'
+}
