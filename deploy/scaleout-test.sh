@@ -28,6 +28,10 @@ for p in nupmpc-server nupmpc nupmpc-loadtest nupmpc-scaleout-probe; do
 done
 command -v haproxy >/dev/null || deploy/install-deps.sh
 
+# Debian's interpreter: it starts in milliseconds (a version manager's shim on PATH can take
+# a good part of a second on a loaded machine, too slow to poll the balancer with).
+py=/usr/bin/python3
+[ -x "$py" ] || py=python3
 work=$(mktemp -d /tmp/nupmpc-scaleout.XXXXXX)
 cleanup() {
   # Every process of this test is a child of this shell (haproxy runs in the foreground as
@@ -43,7 +47,7 @@ say() { echo "== scaleout: $*"; }
 fail() { echo "scaleout-test: FAILED: $*" >&2; for f in "$work"/*.log; do echo "--- $f" >&2; tail -5 "$f" >&2; done; exit 1; }
 # Five distinct free ports, drawn while all are held (gRPC and HAProxy bind with
 # SO_REUSEPORT: two processes given one port would silently share it).
-read -r lb_port p1 p2 p3 p4 < <(python3 -c '
+read -r lb_port p1 p2 p3 p4 < <("$py" -c '
 import socket
 held = [socket.socket() for _ in range(5)]
 for s in held: s.bind(("127.0.0.1", 0))
@@ -61,7 +65,7 @@ start_replica() {  # name
     sleep 0.1
   done
   "$bin/nupmpc" --server "127.0.0.1:${port[$name]}" info >/dev/null 2>&1 || fail "replica $name did not start"
-  say "replica $name on port ${port[$name]} serving after $(python3 -c "import time; print(f'{time.time()-$started:.2f}')") s"
+  say "replica $name on port ${port[$name]} serving after $("$py" -c "import time; print(f'{time.time()-$started:.2f}')") s"
 }
 lb="127.0.0.1:$lb_port"
 stats="$work/haproxy.sock"
@@ -80,7 +84,7 @@ start_balancer() {  # replica names...: starts HAProxy, or reloads it with these
   fi
   wait_up "$@"
 }
-server_line() { deploy/haproxy/haproxy-stat.py "$stats" streams 2>/dev/null | awk -v s="$1" '$1 == s'; }
+server_line() { "$py" deploy/haproxy/haproxy-stat.py "$stats" streams 2>/dev/null | awk -v s="$1" '$1 == s'; }
 field() { server_line "$1" | awk -v f="$2" '{print $f}'; }  # 2 status, 3 current, 4 total, 5 last check
 wait_up() {  # replica names (r1, r2, ...): waits until the balancer has them all UP
   for _ in $(seq 100); do
@@ -89,7 +93,7 @@ wait_up() {  # replica names (r1, r2, ...): waits until the balancer has them al
     [ $all = 1 ] && return 0
     sleep 0.1
   done
-  deploy/haproxy/haproxy-stat.py "$stats" streams >&2
+  "$py" deploy/haproxy/haproxy-stat.py "$stats" streams >&2
   fail "the balancer did not see $* UP"
 }
 wait_streams_on() {  # replica: until it holds an open stream
@@ -118,10 +122,10 @@ wait "$loadtest_pid" || fail "loadtest through the balancer"
 out=$(cat "$work/spread.json")
 say "spread: most open Control streams per replica during the load test: r1 ${most[r1]}, r2 ${most[r2]}, r3 ${most[r3]}"
 for n in r1 r2 r3; do [ "${most[$n]}" -ge 1 ] || fail "replica $n held no stream; the load test said: $out"; done
-level=$(python3 -c "import json,sys; print(json.dumps(json.loads(sys.argv[1])['levels'][0]))" "$out")
-errors=$(python3 -c "import json,sys; print(json.loads(sys.argv[1])['errors'])" "$level")
+level=$("$py" -c "import json,sys; print(json.dumps(json.loads(sys.argv[1])['levels'][0]))" "$out")
+errors=$("$py" -c "import json,sys; print(json.loads(sys.argv[1])['errors'])" "$level")
 [ "$errors" = "{}" ] || fail "loadtest through the balancer had errors: $errors"
-python3 - "$level" <<'PY'
+"$py" - "$level" <<'PY'
 import json, sys
 l = json.loads(sys.argv[1])
 print(f"== scaleout: through the balancer, {l['concurrency']} streams: {l['solves_per_s']:.0f} solves/s, "
@@ -130,7 +134,7 @@ PY
 one_lb=$("${lt[@]}" --server "$lb" --concurrency 1 --duration_s "$phase_s") || fail "loadtest, 1 stream, balancer"
 one_direct=$("${lt[@]}" --server "127.0.0.1:${port[r1]}" --concurrency 1 --duration_s "$phase_s") ||
   fail "loadtest, 1 stream, direct"
-python3 - "$one_lb" "$one_direct" <<'PY'
+"$py" - "$one_lb" "$one_direct" <<'PY'
 import json, sys
 b, d = (json.loads(a)["levels"][0] for a in sys.argv[1:3])
 print(f"== scaleout: 1 stream, balancer: {b['solves_per_s']:.0f} solves/s, p50 {b['p50_ms']:.3f} ms, p99 {b['p99_ms']:.3f} ms;"
@@ -142,18 +146,19 @@ PY
 out=$("$bin/nupmpc-scaleout-probe" --server "$lb" --instance "$instance" --probe addressed --sessions 50 --solves 20) ||
   fail "addressed probe"
 say "addressed: $out"
-check() { python3 -c "import json,sys; d=json.loads(sys.argv[1]); sys.exit(0 if ($2) else 1)" "$1" || fail "$3: $1"; }
+check() { "$py" -c "import json,sys; d=json.loads(sys.argv[1]); sys.exit(0 if ($2) else 1)" "$1" || fail "$3: $1"; }
 check "$out" 'd["failed"] == 0 and d["recreated"] == 0 and d["miscounted"] == 0 and d["solves"] == 1000' \
   "a call addressed by session id missed its session"
 
 # 3. Failover: kill -9 one replica under load.
 probe=("$bin/nupmpc-scaleout-probe" --server "$lb" --instance "$instance" --probe streams --streams "$streams"
-       --duration_s "$phase_s" --verify_every 10)
-"${probe[@]}" > "$work/failover.json" 2>"$work/probe.log" &
+       --verify_every 10)
+"${probe[@]}" --duration_s "$((phase_s + 4))" > "$work/failover.json" 2>"$work/probe.log" &
 probe_pid=$!
-sleep "$(python3 -c "print($phase_s / 3)")"
+sleep "$("$py" -c "print($phase_s / 3)")"
 wait_streams_on r1
 held=$(field r1 3)
+kill -0 "$probe_pid" 2>/dev/null || fail "failover: the probe ended before the kill (a very slow machine?)"
 kill -9 "${pid[r1]}"
 say "killed replica r1 (SIGKILL) while it held $held streams"
 wait "$probe_pid" || fail "streams probe (failover)"
@@ -168,10 +173,10 @@ wait_up r1 r2 r3
 
 # 4. Drain: SIGTERM to one replica under load; the streams run on past its drain delay, so
 # those it held must move.
-"${probe[@]}" --duration_s "$(python3 -c "print($phase_s + $drain_delay_s + 1)")" > "$work/drain.json" \
+"${probe[@]}" --duration_s "$("$py" -c "print($phase_s + $drain_delay_s + 1)")" > "$work/drain.json" \
   2>>"$work/probe.log" &
 probe_pid=$!
-sleep "$(python3 -c "print($phase_s / 3)")"
+sleep "$("$py" -c "print($phase_s / 3)")"
 wait_streams_on r2
 kill -TERM "${pid[r2]}"
 drain_start=$(date +%s.%N)
@@ -180,7 +185,7 @@ for _ in $(seq 100); do [ "$(field r2 2)" = UP ] || break; sleep 0.05; done
 kill -0 "${pid[r2]}" 2>/dev/null || fail "drain: replica r2 exited before the balancer took it out"
 [ "$(field r2 2)" != UP ] || fail "drain: the balancer kept replica r2 UP"
 say "SIGTERM to replica r2: the balancer took it out after" \
-    "$(python3 -c "import time; print(f'{time.time()-$drain_start:.2f}')") s (last check $(field r2 5)," \
+    "$("$py" -c "import time; print(f'{time.time()-$drain_start:.2f}')") s (last check $(field r2 5)," \
     "drain delay $drain_delay_s s)"
 wait "$probe_pid" || fail "streams probe (drain)"
 wait "${pid[r2]}" || fail "replica r2 did not exit 0 after SIGTERM"

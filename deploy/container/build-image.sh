@@ -40,7 +40,7 @@ say() { echo "build-image: $*"; }
 die() { echo "build-image: $*" >&2; exit 1; }
 
 for tool in podman mmdebstrap; do
-  command -v "$tool" >/dev/null || die "$tool is missing (apt-get install podman mmdebstrap uidmap runc)"
+  command -v "$tool" >/dev/null || die "$tool is missing (apt-get install podman mmdebstrap uidmap runc catatonit)"
 done
 [ "$(id -u)" -eq 0 ] || die "run as root (mmdebstrap root mode and rootful podman storage)"
 
