@@ -66,7 +66,7 @@ absl::Status AddressedSession::CreateLocked(std::chrono::milliseconds timeout) {
   if (response.session_id() != request.session_id()) {
     // A server from before CreateSessionRequest.session_id drew its own id: a balancer would
     // send the later calls elsewhere, and every step would re-create the session.
-    CloseQuietly(response.session_id());
+    (void)CloseById(response.session_id());
     return absl::FailedPreconditionError(
         "CreateSession: the server ignores CreateSessionRequest.session_id (an older server); addressed sessions "
         "need it");
@@ -90,14 +90,15 @@ absl::StatusOr<v1::SolveResult> AddressedSession::SolveLocked(const v1::Step& st
   return std::move(*response.mutable_result());
 }
 
-void AddressedSession::CloseQuietly(const std::string& id) {
+absl::Status AddressedSession::CloseById(const std::string& id) {
   v1::CloseSessionRequest request;
   request.set_session_id(id);
   grpc::ClientContext context;
   SetTimeout(&context, kCloseTimeout);
   RouteToSession(&context, id);
   v1::CloseSessionResponse response;
-  (void)client_->stub().CloseSession(&context, request, &response);
+  const grpc::Status s = client_->stub().CloseSession(&context, request, &response);
+  return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
 }
 
 absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
@@ -123,7 +124,7 @@ absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
           *answered = result.ok() || !IsRetryable(result.status());
           // Not answered: the next attempt makes another session; do not leave this one
           // holding memory on its replica until it expires.
-          if (!*answered) CloseQuietly(id_);
+          if (!*answered) (void)CloseById(id_);
           return result.status();
         },
         &stats_);
@@ -143,15 +144,7 @@ absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
 absl::Status AddressedSession::Close() {
   std::lock_guard<std::mutex> lock(mu_);
   if (id_.empty()) return absl::OkStatus();
-  const std::string id = std::exchange(id_, std::string());
-  v1::CloseSessionRequest request;
-  request.set_session_id(id);
-  grpc::ClientContext context;
-  SetTimeout(&context, kCloseTimeout);
-  RouteToSession(&context, id);
-  v1::CloseSessionResponse response;
-  const grpc::Status s = client_->stub().CloseSession(&context, request, &response);
-  return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
+  return CloseById(std::exchange(id_, std::string()));
 }
 
 }  // namespace nupmpc

@@ -53,8 +53,8 @@ class AddressedSession {
   // CreateSession under a new id, bounded by `timeout`.
   absl::Status CreateLocked(std::chrono::milliseconds timeout);
   absl::StatusOr<v1::SolveResult> SolveLocked(const v1::Step& step, std::chrono::milliseconds timeout);
-  // CloseSession on `id`, best effort, with a short deadline.
-  void CloseQuietly(const std::string& id);
+  // CloseSession on `id` with a short deadline (best effort where its result is ignored).
+  absl::Status CloseById(const std::string& id);
 
   Client* client_;
   v1::ProblemSpec spec_;

@@ -11,7 +11,8 @@
 #                 sampled plans equal the core's own solve of the same state to 1e-9;
 #   4. drain:     SIGTERM to one replica (--drain_delay_s): the balancer takes it out,
 #                 no step fails;
-#   5. scale-up:  a fourth replica and a balancer reload: new streams reach it.
+#   5. scale-up:  a fourth replica and a balancer reload: new streams reach it;
+#   6. compose:   (full run, where podman and the images are) deploy/compose/smoke.sh.
 #
 #   deploy/scaleout-test.sh [--quick]     (--quick: short phases, as the ctest entry)
 #
@@ -204,4 +205,19 @@ got=$(( $(field r4 4) - before_r4 ))
 say "scale-up: replica r4 got $got of 8 new streams; $out"
 [ "$got" -gt 0 ] || fail "scale-up: the new replica got no stream"
 check "$out" 'd["failed_steps"] == 0' "scale-up: a step failed"
+
+# 6. The same in containers (full run only, where podman and the images are here): the
+#    compose stack's smoke test (podman kube play).
+if [ $quick = 0 ]; then
+  if command -v podman >/dev/null && podman image exists localhost/nupmpc:latest 2>/dev/null &&
+     podman image exists localhost/nupmpc-haproxy:latest 2>/dev/null; then
+    say "compose stack (podman kube play): deploy/compose/smoke.sh"
+    NUPMPC_BIN_DIR="$bin" deploy/compose/smoke.sh --port "$("$py" -c '
+import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')" ||
+      fail "the compose stack's smoke test"
+  else
+    say "compose stack: not run (needs podman and the images of deploy/container/build-image.sh and" \
+        "deploy/compose/build-balancer-image.sh)"
+  fi
+fi
 say "all checks passed"
