@@ -30,6 +30,7 @@
 #include "absl/strings/str_join.h"
 #include "cli/program_flags.h"
 #include "client/client.h"
+#include "client/security_flags.h"
 #include "client/closed_loop_summary.h"
 #include "client/problem_file.h"
 #include "client/server_info_table.h"
@@ -67,7 +68,9 @@ const nupmpc::cli::ProgramInfo kProgram{
                "FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.",
     .usage = "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
              "sessions",
-    .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
+    .environment = {{"NUPMPC_SERVER", "server address when --server is not given"},
+                    {"NUPMPC_TOKEN", "the bearer token, when --token_file and NUPMPC_TOKEN_FILE are not given"},
+                    {"NUPMPC_TLS, NUPMPC_TLS_CA_FILE, ...", "each --tls* flag's value when the flag is not given"}},
     .max_arguments = 2,
 };
 
@@ -240,7 +243,12 @@ int main(int argc, char** argv) {
     return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("--format ", format, ": must be table or json"));
   }
   const bool json = format == "json";
-  nupmpc::Client client(absl::GetFlag(FLAGS_server), std::chrono::milliseconds(absl::GetFlag(FLAGS_deadline_ms)));
+  absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
+  if (!security.ok()) return Fail(security.status());
+  absl::StatusOr<std::unique_ptr<nupmpc::Client>> connected = nupmpc::Client::Connect(
+      absl::GetFlag(FLAGS_server), *security, std::chrono::milliseconds(absl::GetFlag(FLAGS_deadline_ms)));
+  if (!connected.ok()) return Fail(connected.status());
+  nupmpc::Client& client = **connected;
 
   if (command == "solve" || command == "closed-loop") {
     if (args.size() < 3) return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat(command, ": FILE missing"));

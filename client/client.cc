@@ -17,19 +17,39 @@ absl::Status FromGrpc(const grpc::Status& s) {
 // `own_subchannel`: a connection of this channel's own, not shared through gRPC's global
 // subchannel pool with other channels to the same address (and so not sharing their
 // reconnect back-off either).
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target, bool own_subchannel = false) {
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target,
+                                          const std::shared_ptr<grpc::ChannelCredentials>& credentials,
+                                          const ChannelSecurity& security, bool own_subchannel) {
   grpc::ChannelArguments args;
   // Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
   args.SetMaxReceiveMessageSize(-1);
   args.SetMaxSendMessageSize(-1);
   if (own_subchannel) args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-  return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+  AddSecurityArguments(security, &args);
+  return grpc::CreateCustomChannel(target, credentials, args);
 }
 }  // namespace
 
 Client::Client(const std::string& target, std::chrono::milliseconds default_deadline)
-    : Client(MakeChannel(target), default_deadline) {
+    : Client(MakeChannel(target, grpc::InsecureChannelCredentials(), {}, /*own_subchannel=*/false), default_deadline) {
   target_ = target;
+  credentials_ = grpc::InsecureChannelCredentials();
+}
+
+absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const std::string& target, const ChannelSecurity& security,
+                                                        std::chrono::milliseconds default_deadline) {
+  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
+  if (!credentials.ok()) return credentials.status();
+  auto client = std::make_unique<Client>(MakeChannel(target, *credentials, security, /*own_subchannel=*/false),
+                                         default_deadline);
+  client->target_ = target;
+  client->credentials_ = *std::move(credentials);
+  client->security_ = security;
+  return client;
+}
+
+std::shared_ptr<grpc::Channel> Client::NewChannel(bool own_subchannel) const {
+  return MakeChannel(target_, credentials_, security_, own_subchannel);
 }
 
 Client::Client(std::shared_ptr<grpc::Channel> channel, std::chrono::milliseconds default_deadline)
@@ -256,7 +276,7 @@ absl::StatusOr<v1::SolveResult> Session::Step(const v1::Step& step) {
           // keeps the one that worked. (Built from a channel, the client has no target to
           // open another: then its channel is told to retry now, which gRPC may honour late.)
           if (!client_->target_.empty()) {
-            channel_ = MakeChannel(client_->target_, /*own_subchannel=*/true);
+            channel_ = client_->NewChannel(/*own_subchannel=*/true);
             stub_ = v1::MpcService::NewStub(channel_);
           } else {
             grpc::experimental::ChannelResetConnectionBackoff(channel_.get());

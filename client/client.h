@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "client/channel_security.h"
 #include "client/reconnect.h"
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
@@ -52,6 +53,12 @@ class Client {
                   std::chrono::milliseconds default_deadline = std::chrono::milliseconds(0));
   explicit Client(std::shared_ptr<grpc::Channel> channel,
                   std::chrono::milliseconds default_deadline = std::chrono::milliseconds(0));
+  // A client of a server with TLS, mTLS or bearer tokens (client/channel_security.h);
+  // an error naming the option when a file cannot be read or a token would go out in
+  // clear text.
+  static absl::StatusOr<std::unique_ptr<Client>> Connect(
+      const std::string& target, const ChannelSecurity& security,
+      std::chrono::milliseconds default_deadline = std::chrono::milliseconds(0));
 
   absl::StatusOr<v1::SolveResult> SolveOnce(const v1::ProblemSpec& spec);
   // Creates a session under `session_id` (empty: a new random id, NewSessionId). This and
@@ -82,7 +89,11 @@ class Client {
   absl::StatusOr<Response> Unary(
       grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
       const Request& request, const std::string& session_id = {});
+  // A new channel to target_ with credentials_ (`own_subchannel`: a connection of its own).
+  std::shared_ptr<grpc::Channel> NewChannel(bool own_subchannel) const;
   std::string target_;  // empty when built from a channel
+  std::shared_ptr<grpc::ChannelCredentials> credentials_;
+  ChannelSecurity security_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::MpcService::Stub> stub_;
   std::chrono::milliseconds default_deadline_;

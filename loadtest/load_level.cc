@@ -15,11 +15,15 @@ namespace {
 
 // Every simulated controller gets its own TCP connection, as separate plant computers
 // would (gRPC would otherwise share one connection between channels to the same target).
-std::shared_ptr<grpc::Channel> OwnConnection(const std::string& target) {
+absl::StatusOr<std::shared_ptr<grpc::Channel>> OwnConnection(const std::string& target,
+                                                            const ChannelSecurity& security) {
+  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
+  if (!credentials.ok()) return credentials.status();
   grpc::ChannelArguments args;
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   args.SetMaxReceiveMessageSize(-1);
-  return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+  AddSecurityArguments(security, &args);
+  return grpc::CreateCustomChannel(target, *credentials, args);
 }
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
@@ -48,7 +52,9 @@ absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan
   std::vector<std::unique_ptr<v1::MpcService::Stub>> stubs;
   std::vector<std::unique_ptr<LoadStream>> streams;
   for (int i = 0; i < config.concurrency; ++i) {
-    channels.push_back(OwnConnection(target));
+    absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = OwnConnection(target, config.security);
+    if (!channel.ok()) return channel.status();
+    channels.push_back(*std::move(channel));
     stubs.push_back(v1::MpcService::NewStub(channels.back()));
     streams.push_back(std::make_unique<LoadStream>(stubs.back().get(), plan));
     if (const grpc::Status s = streams.back()->Open(); !s.ok()) {

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "client/channel_security.h"
 #include "loadtest/load_stream.h"
 
 namespace nupmpc::loadtest {
@@ -22,6 +23,7 @@ struct LevelConfig {
   std::uint64_t requests = 0;  ///< > 0: stop once this many solves were answered
   bool progress = false;       ///< a status line on stderr every second
   std::uint64_t seed = 1;
+  ChannelSecurity security;    ///< TLS / token of the server under test
 };
 
 struct LevelReport {

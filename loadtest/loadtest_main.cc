@@ -22,6 +22,7 @@
 #include "absl/strings/str_split.h"
 #include "cli/program_flags.h"
 #include "client/client.h"
+#include "client/security_flags.h"
 #include "client/problem_file.h"
 #include "loadtest/core_baseline.h"
 #include "loadtest/echo_process.h"
@@ -100,8 +101,12 @@ bool ShowProgress() {
 }
 
 // The child process of an echo peer: the real server's plan for the spec is its answer.
-int ServeEcho(const std::string& target, const nupmpc::v1::ProblemSpec& spec, double busy_us) {
-  nupmpc::Client client(target, std::chrono::seconds(10));
+int ServeEcho(const std::string& target, const nupmpc::ChannelSecurity& security,
+              const nupmpc::v1::ProblemSpec& spec, double busy_us) {
+  absl::StatusOr<std::unique_ptr<nupmpc::Client>> connected =
+      nupmpc::Client::Connect(target, security, std::chrono::seconds(10));
+  if (!connected.ok()) return Fail("connection security", connected.status());
+  nupmpc::Client& client = **connected;
   absl::StatusOr<nupmpc::v1::SolveResult> answer = client.SolveOnce(spec);
   if (!answer.ok()) return Fail("SolveOnce for the echo server's answer", answer.status());
   absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> echo = lt::EchoControlServer::Start(
@@ -124,8 +129,10 @@ int main(int argc, char** argv) {
     file->closed_loop_states.emplace_back(mean.begin(), mean.end());
   }
   const std::string name = std::filesystem::path(instance_path).stem().string();
+  absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
+  if (!security.ok()) return Fail("connection security", security.status());
   if (const double busy_us = absl::GetFlag(FLAGS_serve_echo_busy_us); busy_us >= 0.0) {
-    return ServeEcho(target, file->spec, busy_us);
+    return ServeEcho(target, *security, file->spec, busy_us);
   }
   const bool json = absl::GetFlag(FLAGS_json);
 
@@ -145,8 +152,10 @@ int main(int argc, char** argv) {
   const std::string mode = absl::GetFlag(FLAGS_mode);
   if (mode != "closed" && mode != "open") return Fail("--mode", absl::InvalidArgumentError("must be closed or open"));
 
-  nupmpc::Client client(target, std::chrono::seconds(10));
-  absl::StatusOr<nupmpc::v1::GetServerInfoResponse> info = client.GetServerInfo();
+  absl::StatusOr<std::unique_ptr<nupmpc::Client>> client =
+      nupmpc::Client::Connect(target, *security, std::chrono::seconds(10));
+  if (!client.ok()) return Fail("connection security", client.status());
+  absl::StatusOr<nupmpc::v1::GetServerInfoResponse> info = (*client)->GetServerInfo();
   if (!info.ok()) return Fail(absl::StrCat("server ", target), info.status());
 
   absl::StatusOr<lt::CoreBaseline> baseline =
@@ -154,7 +163,7 @@ int main(int argc, char** argv) {
   if (!baseline.ok()) return Fail("core baseline", baseline.status());
   const double capacity_per_s = info->limits().worker_threads() / (baseline->median_ms * 1e-3);
 
-  absl::StatusOr<lt::TransportFloor> transport = lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls));
+  absl::StatusOr<lt::TransportFloor> transport = lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls), *security);
   if (!transport.ok()) return Fail("transport floor", transport.status());
 
   // The peers are echo servers in child processes (this program with --serve_echo_busy_us),
@@ -162,8 +171,10 @@ int main(int argc, char** argv) {
   std::unique_ptr<lt::EchoProcess> echo, inline_solve;
   const auto spawn_echo = [&](double busy_us) {
     const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
-    return lt::EchoProcess::Spawn({self, "--server=" + target, "--instance=" + instance_path,
-                                   absl::StrCat("--serve_echo_busy_us=", busy_us)});
+    std::vector<std::string> args = {self, "--server=" + target, "--instance=" + instance_path,
+                                     absl::StrCat("--serve_echo_busy_us=", busy_us)};
+    for (std::string& a : nupmpc::SecurityFlagArguments()) args.push_back(std::move(a));
+    return lt::EchoProcess::Spawn(args);
   };
   if (absl::GetFlag(FLAGS_echo)) {
     absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(0.0);
@@ -198,10 +209,12 @@ int main(int argc, char** argv) {
     config.requests = absl::GetFlag(FLAGS_requests);
     config.progress = ShowProgress();
     config.seed = absl::GetFlag(FLAGS_seed);
+    config.security = *security;
     absl::StatusOr<lt::LevelReport> report = lt::RunLevel(target, plan, config);
     if (!report.ok()) return Fail(absl::StrCat("concurrency ", c), report.status());
     if (!json) lt::PrintLevel(header, *report);
     config.progress = false;
+    config.security = {};  // the peers listen in plaintext
     for (const auto& [peer, slot, label, busy_ms] :
          {std::tuple{echo.get(), &report->echo, "echo", 0.0},
           std::tuple{inline_solve.get(), &report->inline_solve, "inline", baseline->median_ms}}) {

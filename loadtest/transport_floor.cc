@@ -35,10 +35,14 @@ grpc::Status Check(grpc::GenericStub& stub, grpc::CompletionQueue& cq) {
 
 }  // namespace
 
-absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, int calls) {
+absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, int calls,
+                                                     const ChannelSecurity& security) {
+  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
+  if (!credentials.ok()) return credentials.status();
   grpc::ChannelArguments arguments;
   arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // not shared with the streams' channels
-  grpc::GenericStub stub(grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), arguments));
+  AddSecurityArguments(security, &arguments);
+  grpc::GenericStub stub(grpc::CreateCustomChannel(target, *credentials, arguments));
   grpc::CompletionQueue cq;
   std::vector<double> micros;
   micros.reserve(calls);

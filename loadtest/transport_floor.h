@@ -9,6 +9,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "client/channel_security.h"
 
 namespace nupmpc::loadtest {
 
@@ -19,7 +20,8 @@ struct TransportFloor {
 };
 
 // `calls` sequential health checks on a channel of their own (after a few warm-up calls).
-absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, int calls);
+absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, int calls,
+                                                     const ChannelSecurity& security = {});
 
 }  // namespace nupmpc::loadtest
 

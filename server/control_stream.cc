@@ -29,7 +29,7 @@ ControlStream* ControlStream::Start(ServerState* state, grpc::CallbackServerCont
 }
 
 ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* context)
-    : state_(state), context_(context) {}
+    : state_(state), context_(context), caller_(CallerOf(*context)) {}
 
 void ControlStream::Begin() {
   if (state_->draining.load()) {
@@ -43,6 +43,11 @@ void ControlStream::Begin() {
                      " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
     return;
   }
+  if (absl::Status quota = state_->principal_streams.Acquire(caller_.principal); !quota.ok()) {
+    Finish(state_->ToGrpc(Rpc::kControl, quota));
+    return;
+  }
+  counted_for_principal_ = true;
   StartRead(&read_buffer_);
 }
 
@@ -59,7 +64,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
   std::shared_ptr<SessionEntry> entry;
   switch (first.attach_case()) {
     case v1::ControlRequest::kSessionId: {
-      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->registry.Find(first.session_id());
+      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->registry.Find(first.session_id(), caller_);
       if (!found.ok()) return found.status();
       entry = *std::move(found);
       if (entry->owned_by_stream || entry->attached.exchange(true)) {
@@ -74,7 +79,8 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       call.cancel = &cancelled_;
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
           CreateAndRegister(first.spec(), state_->options.size_limits, &state_->gp_models, &state_->budget,
-                            &state_->registry, call, /*owned_by_stream=*/true);
+                            &state_->registry, call, /*owned_by_stream=*/true, /*requested_id=*/{},
+                            OwnerFor(caller_));
       if (!added.ok()) return added.status();
       entry = *std::move(added);
       entry->attached.store(true);
@@ -315,6 +321,7 @@ void ControlStream::OnDone() {
   // Deletes this stream on return unless a pool task still holds it.
   const std::shared_ptr<ControlStream> last_reference_maybe = std::move(grpc_reference_);
   if (counted_) state_->control_streams.fetch_sub(1);
+  if (counted_for_principal_) state_->principal_streams.Release(caller_.principal);
   if (entry_ != nullptr) {
     if (entry_->owned_by_stream) {
       (void)state_->registry.Close(entry_->id);

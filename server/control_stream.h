@@ -9,6 +9,7 @@
 
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
+#include "server/caller.h"
 #include "server/server_context.h"
 
 namespace nupmpc::server {
@@ -81,6 +82,8 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   grpc::ByteBuffer read_buffer_;  // raw: parsed by OnReadDone (server/raw_messages.h)
   std::atomic<bool> cancelled_{false};
   bool counted_ = false;  // in state_->control_streams (set by Begin, before any reaction)
+  const Caller caller_;   // who opened the stream: owns the session it creates
+  bool counted_for_principal_ = false;  // in state_->principal_streams (set by Begin)
 
   // Where the stream is in its life.
   enum class Phase {

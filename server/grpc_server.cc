@@ -12,11 +12,29 @@ namespace nupmpc::server {
 absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOptions& options) {
   std::unique_ptr<GrpcServer> s(new GrpcServer());
   s->state_ = std::make_unique<ServerState>(options);
+  ServerState& state = *s->state_;
+  if (!options.auth_tokens_file.empty()) {
+    absl::StatusOr<std::unique_ptr<TokenStore>> tokens = TokenStore::Open(options.auth_tokens_file);
+    if (!tokens.ok()) return tokens.status();
+    state.tokens = *std::move(tokens);
+  }
+  if (state.tokens != nullptr || options.tls.mutual()) {
+    state.auth = std::make_shared<AuthProcessor>(state.tokens, options.tls.mutual());
+  }
+  absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
+      ServerCredentialsFor(options.tls, options.address, state.auth);
+  if (!credentials.ok()) return credentials.status();
+  if (!options.tls.enabled() && !IsLocalAddress(options.address)) {
+    spdlog::warn("listening on {} WITHOUT TLS: anyone who reaches this address can read and drive every session's "
+                 "traffic; give --tls_cert_file and --tls_key_file (and --auth_tokens_file or --tls_client_ca_file) "
+                 "outside a trusted network",
+                 options.address);
+  }
   s->service_ = std::make_unique<MpcServiceImpl>(s->state_.get());
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(options.address, grpc::InsecureServerCredentials(), &s->port_);
+  builder.AddListeningPort(options.address, *credentials, &s->port_);
   builder.RegisterService(s->service_.get());
   builder.SetMaxReceiveMessageSize(options.max_message_bytes);
   builder.SetMaxSendMessageSize(options.max_message_bytes);
@@ -47,6 +65,7 @@ void GrpcServer::Janitor() {
   while (!stopping_) {
     janitor_wake_.wait_for(lock, std::chrono::seconds(1));
     if (stopping_) break;
+    ReloadTokens();
     const int expired = state_->registry.ExpireIdle(state_->options.session_idle_timeout_s);
     if (expired > 0) spdlog::info("closed {} idle sessions", expired);
     const double compact_after_s = state_->options.session_compact_idle_s;
@@ -60,9 +79,19 @@ void GrpcServer::Janitor() {
   }
 }
 
+void GrpcServer::ReloadTokens() {
+  if (state_->tokens == nullptr) return;
+  const absl::StatusOr<bool> reloaded = state_->tokens->ReloadIfChanged();
+  if (!reloaded.ok()) {
+    spdlog::error("{} (the tokens read before stay in effect)", std::string(reloaded.status().message()));
+  } else if (*reloaded) {
+    spdlog::info("re-read {}: {} tokens", state_->tokens->path(), state_->tokens->size());
+  }
+}
+
 void GrpcServer::ReportNotServing() {
   state_->serving.store(false);
-  server_->GetHealthCheckService()->SetServingStatus(false);
+  if (server_ != nullptr) server_->GetHealthCheckService()->SetServingStatus(false);
 }
 
 void GrpcServer::Shutdown() {
@@ -77,7 +106,7 @@ void GrpcServer::Shutdown() {
   ReportNotServing();
   const auto grace = std::chrono::duration_cast<std::chrono::milliseconds>(
       std::chrono::duration<double>(state_->options.grace_period_s));
-  server_->Shutdown(std::chrono::system_clock::now() + grace);
+  if (server_ != nullptr) server_->Shutdown(std::chrono::system_clock::now() + grace);
   state_->pool.Shutdown();
   metrics_.reset();  // last: scrapes see the drain to its end
 }

@@ -36,6 +36,8 @@ class GrpcServer {
  private:
   GrpcServer() = default;
   void Janitor();
+  // Takes in a changed --auth_tokens_file (the janitor checks once a second).
+  void ReloadTokens();
 
   std::unique_ptr<ServerState> state_;
   std::unique_ptr<MpcServiceImpl> service_;

@@ -30,10 +30,11 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
   ServerState* state = state_;
   const v1::CreateSessionRequest* request = &call->request();
   v1::CreateSessionResponse* response = call->response();
-  call->RunOnPool("CreateSession", /*solve_result=*/nullptr, [state, request, response](const CallContext& c) {
+  call->RunOnPool("CreateSession", /*solve_result=*/nullptr,
+                  [state, request, response, owner = OwnerFor(CallerOf(*context))](const CallContext& c) {
     absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
         CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
-                          &state->registry, c, /*owned_by_stream=*/false, request->session_id());
+                          &state->registry, c, /*owned_by_stream=*/false, request->session_id(), owner);
     if (!entry.ok()) return entry.status();
     response->set_session_id((*entry)->id);
     *response->mutable_dimensions() = (*entry)->dims;
@@ -57,7 +58,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
                                                 Raw* raw_response) {
   auto* call = UnaryCall<v1::SolveRequest, v1::SolveResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(call->request().session_id());
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+      state_->registry.Find(call->request().session_id(), CallerOf(*context));
   if (!entry.ok()) {
     call->Reply(entry.status());
     return call;
@@ -96,7 +98,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::GetSession(grpc::CallbackServerContext
   auto* call =
       UnaryCall<v1::GetSessionRequest, v1::GetSessionResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(call->request().session_id());
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+      state_->registry.Find(call->request().session_id(), CallerOf(*context));
   if (entry.ok()) (*entry)->Describe(call->response()->mutable_session());
   call->Reply(entry.status());
   return call;
@@ -107,7 +110,9 @@ grpc::ServerUnaryReactor* MpcServiceImpl::ListSessions(grpc::CallbackServerConte
   auto* call =
       UnaryCall<v1::ListSessionsRequest, v1::ListSessionsResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
-  for (const auto& entry : state_->registry.List()) entry->Describe(call->response()->add_sessions());
+  for (const auto& entry : state_->registry.ListFor(CallerOf(*context), state_->options.list_all_sessions)) {
+    entry->Describe(call->response()->add_sessions());
+  }
   call->Reply(absl::OkStatus());
   return call;
 }
@@ -118,8 +123,12 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
       UnaryCall<v1::CloseSessionRequest, v1::CloseSessionResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
   const std::string& id = call->request().session_id();
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(id);
-  if (entry.ok() && (*entry)->owned_by_stream) {
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(id, CallerOf(*context));
+  if (!entry.ok()) {
+    call->Reply(entry.status());
+    return call;
+  }
+  if ((*entry)->owned_by_stream) {
     call->Reply(absl::FailedPreconditionError("session_id: the session belongs to a Control stream and closes with it"));
     return call;
   }

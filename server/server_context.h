@@ -8,11 +8,15 @@
 #include "absl/status/status.h"
 #include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
+#include "server/auth_processor.h"
 #include "server/gp_model_cache.h"
 #include "server/memory_budget.h"
 #include "server/metrics.h"
+#include "server/principal_streams.h"
 #include "server/session_registry.h"
 #include "server/spec_conversion.h"
+#include "server/token_file.h"
+#include "server/transport_security.h"
 #include "server/worker_pool.h"
 
 namespace nupmpc::server {
@@ -32,6 +36,12 @@ struct ServerOptions {
   int max_stream_answers = 16;            ///< answers a Control stream queues before it stops reading
   int max_streams_per_connection = 100;   ///< HTTP/2 concurrent streams (calls) per client connection
   std::string metrics_address;            ///< HTTP /metrics, /healthz, /readyz; empty: none
+  TlsFiles tls;                           ///< TLS / mTLS of the gRPC port; none by default
+  std::string auth_tokens_file;           ///< bearer tokens (server/token_file.h); empty: none
+  int max_sessions_per_principal = 0;     ///< 0: only max_sessions
+  int max_streams_per_principal = 0;      ///< 0: only max_control_streams
+  bool list_all_sessions = false;         ///< without authentication: ListSessions shows every connection's
+  double slow_solve_ms = 0.0;             ///< solves slower than this are logged at warn; 0: none
   SizeLimits size_limits;
 };
 
@@ -41,13 +51,17 @@ struct ServerState {
   explicit ServerState(const ServerOptions& o)
       : options(o),
         budget(o.memory_budget_bytes > 0 ? o.memory_budget_bytes : DefaultMemoryBudgetBytes()),
-        registry(o.max_sessions, pool),  // only kept: the pool is built next, and joined first
-        pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms) {}
+        registry(o.max_sessions, pool, o.max_sessions_per_principal),  // only kept: the pool is built next, and joined first
+        pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms),
+        principal_streams(o.max_streams_per_principal) {}
   ServerOptions options;
   MemoryBudget budget;  ///< before the registry: sessions give their reservations back to it
   SessionRegistry registry;
   WorkerPool pool;
   Metrics metrics;
+  PrincipalStreams principal_streams;
+  std::shared_ptr<TokenStore> tokens;  ///< --auth_tokens_file (null: none), re-read by the janitor
+  std::shared_ptr<AuthProcessor> auth;  ///< null: authentication off
   GpModelCache gp_models;  ///< factorised GP models shared by the sessions that use them
   std::atomic<bool> draining{false};
   std::atomic<bool> serving{true};  ///< what grpc.health.v1 reports (false from SIGTERM on)

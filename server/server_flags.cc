@@ -42,6 +42,31 @@ ABSL_FLAG(int, max_streams_per_connection, 100,
 ABSL_FLAG(std::string, metrics_address, "",
           "HTTP endpoint for operators: GET /metrics (Prometheus text), /healthz, /readyz; HOST:PORT or :PORT "
           "(e.g. :9464); empty: off (env NUPMPC_METRICS_ADDRESS)");
+ABSL_FLAG(std::string, tls_cert_file, "",
+          "PEM certificate chain of the gRPC port; with --tls_key_file: TLS. Re-read when it changes, so rotation "
+          "needs no restart (env NUPMPC_TLS_CERT_FILE)");
+ABSL_FLAG(std::string, tls_key_file, "", "PEM private key of --tls_cert_file (env NUPMPC_TLS_KEY_FILE)");
+ABSL_FLAG(std::string, tls_client_ca_file, "",
+          "PEM CA bundle: clients must present a certificate it signed (mTLS); the certificate's subject is the "
+          "caller's principal when the call carries no bearer token (env NUPMPC_TLS_CLIENT_CA_FILE)");
+ABSL_FLAG(int, tls_reload_interval_s, 10,
+          "how often the TLS files are checked for changes (env NUPMPC_TLS_RELOAD_INTERVAL_S)");
+ABSL_FLAG(std::string, auth_tokens_file, "",
+          "bearer tokens: one line per token, TOKEN PRINCIPAL [admin], # comments; calls must send "
+          "'authorization: Bearer TOKEN'; sessions belong to their creator's principal; re-read when it changes. "
+          "Needs TLS unless the address is loopback or a Unix socket (env NUPMPC_AUTH_TOKENS_FILE)");
+ABSL_FLAG(int, max_sessions_per_principal, 0,
+          "sessions one authenticated principal may hold; 0: only --max_sessions (env NUPMPC_MAX_SESSIONS_PER_PRINCIPAL)");
+ABSL_FLAG(int, max_streams_per_principal, 0,
+          "Control streams one authenticated principal may have open; 0: only --max_control_streams "
+          "(env NUPMPC_MAX_STREAMS_PER_PRINCIPAL)");
+ABSL_FLAG(bool, list_all_sessions, false,
+          "without authentication: ListSessions shows the sessions of every connection, not only the caller's "
+          "(env NUPMPC_LIST_ALL_SESSIONS)");
+ABSL_FLAG(double, slow_solve_ms, 0,
+          "solves slower than this are logged at warn with their dimensions and iterations; 0: none "
+          "(env NUPMPC_SLOW_SOLVE_MS)");
+ABSL_FLAG(std::string, log_format, "text", "text|json: one JSON object per line for log collectors (env NUPMPC_LOG_FORMAT)");
 ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error|off (env NUPMPC_LOG_LEVEL)");
 
 namespace nupmpc::server {
@@ -95,7 +120,9 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                            "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states",
                            "max_iterations", "grace_period_s", "drain_delay_s", "memory_budget_mb", "max_session_memory_mb",
                            "max_pass_gflop", "max_control_streams", "max_stream_answers", "max_streams_per_connection",
-                           "metrics_address", "log_level"}) {
+                           "metrics_address", "tls_cert_file", "tls_key_file", "tls_client_ca_file",
+                           "tls_reload_interval_s", "auth_tokens_file", "max_sessions_per_principal",
+                           "max_streams_per_principal", "list_all_sessions", "slow_solve_ms", "log_format", "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
   cli::ParseProgramFlags(ServerProgram(), argc, argv);
@@ -120,7 +147,20 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.max_stream_answers = absl::GetFlag(FLAGS_max_stream_answers);
   o.max_streams_per_connection = absl::GetFlag(FLAGS_max_streams_per_connection);
   o.metrics_address = absl::GetFlag(FLAGS_metrics_address);
+  o.tls.cert_file = absl::GetFlag(FLAGS_tls_cert_file);
+  o.tls.key_file = absl::GetFlag(FLAGS_tls_key_file);
+  o.tls.client_ca_file = absl::GetFlag(FLAGS_tls_client_ca_file);
+  o.tls.reload_interval_s = absl::GetFlag(FLAGS_tls_reload_interval_s);
+  o.auth_tokens_file = absl::GetFlag(FLAGS_auth_tokens_file);
+  o.max_sessions_per_principal = absl::GetFlag(FLAGS_max_sessions_per_principal);
+  o.max_streams_per_principal = absl::GetFlag(FLAGS_max_streams_per_principal);
+  o.list_all_sessions = absl::GetFlag(FLAGS_list_all_sessions);
+  o.slow_solve_ms = absl::GetFlag(FLAGS_slow_solve_ms);
   out.log_level = absl::GetFlag(FLAGS_log_level);
+  out.log_format = absl::GetFlag(FLAGS_log_format);
+  if (out.log_format != "text" && out.log_format != "json") {
+    return absl::InvalidArgumentError(absl::StrCat("--log_format = ", out.log_format, ": must be text or json"));
+  }
   out.drain_delay_s = absl::GetFlag(FLAGS_drain_delay_s);
   for (const absl::Status& s :
        {RequireAtLeast("threads", o.worker_threads, 1), RequireAtLeast("queue_capacity", o.queue_capacity, 1),
@@ -136,7 +176,11 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
         RequireAtLeast("max_pass_gflop", absl::GetFlag(FLAGS_max_pass_gflop), 1e-6),
         RequireAtLeast("max_control_streams", o.max_control_streams, 1),
         RequireAtLeast("max_stream_answers", o.max_stream_answers, 2),
-        RequireAtLeast("max_streams_per_connection", o.max_streams_per_connection, 1)}) {
+        RequireAtLeast("max_streams_per_connection", o.max_streams_per_connection, 1),
+        RequireAtLeast("tls_reload_interval_s", o.tls.reload_interval_s, 1),
+        RequireAtLeast("max_sessions_per_principal", o.max_sessions_per_principal, 0),
+        RequireAtLeast("max_streams_per_principal", o.max_streams_per_principal, 0),
+        RequireAtLeast("slow_solve_ms", o.slow_solve_ms, 0.0)}) {
     if (!s.ok()) return s;
   }
   return out;

@@ -16,6 +16,7 @@ namespace nupmpc::server {
 struct ParsedFlags {
   ServerOptions options;
   std::string log_level;
+  std::string log_format;  ///< text or json
   double drain_delay_s = 0.0;
 };
 // --help and unknown flags exit here (cli/program_flags.h); a value out of range or a bad

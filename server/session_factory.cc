@@ -70,11 +70,13 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
 absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::ProblemSpec& spec, const SizeLimits& limits,
                                                                 GpModelCache* gp_models, MemoryBudget* budget,
                                                                 SessionRegistry* registry, const CallContext& call,
-                                                                bool owned_by_stream, absl::string_view requested_id) {
+                                                                bool owned_by_stream, absl::string_view requested_id,
+                                                                const SessionOwner& owner) {
+  NUPMPC_RETURN_IF_ERROR(registry->CheckQuota(owner));
   NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, limits, gp_models, &call, budget));
   NUPMPC_RETURN_IF_ERROR(CheckCallStillWanted(call, "the session was built"));
   return registry->Add(std::move(built.solver), built.default_time_limit_ms, owned_by_stream,
-                       std::move(built.memory), requested_id);
+                       std::move(built.memory), requested_id, owner);
 }
 
 }  // namespace nupmpc::server

@@ -35,14 +35,14 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
                                           MemoryBudget* budget = nullptr);
 
 // CreateSession and a Control stream's spec: BuildSession, then registers the session
-// (under `requested_id` when not empty, see SessionRegistry::Add) unless the call's
-// deadline passed or its client cancelled meanwhile (nobody could reach a session
-// registered then).
+// (under `requested_id` when not empty, see SessionRegistry::Add; owned by `owner`) unless
+// the call's deadline passed or its client cancelled meanwhile (nobody could reach a
+// session registered then). The owner's session quota is checked before the build too.
 absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::ProblemSpec& spec, const SizeLimits& limits,
                                                                 GpModelCache* gp_models, MemoryBudget* budget,
                                                                 SessionRegistry* registry, const CallContext& call,
-                                                                bool owned_by_stream,
-                                                                absl::string_view requested_id = {});
+                                                                bool owned_by_stream, absl::string_view requested_id,
+                                                                const SessionOwner& owner);
 
 }  // namespace nupmpc::server
 

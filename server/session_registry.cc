@@ -38,8 +38,10 @@ std::string SessionRegistry::NewId() {
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
                                                                    double default_time_limit_ms,
                                                                    bool owned_by_stream, SessionMemory memory,
-                                                                   absl::string_view requested_id) {
+                                                                   absl::string_view requested_id,
+                                                                   SessionOwner owner) {
   auto entry = std::make_shared<SessionEntry>();
+  entry->owner = std::move(owner);
   entry->owned_by_stream = owned_by_stream;
   entry->default_time_limit_ms = default_time_limit_ms;
   entry->algorithm = solver->algorithm();
@@ -56,6 +58,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_p
     return absl::ResourceExhaustedError(
         absl::StrCat("the server holds its maximum of ", max_sessions_, " sessions; close one or retry later"));
   }
+  NUPMPC_RETURN_IF_ERROR(CheckQuotaLocked(entry->owner));
   if (!requested_id.empty()) {
     entry->id = std::string(requested_id);
     if (sessions_.count(entry->id) > 0) {
@@ -68,6 +71,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_p
     } while (sessions_.count(entry->id) > 0);
   }
   sessions_.emplace(entry->id, entry);
+  if (!entry->owner.principal.empty()) ++per_principal_[entry->owner.principal];
   created_total_.fetch_add(1, std::memory_order_relaxed);
   return entry;
 }
@@ -95,11 +99,27 @@ absl::Status CheckSessionIdForm(absl::string_view id) {
                                                  " hex digits, as CreateSession returns it"));
 }
 
-absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Find(const std::string& id) const {
+absl::Status SessionRegistry::CheckQuota(const SessionOwner& owner) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return CheckQuotaLocked(owner);
+}
+
+absl::Status SessionRegistry::CheckQuotaLocked(const SessionOwner& owner) const {
+  if (max_per_principal_ <= 0 || owner.principal.empty()) return absl::OkStatus();
+  const auto it = per_principal_.find(owner.principal);
+  if (it == per_principal_.end() || it->second < max_per_principal_) return absl::OkStatus();
+  return absl::ResourceExhaustedError(absl::StrCat("max_sessions_per_principal: principal \"", owner.principal,
+                                                   "\" holds its quota of ", max_per_principal_,
+                                                   " sessions; close one first"));
+}
+
+absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Find(const std::string& id, const Caller& caller) const {
   NUPMPC_RETURN_IF_ERROR(CheckSessionIdForm(id));
   std::lock_guard<std::mutex> lock(mu_);
   const auto it = sessions_.find(id);
-  if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
+  if (it == sessions_.end() || !MayUse(caller, it->second->owner)) {
+    return absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
+  }
   return it->second;
 }
 
@@ -112,6 +132,10 @@ absl::Status SessionRegistry::Close(const std::string& id, std::function<void()>
     if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
     entry = std::move(it->second);
     sessions_.erase(it);
+    if (!entry->owner.principal.empty()) {
+      const auto count = per_principal_.find(entry->owner.principal);
+      if (--count->second == 0) per_principal_.erase(count);
+    }
   }
   closed_total_.fetch_add(1, std::memory_order_relaxed);
   SessionStrand::RunExclusive(entry->strand, pool_, [entry, closed = std::move(closed)] {
@@ -145,6 +169,15 @@ std::vector<std::shared_ptr<SessionEntry>> SessionRegistry::List() const {
   std::vector<std::shared_ptr<SessionEntry>> out;
   out.reserve(sessions_.size());
   for (const auto& [id, entry] : sessions_) out.push_back(entry);
+  return out;
+}
+
+std::vector<std::shared_ptr<SessionEntry>> SessionRegistry::ListFor(const Caller& caller, bool list_all) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<std::shared_ptr<SessionEntry>> out;
+  for (const auto& [id, entry] : sessions_) {
+    if (MayList(caller, entry->owner, list_all)) out.push_back(entry);
+  }
   return out;
 }
 

@@ -14,6 +14,7 @@
 #include "absl/strings/string_view.h"
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
+#include "server/caller.h"
 #include "server/memory_budget.h"
 #include "server/session_strand.h"
 
@@ -34,6 +35,7 @@ struct SessionMemory {
 // marked "strand" are used only by the task that holds it.
 struct SessionEntry {
   std::string id;
+  SessionOwner owner;  ///< fixed at creation: who may use it (server/caller.h)
   bool owned_by_stream = false;
   double default_time_limit_ms = 0.0;  ///< from the spec's options
   v1::Dimensions dims;                 ///< fixed at creation: the caller's (MpcSession::dimensions)
@@ -74,21 +76,30 @@ std::string QuoteSessionId(absl::string_view id);
 class SessionRegistry {
  public:
   // `pool` runs the sessions' strands (closing or compacting a busy session queues on it).
-  SessionRegistry(int max_sessions, WorkerPool& pool) : max_sessions_(max_sessions), pool_(pool) {}
+  // `max_per_principal`: sessions one authenticated principal may hold (0: no own limit).
+  SessionRegistry(int max_sessions, WorkerPool& pool, int max_per_principal = 0)
+      : max_sessions_(max_sessions), max_per_principal_(max_per_principal), pool_(pool) {}
 
-  // RESOURCE_EXHAUSTED when full. The session gets `requested_id` (a form CheckSessionIdForm
-  // accepts: the client drew it, see CreateSessionRequest.session_id) or, when empty, a new
-  // random id; ALREADY_EXISTS when `requested_id` is taken.
+  // RESOURCE_EXHAUSTED when full, or when `owner`'s principal holds its quota. The session
+  // gets `requested_id` (a form CheckSessionIdForm accepts: the client drew it, see
+  // CreateSessionRequest.session_id) or, when empty, a new random id; ALREADY_EXISTS when
+  // `requested_id` is taken.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver,
                                                     double default_time_limit_ms, bool owned_by_stream,
-                                                    SessionMemory memory = {}, absl::string_view requested_id = {});
-  // INVALID_ARGUMENT for malformed ids, NOT_FOUND for unknown (or closed, or expired) ones.
-  absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id) const;
+                                                    SessionMemory memory = {}, absl::string_view requested_id = {},
+                                                    SessionOwner owner = {});
+  // The quota check of Add, for before the work of building a session.
+  absl::Status CheckQuota(const SessionOwner& owner) const;
+  // INVALID_ARGUMENT for malformed ids, NOT_FOUND for unknown (or closed, or expired) ones
+  // and for those `caller` may not use (the same answer: their existence is not revealed).
+  absl::StatusOr<std::shared_ptr<SessionEntry>> Find(const std::string& id, const Caller& caller = {}) const;
   // Removes the session at once; frees its solver and gives its memory back now, or right
   // after a solve in flight (solves waiting for it then find it closed), and then calls
   // `closed` (if given). Not called when the id is refused.
   absl::Status Close(const std::string& id, std::function<void()> closed = nullptr);
   std::vector<std::shared_ptr<SessionEntry>> List() const;
+  // The sessions ListSessions shows `caller` (MayList).
+  std::vector<std::shared_ptr<SessionEntry>> ListFor(const Caller& caller, bool list_all) const;
   // Closes sessions idle longer than `idle_seconds` that no stream is attached to.
   int ExpireIdle(double idle_seconds);
   // Releases the solver scratch (and its share of the memory budget) of sessions idle
@@ -106,10 +117,13 @@ class SessionRegistry {
 
  private:
   static std::string NewId();
+  absl::Status CheckQuotaLocked(const SessionOwner& owner) const;
   const int max_sessions_;
+  const int max_per_principal_;
   WorkerPool& pool_;
   mutable std::mutex mu_;
   std::unordered_map<std::string, std::shared_ptr<SessionEntry>> sessions_;
+  std::unordered_map<std::string, int> per_principal_;  ///< sessions of each authenticated principal
   std::atomic<std::uint64_t> created_total_{0};
   std::atomic<std::uint64_t> closed_total_{0};
   std::atomic<std::uint64_t> expired_total_{0};
