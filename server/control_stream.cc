@@ -2,6 +2,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/catch_exceptions.h"
+#include "server/log_context.h"
 #include "server/raw_messages.h"
 #include "server/session_factory.h"
 #include "server/step_solver.h"
@@ -84,7 +85,10 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       if (!added.ok()) return added.status();
       entry = *std::move(added);
       entry->attached.store(true);
-      spdlog::info("session {} created by a Control stream", entry->id);
+      const LogContext log_context(entry->id, caller_.principal);
+      spdlog::info("session {} created by a Control stream (M={}, L={}, K={}, N={})", entry->id,
+                   entry->dims.num_states(), entry->dims.num_inputs(), entry->dims.num_outputs(),
+                   entry->dims.horizon());
       break;
     }
     case v1::ControlRequest::ATTACH_NOT_SET:
@@ -254,7 +258,7 @@ void ControlStream::SolveOnPool(v1::ControlRequest request, Clock::time_point qu
   const absl::Status status = RunCatchingExceptions(
       "Control", [&] { return SolveStep(*entry_, request.step(), call, response.mutable_result()); });
   if (status.ok()) {
-    state_->metrics.RecordSolve(response.result(), std::chrono::duration<double>(started_at - queued_at).count(),
+    state_->RecordSolve(response.result(), entry_.get(), std::chrono::duration<double>(started_at - queued_at).count(),
                                 std::chrono::duration<double>(Clock::now() - queued_at).count());
   }
   {
@@ -322,12 +326,19 @@ void ControlStream::OnDone() {
   const std::shared_ptr<ControlStream> last_reference_maybe = std::move(grpc_reference_);
   if (counted_) state_->control_streams.fetch_sub(1);
   if (counted_for_principal_) state_->principal_streams.Release(caller_.principal);
+  const LogContext log_context(entry_ != nullptr ? absl::string_view(entry_->id) : absl::string_view(),
+                               caller_.principal);
+  if (spdlog::should_log(spdlog::level::debug)) {
+    spdlog::debug("access: Control ended after {:.3f} s peer {}",
+                  std::chrono::duration<double>(Clock::now() - started_at_).count(), caller_.connection);
+  }
   if (entry_ != nullptr) {
     if (entry_->owned_by_stream) {
       (void)state_->registry.Close(entry_->id);
       spdlog::info("session {} closed with its Control stream", entry_->id);
     } else {
       entry_->attached.store(false);
+      spdlog::info("session {}: its Control stream detached", entry_->id);
     }
   }
 }

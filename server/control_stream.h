@@ -83,6 +83,7 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   std::atomic<bool> cancelled_{false};
   bool counted_ = false;  // in state_->control_streams (set by Begin, before any reaction)
   const Caller caller_;   // who opened the stream: owns the session it creates
+  const Clock::time_point started_at_ = Clock::now();
   bool counted_for_principal_ = false;  // in state_->principal_streams (set by Begin)
 
   // Where the stream is in its life.

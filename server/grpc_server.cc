@@ -67,7 +67,7 @@ void GrpcServer::Janitor() {
     if (stopping_) break;
     ReloadTokens();
     const int expired = state_->registry.ExpireIdle(state_->options.session_idle_timeout_s);
-    if (expired > 0) spdlog::info("closed {} idle sessions", expired);
+    if (expired > 0) spdlog::debug("closed {} idle sessions", expired);
     const double compact_after_s = state_->options.session_compact_idle_s;
     const int compacted = compact_after_s > 0.0 ? state_->registry.CompactIdle(compact_after_s) : 0;
     if (compacted > 0) spdlog::debug("released the scratch memory of {} idle sessions", compacted);

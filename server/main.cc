@@ -8,6 +8,7 @@
 
 #include "cli/program_flags.h"
 #include "server/grpc_server.h"
+#include "server/log_format.h"
 #include "server/server_flags.h"
 #include "server/version.h"
 #include "spdlog/spdlog.h"
@@ -22,15 +23,19 @@ int main(int argc, char** argv) {
 
   absl::StatusOr<nupmpc::server::ParsedFlags> flags = nupmpc::server::ParseServerFlags(argc, argv);
   if (!flags.ok()) return nupmpc::cli::ReportUsageError(nupmpc::server::ServerProgram(), flags.status().message());
-  spdlog::set_level(spdlog::level::from_str(flags->log_level));
+  if (absl::Status logging = nupmpc::server::ConfigureLogging(flags->log_format, flags->log_level); !logging.ok()) {
+    return nupmpc::cli::ReportUsageError(nupmpc::server::ServerProgram(), logging.message());
+  }
   auto server = nupmpc::server::GrpcServer::Start(flags->options);
   if (!server.ok()) {
     spdlog::error("{}", std::string(server.status().message()));
     return 1;
   }
-  spdlog::info("nupmpc-server {} listening on port {} ({} workers, queue {}, max {} sessions)",
-               nupmpc::server::kVersion, (*server)->port(), flags->options.worker_threads,
-               flags->options.queue_capacity, flags->options.max_sessions);
+  const nupmpc::server::ServerOptions& o = flags->options;
+  spdlog::info("nupmpc-server {} listening on port {} ({}{}; {} workers, queue {}, max {} sessions)",
+               nupmpc::server::kVersion, (*server)->port(),
+               !o.tls.enabled() ? "plaintext" : o.tls.mutual() ? "mTLS" : "TLS",
+               o.auth_tokens_file.empty() ? "" : ", bearer tokens", o.worker_threads, o.queue_capacity, o.max_sessions);
   int signal = 0;
   sigwait(&stop_signals, &signal);
   if (flags->drain_delay_s > 0) {

@@ -98,6 +98,9 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
   Counter(out, "nupmpc_sessions_compacted_total", "Idle sessions that gave their solver scratch memory back.",
           static_cast<double>(sessions.compacted_total()));
   Gauge(out, "nupmpc_control_streams", "Open Control streams.", state.control_streams.load());
+  Counter(out, "nupmpc_auth_refused_total",
+          "Calls refused with UNAUTHENTICATED before reaching the service (missing or unknown token or certificate).",
+          state.auth != nullptr ? static_cast<double>(state.auth->refused_total()) : 0.0);
   Counter(out, "nupmpc_control_stream_read_pauses_total",
           "Times a Control stream stopped reading because its client left answers unread.",
           static_cast<double>(state.stream_read_pauses.load()));

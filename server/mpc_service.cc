@@ -5,6 +5,7 @@
 #include "core/util/status_macros.h"
 #include "server/control_stream.h"
 #include "server/gp_conversion.h"
+#include "server/log_context.h"
 #include "server/process_memory.h"
 #include "server/result_conversion.h"
 #include "server/session_cost.h"
@@ -40,6 +41,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
     *response->mutable_dimensions() = (*entry)->dims;
     response->set_algorithm(AlgorithmToProto((*entry)->algorithm.load()));
     state->FillLimits(response->mutable_limits());
+    const LogContext log_context((*entry)->id, (*entry)->owner.principal);
     spdlog::info("session {} created (M={}, L={}, K={}, N={}); memory budget: {} MiB reserved of {} MiB",
                  (*entry)->id, response->dimensions().num_states(), response->dimensions().num_inputs(),
                  response->dimensions().num_outputs(), response->dimensions().horizon(),
@@ -133,7 +135,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
     return call;
   }
   // Answered once the session's memory is given back (after a solve in flight).
-  const absl::Status status = state_->registry.Close(id, [state = state_, call, id] {
+  const absl::Status status = state_->registry.Close(id, [state = state_, call, id, entry = *entry] {
+    const LogContext log_context(id, entry->owner.principal);
     spdlog::info("session {} closed; memory budget: {} MiB reserved of {} MiB", id, state->budget.reserved() >> 20,
                  state->budget.capacity() >> 20);
     call->Reply(absl::OkStatus());

@@ -1,5 +1,9 @@
 #include "server/server_context.h"
 
+#include "absl/strings/str_cat.h"
+#include "server/log_context.h"
+#include "spdlog/spdlog.h"
+
 namespace nupmpc::server {
 
 grpc::Status ServerState::ToGrpc(Rpc rpc, const absl::Status& status) {
@@ -7,6 +11,21 @@ grpc::Status ServerState::ToGrpc(Rpc rpc, const absl::Status& status) {
   metrics.RecordError(rpc, status.code());
   // absl and gRPC share the canonical code numbering.
   return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
+}
+
+void ServerState::RecordSolve(const v1::SolveResult& result, const SessionEntry* session, double queue_wait_s,
+                              double latency_s) {
+  metrics.RecordSolve(result, queue_wait_s, latency_s);
+  if (options.slow_solve_ms <= 0.0 || !(result.solve_ms() > options.slow_solve_ms)) return;
+  const LogContext context(session != nullptr ? absl::string_view(session->id) : absl::string_view("SolveOnce"),
+                           session != nullptr ? absl::string_view(session->owner.principal) : absl::string_view());
+  const v1::Dimensions* dims = session != nullptr ? &session->dims : nullptr;
+  spdlog::warn("slow solve: {:.3f} ms in the solver (--slow_solve_ms {}), {} iterations, status {}, queue wait {:.3f} ms{}",
+               result.solve_ms(), options.slow_solve_ms, result.iterations(), v1::SolveStatus_Name(result.status()),
+               queue_wait_s * 1e3,
+               dims == nullptr ? std::string()
+                               : absl::StrCat(", M=", dims->num_states(), " L=", dims->num_inputs(),
+                                              " K=", dims->num_outputs(), " N=", dims->horizon()));
 }
 
 void ServerState::FillLimits(v1::ServerLimits* out) const {

@@ -70,6 +70,9 @@ struct ServerState {
 
   // An absl::Status of `rpc` as a gRPC status, counted when it is an error.
   grpc::Status ToGrpc(Rpc rpc, const absl::Status& status);
+  // A finished solve: its metrics, and a warning when it took longer than slow_solve_ms
+  // (`session`: null for SolveOnce).
+  void RecordSolve(const v1::SolveResult& result, const SessionEntry* session, double queue_wait_s, double latency_s);
   void FillLimits(v1::ServerLimits* out) const;
 };
 

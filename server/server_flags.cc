@@ -7,6 +7,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "cli/program_flags.h"
+#include "spdlog/common.h"
 
 ABSL_FLAG(std::string, address, "[::]:50051", "listen address host:port (env NUPMPC_ADDRESS)");
 ABSL_FLAG(int, threads, 2, "solver worker threads (env NUPMPC_THREADS)");
@@ -158,6 +159,10 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.slow_solve_ms = absl::GetFlag(FLAGS_slow_solve_ms);
   out.log_level = absl::GetFlag(FLAGS_log_level);
   out.log_format = absl::GetFlag(FLAGS_log_format);
+  if (spdlog::level::from_str(out.log_level) == spdlog::level::off && out.log_level != "off") {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--log_level = ", out.log_level, ": must be trace, debug, info, warn, error or off"));
+  }
   if (out.log_format != "text" && out.log_format != "json") {
     return absl::InvalidArgumentError(absl::StrCat("--log_format = ", out.log_format, ": must be text or json"));
   }

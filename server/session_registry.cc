@@ -8,7 +8,9 @@
 #include "absl/strings/escaping.h"
 #include "absl/strings/str_format.h"
 #include "core/util/status_macros.h"
+#include "server/log_context.h"
 #include "server/result_conversion.h"
+#include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
 
@@ -182,15 +184,20 @@ std::vector<std::shared_ptr<SessionEntry>> SessionRegistry::ListFor(const Caller
 }
 
 int SessionRegistry::ExpireIdle(double idle_seconds) {
-  std::vector<std::string> expired;
+  std::vector<std::pair<std::string, std::string>> expired;  // id, owner's principal
   {
     std::lock_guard<std::mutex> lock(mu_);
     for (const auto& [id, entry] : sessions_) {
-      if (!entry->attached.load() && entry->idle_seconds() > idle_seconds) expired.push_back(id);
+      if (!entry->attached.load() && entry->idle_seconds() > idle_seconds) expired.emplace_back(id, entry->owner.principal);
     }
   }
   int closed = 0;
-  for (const std::string& id : expired) closed += Close(id).ok() ? 1 : 0;
+  for (const auto& [id, principal] : expired) {
+    if (!Close(id).ok()) continue;  // closed meanwhile by its client
+    ++closed;
+    const LogContext log_context(id, principal);
+    spdlog::info("session {} closed: idle longer than {} s", id, idle_seconds);
+  }
   expired_total_.fetch_add(static_cast<std::uint64_t>(closed), std::memory_order_relaxed);
   return closed;
 }

@@ -8,10 +8,13 @@
 
 #include "absl/status/status.h"
 #include "grpcpp/grpcpp.h"
+#include "server/caller.h"
 #include "server/catch_exceptions.h"
+#include "server/log_context.h"
 #include "server/raw_messages.h"
 #include "server/server_context.h"
 #include "server/step_solver.h"
+#include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
 
@@ -56,9 +59,12 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
   const Request& request() const { return request_; }
   Response* response() { return &response_; }
 
-  // Sends the response (when `status` is OK) or the error.
+  // Sends the response (when `status` is OK) or the error; one access-log line at debug.
   void Reply(const absl::Status& status) {
-    Finish(state_->ToGrpc(RpcOf<Request>::value, status.ok() ? SerializeRaw(response_, raw_response_) : status));
+    const grpc::Status sent =
+        state_->ToGrpc(RpcOf<Request>::value, status.ok() ? SerializeRaw(response_, raw_response_) : status);
+    if (spdlog::should_log(spdlog::level::debug)) LogAccess(sent);
+    Finish(sent);
   }
 
   // Runs `work` on the worker pool (RESOURCE_EXHAUSTED when the queue is full), through
@@ -75,12 +81,12 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     call_.deadline = SteadyDeadline(*context_);
     call_.cancel = &cancelled_;
     const auto queued_at = Clock::now();
-    auto run = [this, name, solve_result, work = std::move(work), queued_at] {
+    auto run = [this, name, solve_result, work = std::move(work), queued_at, session] {
       const auto started_at = Clock::now();
       const absl::Status status = RunCatchingExceptions(name, [&] { return work(call_); });
       if (status.ok() && solve_result != nullptr) {
-        state_->metrics.RecordSolve(*solve_result, std::chrono::duration<double>(started_at - queued_at).count(),
-                                    std::chrono::duration<double>(Clock::now() - queued_at).count());
+        state_->RecordSolve(*solve_result, session, std::chrono::duration<double>(started_at - queued_at).count(),
+                            std::chrono::duration<double>(Clock::now() - queued_at).count());
       }
       Reply(status);
     };
@@ -97,9 +103,25 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
   void OnDone() override { delete this; }
 
  private:
+  void LogAccess(const grpc::Status& sent) const {
+    std::string session;
+    if constexpr (requires { request_.session_id(); }) session = request_.session_id();
+    if constexpr (requires { response_.session_id(); }) {
+      if (session.empty()) session = response_.session_id();
+    }
+    // A malformed id is the client's text: shown escaped and cut short.
+    if (!session.empty() && !CheckSessionIdForm(session).ok()) session = QuoteSessionId(session);
+    const Caller caller = CallerOf(*context_);
+    const LogContext log_context(session, caller.principal);
+    spdlog::debug("access: {} {} {:.3f} ms peer {}", std::string(RpcName(RpcOf<Request>::value)),
+                  absl::StatusCodeToString(static_cast<absl::StatusCode>(sent.error_code())),
+                  std::chrono::duration<double, std::milli>(Clock::now() - started_at_).count(), caller.connection);
+  }
+
   UnaryCall(ServerState* state, grpc::CallbackServerContext* context, grpc::ByteBuffer* raw_response)
       : state_(state), context_(context), raw_response_(raw_response) {}
 
+  const Clock::time_point started_at_ = Clock::now();
   ServerState* const state_;
   grpc::CallbackServerContext* const context_;
   grpc::ByteBuffer* const raw_response_;
