@@ -38,6 +38,7 @@ const Program kPrograms[] = {
     {"nupmpc-bench", "--repeat=<int>", ""},
     {"nupmpc-loadtest", "--concurrency=<int>", "NUPMPC_SERVER"},
     {"nupmpc-scaleout-probe", "--streams=<int>", "NUPMPC_SERVER"},
+    {"nupmpc-metrics-cost", "--sessions=<int>", ""},
     {"nupmpc-gp-bench", "--sizes=<string>", ""},
     {"nupmpc-example-dac", "--out_dir=<string>", ""},
     {"nupmpc-example-corridor", "--out_dir=<string>", ""},
