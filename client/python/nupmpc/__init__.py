@@ -32,3 +32,4 @@ __all__ = [
     "Plan", "ReconnectOptions", "Client", "connect", "Session", "Instance", "load_instance",
     "simulate", "Trajectory",
 ]
+from nupmpc import aio  # noqa: E402,F401  (nupmpc.aio.connect: the asyncio variant)
