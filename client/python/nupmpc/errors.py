@@ -5,9 +5,11 @@ import re
 
 import grpc
 
-# The server writes "FIELD: rule" (e.g. "spec.input_priors[1].lower: must be ≤ upper");
-# a field path is a dotted identifier with optional [index] parts.
-_FIELD = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])*(?:\.[A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])*)*)\s*:")
+# The server starts a message with the field it refuses: "FIELD: rule", "FIELD at step n:
+# ...", "FIELD = value: ...", "FIELD (note): ..." (e.g. "spec.input_priors[1] at step 0:
+# lower = 1 must be < upper = 0.5"); a field path is a dotted identifier with [index] parts.
+_FIELD = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])*(?:\.[A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])*)*)"
+                    r"(?=:|\s+at\s|\s*=\s|\s+\()")
 
 
 def field_of(message):

@@ -31,13 +31,20 @@ class InstanceError(ValueError):
 class Instance:
     name: str
     family: str
-    spec: pb.ProblemSpec
+    _spec: pb.ProblemSpec
     closed_loop_states: np.ndarray = field(default=None)  # (T, M) recorded x1 per step, or None
+
+    @property
+    def spec(self):
+        """A copy of the instance's ProblemSpec (yours to change)."""
+        copy = pb.ProblemSpec()
+        copy.CopyFrom(self._spec)
+        return copy
 
     @property
     def problem(self):
         """The spec as a builder (Problem or GpProblem)."""
-        return from_spec(self.spec)
+        return from_spec(self._spec)
 
 
 def _member(obj, name):
