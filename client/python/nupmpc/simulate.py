@@ -81,7 +81,10 @@ def simulate(session, plant=None, x0=None, steps=50, disturbance=None, step_args
         extra = step_args(t, x) if step_args else {}
         plan = session.step(x, **extra)
         plans.append(plan)
-        refs.append(from_spec(session.spec).output_references()[0])
+        # The references of the plan's first output step (GP sessions: y[0] is measured and
+        # has none; their first reference is at step 1).
+        in_force = from_spec(session.spec).output_references()
+        refs.append(in_force[0] if np.isfinite(in_force[0]).any() or len(in_force) == 1 else in_force[1])
         if plan.has_plan:
             u = plan.u0
             ys.append(plan.y[0])
