@@ -31,6 +31,10 @@ class ReconnectOptions:
     attempt_timeout_s: float = 5.0
     seed: Optional[int] = None  # of the jitter; None: random
     on_attempt: Optional[Callable] = None  # called with a ReconnectAttempt after every attempt
+    # Injectable for tests (a fake clock); None: time.monotonic and time.sleep (asyncio
+    # sessions always sleep with asyncio.sleep).
+    now: Optional[Callable] = None
+    sleep: Optional[Callable] = None
 
 
 @dataclass
@@ -79,12 +83,13 @@ class _Outage:
 
     def __init__(self, options, cause, stats):
         self.options, self.cause, self.stats = options, cause, stats
-        self.start = time.monotonic()
+        self.now = options.now or time.monotonic
+        self.start = self.now()
         self.backoff = Backoff(options)
         self.made = 0
 
     def elapsed(self):
-        return time.monotonic() - self.start
+        return self.now() - self.start
 
     def next_wait(self):
         return min(self.backoff.next(), max(self.options.budget_s - self.elapsed(), 0.0))
@@ -123,11 +128,12 @@ def ride_out_outage(options, cause, recreate_and_resend, stats):
     returns the answer or raises) with back-off; returns the answer, or raises the error
     that ended the outage (Unavailable once the budget is spent)."""
     outage = _Outage(options, cause, stats)
+    sleep = options.sleep or time.sleep
     error = None
     while outage.elapsed() < options.budget_s:
         wait = outage.next_wait()
         if wait > 0:
-            time.sleep(wait)
+            sleep(wait)
         try:
             answer = recreate_and_resend(options.attempt_timeout_s)
         except NupmpcError as e:
