@@ -9,6 +9,7 @@ same reconnect options, spec bookkeeping and step building)."""
 
 import asyncio
 import time
+import weakref
 
 import grpc
 
@@ -33,7 +34,7 @@ class AsyncClient:
         self._server_name = server_name
         self._channel = self.new_channel()
         self._stub = pb_grpc.MpcServiceStub(self._channel)
-        self._sessions = []
+        self._sessions = weakref.WeakSet()  # closed with the client, if still alive
 
     def new_channel(self, own_subchannel=False):
         options = channel_options(self._server_name, own_subchannel)
@@ -60,13 +61,13 @@ class AsyncClient:
         session = AsyncSession(self, spec_of(problem), reconnect)
         async with session._lock:
             await session._connect(session._options.attempt_timeout_s)
-        self._sessions.append(session)
+        self._sessions.add(session)
         return session
 
     async def close(self):
-        for session in self._sessions:
+        for session in list(self._sessions):
             await session.close()
-        self._sessions = []
+        self._sessions.clear()
         await self._channel.close()
 
     async def __aenter__(self):

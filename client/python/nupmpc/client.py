@@ -6,6 +6,7 @@
 """
 
 import time
+import weakref
 
 import grpc
 
@@ -38,7 +39,7 @@ class Client:
         self._server_name = server_name
         self._channel = self.new_channel()
         self._stub = pb_grpc.MpcServiceStub(self._channel)
-        self._sessions = []
+        self._sessions = weakref.WeakSet()  # closed with the client, if still alive
 
     def new_channel(self, own_subchannel=False):
         """A channel to the target with this client's credentials (own_subchannel: a
@@ -66,7 +67,7 @@ class Client:
         re-creates itself after a server restart (see nupmpc.Session)."""
         from nupmpc.session import Session
         session = Session(self, spec_of(problem), reconnect)
-        self._sessions.append(session)
+        self._sessions.add(session)
         return session
 
     def server_info(self):
@@ -81,9 +82,9 @@ class Client:
         return list(self._call(self._stub.ListSessions, pb.ListSessionsRequest()).sessions)
 
     def close(self):
-        for session in self._sessions:
+        for session in list(self._sessions):
             session.close()
-        self._sessions = []
+        self._sessions.clear()
         self._channel.close()
 
     def __enter__(self):
