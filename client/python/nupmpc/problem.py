@@ -40,7 +40,7 @@ class _Spec:
 
     def to_json(self):
         """The spec in proto JSON, the form `nupmpc solve FILE` reads."""
-        return json_format.MessageToJson(self._spec, preserving_proto_field_name=False)
+        return json_format.MessageToJson(self._spec, preserving_proto_field_name=True)
 
     @staticmethod
     def from_json(text):
