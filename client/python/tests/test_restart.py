@@ -82,3 +82,37 @@ def test_an_asyncio_session_rides_through_a_server_restart(masses, reference):
         assert asyncio.run(run()) == 1
     finally:
         server.stop()
+
+
+def test_a_session_re_created_after_a_restart_is_the_session_the_server_had():
+    """What the steps changed (shifted per-step references, a new bound, Δu's u[-1]) is in
+    the re-created session: after the restart its plans equal those of a twin session on
+    a server that never went away (the Python mirror of reconnect_fidelity_test)."""
+    N = 15
+    reference = np.sin(np.linspace(0, 3, N + 1))[:, None] * [1.0, 0.0]
+    problem = (nupmpc.Problem([[1, 0.1], [0, 1]], [[0.005], [0.1]], np.eye(2), horizon=N, x0=[0, 0])
+               .output_weight([10.0, 0.1], reference=reference).input_weight(0.01).input_box(-2, 2)
+               .input_rate(-0.3, 0.3))
+    restarted, steady = ServerProcess(), ServerProcess()
+    try:
+        with nupmpc.connect(restarted.target) as a, nupmpc.connect(steady.target) as b:
+            sessions = [a.session(problem), b.session(problem)]
+            x = np.array([0.2, 0.0])
+            for t in range(14):
+                if t == 9:
+                    restarted.restart()
+                kwargs = {"shift": True, "warm_start": "cold"}
+                if t == 3:
+                    kwargs["bounds"] = (None, [0.6, np.inf])
+                if t == 6:
+                    kwargs["references"] = np.c_[np.linspace(0.5, 1.0, N + 1), np.zeros(N + 1)]
+                plan_a, plan_b = (s.step(x, **kwargs) for s in sessions)
+                assert plan_a.objective == plan_b.objective or \
+                    abs(plan_a.objective - plan_b.objective) <= 1e-9 * abs(plan_b.objective), t
+                np.testing.assert_allclose(plan_a.u, plan_b.u, atol=1e-7, err_msg=f"step {t}")
+                x = np.array([[1, 0.1], [0, 1]]) @ x + np.array([0.005, 0.1]) * plan_b.u0[0]
+            assert sessions[0].reconnects == 1 and sessions[1].reconnects == 0
+            assert sessions[0].spec == sessions[1].spec
+    finally:
+        restarted.stop()
+        steady.stop()
