@@ -17,7 +17,9 @@ from nupmpc.errors import NupmpcError, ShapeError, error_from_code  # noqa: E402
 from nupmpc.errors import (  # noqa: E402,F401
     InvalidArgument, NotFound, AlreadyExists, ResourceExhausted, Unavailable, Unauthenticated,
     PermissionDenied, DeadlineExceeded, Cancelled, FailedPrecondition, Internal)
-from nupmpc.problem import Problem, GpProblem, Ellipse, Rectangle  # noqa: E402
+from nupmpc.problem import Problem  # noqa: E402
+from nupmpc.gp_problem import GpProblem  # noqa: E402
+from nupmpc.regions import Ellipse, Rectangle  # noqa: E402
 from nupmpc.result import Plan  # noqa: E402
 from nupmpc.reconnect import ReconnectOptions  # noqa: E402
 from nupmpc.client import Client, connect  # noqa: E402
@@ -30,6 +32,6 @@ __all__ = [
     "ResourceExhausted", "Unavailable", "Unauthenticated", "PermissionDenied", "DeadlineExceeded",
     "Cancelled", "FailedPrecondition", "Internal", "Problem", "GpProblem", "Ellipse", "Rectangle",
     "Plan", "ReconnectOptions", "Client", "connect", "Session", "Instance", "load_instance",
-    "simulate", "Trajectory",
+    "simulate", "Trajectory", "aio",
 ]
 from nupmpc import aio  # noqa: E402,F401  (nupmpc.aio.connect: the asyncio variant)

@@ -12,7 +12,7 @@ import grpc
 
 from nupmpc._proto import pb, pb_grpc
 from nupmpc.errors import error_from_rpc
-from nupmpc.problem import _Spec
+from nupmpc.spec_builder import _Spec
 from nupmpc.result import Plan
 from nupmpc.security import channel_credentials, channel_options
 from nupmpc.step import dims_of

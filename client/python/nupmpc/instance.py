@@ -14,7 +14,7 @@ import numpy as np
 from google.protobuf import json_format
 
 from nupmpc._proto import pb
-from nupmpc.problem import from_spec
+from nupmpc.spec_builder import from_spec
 
 INF = math.inf
 

@@ -8,83 +8,15 @@ step (N rows for inputs, N+1 for outputs); the proto header explains the convent
 """
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
-from google.protobuf import json_format
 
 from nupmpc._proto import pb
-from nupmpc.arrays import as_array, finite, matrices, matrix, per_step, vector
+from nupmpc.arrays import as_array, expand, finite, matrices, matrix, per_step, vector
 from nupmpc.errors import ShapeError
+from nupmpc.spec_builder import _Spec, _set
 
 INF = math.inf
-
-
-def _set(field, values):
-    del field[:]
-    field.extend(values)
-
-
-class _Spec:
-    """What every builder shares: the spec, its dimensions and the JSON round trip."""
-
-    def __init__(self, spec):
-        self._spec = spec
-
-    @property
-    def spec(self):
-        """A copy of the ProblemSpec built so far."""
-        copy = pb.ProblemSpec()
-        copy.CopyFrom(self._spec)
-        return copy
-
-    def to_json(self):
-        """The spec in proto JSON, the form `nupmpc solve FILE` reads."""
-        return json_format.MessageToJson(self._spec, preserving_proto_field_name=True)
-
-    @staticmethod
-    def from_json(text):
-        """A builder for a ProblemSpec in proto JSON (Problem or GpProblem)."""
-        spec = pb.ProblemSpec()
-        try:
-            json_format.Parse(text, spec)
-        except json_format.ParseError as error:
-            raise ShapeError("json", f"not a ProblemSpec: {error}") from None
-        return from_spec(spec)
-
-
-def from_spec(spec):
-    """The builder (Problem or GpProblem) holding a copy of `spec`."""
-    copy = pb.ProblemSpec()
-    copy.CopyFrom(spec)
-    return GpProblem._wrap(copy) if copy.HasField("gp") else Problem._wrap(copy)
-
-
-@dataclass
-class Ellipse:
-    """A keep-out ellipse (a circle when b is None) in the plane of two outputs."""
-    centre: tuple
-    a: float
-    b: float = None
-    rotation: float = 0.0
-    margin: float = 0.0
-    slope: float = 0.0  # 0: hard
-
-    def to_proto(self, shape=pb.KeepOutRegion.SHAPE_ELLIPSE):
-        centre = vector(self.centre, "centre", 2)
-        if not self.a > 0 or (self.b is not None and not self.b > 0):
-            raise ShapeError("half_axis", "must be > 0")
-        return pb.KeepOutRegion(shape=shape, centre_x=centre[0], centre_y=centre[1], half_axis_a=self.a,
-                                half_axis_b=self.b or 0.0, rotation_rad=self.rotation, margin=self.margin,
-                                slope=self.slope)
-
-
-@dataclass
-class Rectangle(Ellipse):
-    """A keep-out rectangle of half-width a and half-height b (a square when b is None)."""
-
-    def to_proto(self):
-        return super().to_proto(pb.KeepOutRegion.SHAPE_RECTANGLE)
 
 
 class Problem(_Spec):
@@ -293,7 +225,6 @@ class Problem(_Spec):
     # What the plots draw.
     def bounds(self, which):
         """(lower, upper) per step, shape (steps, width), ±inf where absent."""
-        from nupmpc.arrays import expand
         components, steps, width = (self._spec.input_priors, self.N, self.L) if which == "input" else \
             (self._spec.output_priors, self.N + 1, self.K)
         lower = np.full((steps, width), -INF)
@@ -307,73 +238,9 @@ class Problem(_Spec):
 
     def output_references(self):
         """The output targets per step (N+1, K); NaN for outputs without a weight."""
-        from nupmpc.arrays import expand
         out = np.full((self.N + 1, self.K), np.nan)
         for k, p in enumerate(self._spec.output_priors):
             if any(w > 0 for w in p.weight):
                 out[:, k] = expand(p.target, self.N + 1) if p.target else 0.0
         return out
 
-
-class GpProblem(_Spec):
-    """GP-MPC on a single-input single-output plant learned from data (proto GpMpc).
-
-    `outputs`, `inputs`: a logged experiment y[0..T-1], u[0..T-1]. The session's state is
-    the past window [y[t-l..t-1], u[t-m-1..t-1]] (M = l + m + 1); Step.reference replaces r."""
-
-    def __init__(self, outputs, inputs, output_lags=1, input_lags=0, horizon=None, output_weight=1.0,
-                 input_change_weight=1.0, input_bounds=None, rate_bounds=None, output_bounds=(-INF, INF),
-                 sigma_multiple=0.0, terminal_tolerance=0.0, reference=0.0, kernel=None, window=None):
-        if horizon is None or int(horizon) != horizon or horizon < 1:
-            raise ShapeError("horizon", f"must be an integer ≥ 1, got {horizon!r}")
-        y = finite(as_array(outputs, "outputs", ndim_max=1), "outputs")
-        u = finite(as_array(inputs, "inputs", ndim_max=1), "inputs")
-        if y.ndim != 1 or u.shape != y.shape:
-            raise ShapeError("inputs", f"expected the same length as outputs {y.shape}, got {u.shape}")
-        for name, bounds in (("input_bounds", input_bounds), ("rate_bounds", rate_bounds)):
-            if bounds is None or len(bounds) != 2 or not (np.isfinite(bounds).all() and bounds[0] < bounds[1]):
-                raise ShapeError(name, "required: finite (min, max) with min < max")
-        if not output_bounds[0] < output_bounds[1]:
-            raise ShapeError("output_bounds", "min must be < max")
-        model = pb.GpModel(output_lags=output_lags, input_lags=input_lags, logged_outputs=y.tolist(),
-                           logged_inputs=u.tolist())
-        if kernel is not None:
-            model.kernel.CopyFrom(kernel)
-        reference = as_array(reference, "reference", ndim_max=1)
-        if reference.ndim == 1 and len(reference) not in (1, horizon):
-            raise ShapeError("reference", f"expected 1 or {horizon} values, got {len(reference)}")
-        gp = pb.GpMpc(model=model, horizon=int(horizon), output_weight=output_weight,
-                      input_change_weight=input_change_weight, input_min=input_bounds[0], input_max=input_bounds[1],
-                      rate_min=rate_bounds[0], rate_max=rate_bounds[1], output_min=output_bounds[0],
-                      output_max=output_bounds[1], sigma_multiple=sigma_multiple,
-                      terminal_tolerance=terminal_tolerance, reference=np.atleast_1d(reference).tolist())
-        spec = pb.ProblemSpec(gp=gp)
-        if window is not None:
-            spec.initial_state.mean.extend(vector(window, "window", output_lags + input_lags + 1).tolist())
-        super().__init__(spec)
-
-    @classmethod
-    def _wrap(cls, spec):
-        self = cls.__new__(cls)
-        _Spec.__init__(self, spec)
-        return self
-
-    M = property(lambda self: max(self._spec.gp.model.output_lags, 1) + self._spec.gp.model.input_lags + 1)
-    L = property(lambda self: 1)
-    K = property(lambda self: 1)
-    N = property(lambda self: self._spec.gp.horizon)
-
-    def bounds(self, which):
-        gp, steps = self._spec.gp, self.N + (which != "input")
-        lo, hi = (gp.input_min, gp.input_max) if which == "input" else (gp.output_min, gp.output_max)
-        return np.full((steps, 1), lo), np.full((steps, 1), hi)
-
-    def output_references(self):
-        from nupmpc.arrays import expand
-        ref = np.full((self.N + 1, 1), np.nan)
-        ref[1:, 0] = expand(self._spec.gp.reference, self.N) if self._spec.gp.reference else 0.0
-        return ref
-
-
-Problem.from_json = staticmethod(_Spec.from_json)
-Problem.from_spec = staticmethod(from_spec)

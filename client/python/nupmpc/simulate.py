@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nupmpc.problem import from_spec
+from nupmpc.spec_builder import from_spec
 
 
 def linear_plant(spec):
