@@ -12,7 +12,8 @@ class Plan:
     only then: a result without a plan, e.g. SUPERSEDED or a time limit before any finite
     iterate, carries none and the arrays are empty). `status` is the SolveStatus name
     without its prefix ("CONVERGED", ...); `solve_ms` the server's time in the solver,
-    `round_trip_ms` the client's wall time of the call (None for results not timed)."""
+    `round_trip_ms` the client's wall time of the call, a reconnect included (None for
+    results not timed)."""
 
     def __init__(self, result, dims, round_trip_ms=None):
         M, L, K, N = dims

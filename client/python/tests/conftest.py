@@ -50,13 +50,18 @@ class ServerProcess:
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
-                pytest.fail(f"nupmpc-server exited with {self.process.returncode}; log {self.log.name}")
+                pytest.fail(f"nupmpc-server exited with {self.process.returncode}:\n{self._log_text()}")
             try:
                 with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
                     return
             except OSError:
                 time.sleep(0.02)
-        pytest.fail(f"nupmpc-server did not listen on {self.target} within 20 s; log {self.log.name}")
+        pytest.fail(f"nupmpc-server did not listen on {self.target} within 20 s:\n{self._log_text()}")
+
+    def _log_text(self):
+        self.log.flush()
+        with open(self.log.name, errors="replace") as f:
+            return f.read()[-4000:]
 
     def kill(self):
         """SIGKILL: no drain, no goodbye; streams break as in a crash."""
@@ -75,6 +80,8 @@ class ServerProcess:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+        self.log.close()
+        os.unlink(self.log.name)
 
 
 @pytest.fixture(scope="session")
