@@ -12,6 +12,7 @@ packages=(
   liblbfgs-dev coinor-libipopt-dev
   clang libclang-rt-14-dev
   haproxy python3-yaml python3-kubernetes yamllint libcpp-httplib-dev
+  python3-grpcio python3-protobuf python3-numpy python3-matplotlib python3-pytest
 )
 
 missing=()

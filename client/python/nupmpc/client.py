@@ -1,0 +1,104 @@
+"""The client: one channel to a server, unary calls, and sessions (Control streams).
+
+    with nupmpc.connect("localhost:50051", token=...) as client:
+        plan = client.solve_once(problem)
+        session = client.session(problem)
+"""
+
+import time
+import weakref
+
+import grpc
+
+from nupmpc._proto import pb, pb_grpc
+from nupmpc.errors import error_from_rpc
+from nupmpc.spec_builder import _Spec
+from nupmpc.result import Plan
+from nupmpc.security import channel_credentials, channel_options
+from nupmpc.step import dims_of
+
+
+def spec_of(problem):
+    """The ProblemSpec of a builder (Problem, GpProblem) or of a ProblemSpec itself."""
+    if isinstance(problem, _Spec):
+        return problem.spec
+    if isinstance(problem, pb.ProblemSpec):
+        return problem
+    raise TypeError(f"problem: expected a nupmpc.Problem, GpProblem or ProblemSpec, got {type(problem).__name__}")
+
+
+class Client:
+    """A connection to nupmpc-server. `deadline_s` bounds each unary call (None: none)."""
+
+    def __init__(self, target, tls=False, ca_file=None, cert_file=None, key_file=None, server_name=None,
+                 token=None, deadline_s=None):
+        self.target = target
+        self.deadline_s = deadline_s
+        self._credentials = channel_credentials(target, tls=tls, ca_file=ca_file, cert_file=cert_file,
+                                                key_file=key_file, token=token)
+        self._server_name = server_name
+        self._channel = self.new_channel()
+        self._stub = pb_grpc.MpcServiceStub(self._channel)
+        self._sessions = weakref.WeakSet()  # closed with the client, if still alive
+
+    def new_channel(self, own_subchannel=False):
+        """A channel to the target with this client's credentials (own_subchannel: a
+        connection of its own, for a session's reconnect attempts)."""
+        options = channel_options(self._server_name, own_subchannel)
+        if self._credentials is None:
+            return grpc.insecure_channel(self.target, options=options)
+        return grpc.secure_channel(self.target, self._credentials, options=options)
+
+    def _call(self, method, request):
+        try:
+            return method(request, timeout=self.deadline_s)
+        except grpc.RpcError as error:
+            raise error_from_rpc(error) from None
+
+    def solve_once(self, problem):
+        """One stateless solve (SolveOnce) → Plan."""
+        spec = spec_of(problem)
+        start = time.perf_counter()
+        response = self._call(self._stub.SolveOnce, pb.SolveOnceRequest(spec=spec))
+        return Plan(response.result, dims_of(spec), (time.perf_counter() - start) * 1e3)
+
+    def session(self, problem, reconnect=None):
+        """A session on a Control stream that owns it (closed with the stream); it
+        re-creates itself after a server restart (see nupmpc.Session)."""
+        from nupmpc.session import Session
+        session = Session(self, spec_of(problem), reconnect)
+        self._sessions.add(session)
+        return session
+
+    def server_info(self):
+        """GetServerInfoResponse (version, limits, counters)."""
+        return self._call(self._stub.GetServerInfo, pb.GetServerInfoRequest())
+
+    def fit_gp_model(self, model, max_iterations=0):
+        """FitGpModelResponse for a pb.GpModel (its .kernel is the fitted one)."""
+        return self._call(self._stub.FitGpModel, pb.FitGpModelRequest(model=model, max_iterations=max_iterations))
+
+    def list_sessions(self):
+        return list(self._call(self._stub.ListSessions, pb.ListSessionsRequest()).sessions)
+
+    def close(self):
+        for session in list(self._sessions):
+            session.close()
+        self._sessions.clear()
+        self._channel.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def connect(target, tls=False, ca_file=None, cert_file=None, key_file=None, server_name=None, token=None,
+            deadline_s=None):
+    """A Client of the server at `target` ("host:port", "unix:/path"). tls: verify against
+    the system CAs (or ca_file); cert_file + key_file: mTLS; server_name: the name the
+    certificate must carry; token: sent as `authorization: Bearer TOKEN` (over TLS, or to a
+    loopback/Unix target only)."""
+    return Client(target, tls=tls, ca_file=ca_file, cert_file=cert_file, key_file=key_file,
+                  server_name=server_name, token=token, deadline_s=deadline_s)

@@ -1,0 +1,65 @@
+"""Channel credentials for a server with TLS, mTLS or bearer tokens (the server's
+--tls_* and --auth_tokens_file flags); the rules of the C++ client
+(client/channel_security.cc): a token rides on every call as `authorization: Bearer TOKEN`,
+and without TLS it is sent only to a loopback or Unix-socket target (gRPC's local
+credentials), never in clear text across a network."""
+
+import grpc
+
+_LOCAL_PREFIXES = ("localhost:", "127.", "[::1]:", "ipv4:127.", "ipv6:[::1]:", "dns:///localhost:")
+
+
+def is_local_target(target):
+    return target.startswith(("unix:", "unix-abstract:")) or target.startswith(_LOCAL_PREFIXES)
+
+
+def _read(option, path):
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except OSError as error:
+        raise ValueError(f"{option} {path}: cannot be read ({error.strerror})") from None
+
+
+class _BearerToken(grpc.AuthMetadataPlugin):
+    def __init__(self, token):
+        self._metadata = (("authorization", f"Bearer {token}"),)
+
+    def __call__(self, context, callback):
+        callback(self._metadata, None)
+
+
+def channel_credentials(target, tls=False, ca_file=None, cert_file=None, key_file=None, token=None):
+    """grpc.ChannelCredentials for `target`, or None for a plaintext channel. Errors
+    (ValueError) name the option: unreadable files, a token without TLS to a remote target."""
+    uses_tls = tls or ca_file or cert_file
+    if uses_tls:
+        if bool(cert_file) != bool(key_file):
+            raise ValueError("cert_file and key_file: give both or neither")
+        channel = grpc.ssl_channel_credentials(
+            root_certificates=_read("ca_file", ca_file) if ca_file else None,
+            private_key=_read("key_file", key_file) if key_file else None,
+            certificate_chain=_read("cert_file", cert_file) if cert_file else None)
+    elif token:
+        if not is_local_target(target):
+            raise ValueError(f"token: sent only over TLS to a remote server ({target}); give tls=True (or ca_file)")
+        unix = target.startswith("unix")
+        channel = grpc.local_channel_credentials(grpc.LocalConnectionType.UDS if unix else
+                                                 grpc.LocalConnectionType.LOCAL_TCP)
+    else:
+        return None
+    if not token:
+        return channel
+    return grpc.composite_channel_credentials(channel, grpc.metadata_call_credentials(_BearerToken(token)))
+
+
+def channel_options(server_name=None, own_subchannel=False):
+    # Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
+    options = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+    if server_name:
+        options.append(("grpc.ssl_target_name_override", server_name))
+    if own_subchannel:
+        # A connection of this channel's own, not shared (with its reconnect back-off)
+        # through gRPC's global subchannel pool with other channels to the same address.
+        options.append(("grpc.use_local_subchannel_pool", 1))
+    return options
