@@ -9,38 +9,23 @@ same reconnect options, spec bookkeeping and step building)."""
 
 import asyncio
 import time
-import weakref
 
 import grpc
+import grpc.aio
 
 from nupmpc._proto import pb, pb_grpc
-from nupmpc.client import spec_of
+from nupmpc.client import _Connection, spec_of
 from nupmpc.errors import NupmpcError, Unavailable, error_from_code, error_from_rpc
 from nupmpc.reconnect import ReconnectOptions, ReconnectStats, is_retryable, ride_out_outage_async
 from nupmpc.result import Plan
-from nupmpc.security import channel_credentials, channel_options
 from nupmpc.session import broken_stream_error
 from nupmpc.spec_update import apply_step_to_spec
 from nupmpc.step import build_step, dims_of
 
 
-class AsyncClient:
-    def __init__(self, target, tls=False, ca_file=None, cert_file=None, key_file=None, server_name=None,
-                 token=None, deadline_s=None):
-        self.target = target
-        self.deadline_s = deadline_s
-        self._credentials = channel_credentials(target, tls=tls, ca_file=ca_file, cert_file=cert_file,
-                                                key_file=key_file, token=token)
-        self._server_name = server_name
-        self._channel = self.new_channel()
-        self._stub = pb_grpc.MpcServiceStub(self._channel)
-        self._sessions = weakref.WeakSet()  # closed with the client, if still alive
-
-    def new_channel(self, own_subchannel=False):
-        options = channel_options(self._server_name, own_subchannel)
-        if self._credentials is None:
-            return grpc.aio.insecure_channel(self.target, options=options)
-        return grpc.aio.secure_channel(self.target, self._credentials, options=options)
+class AsyncClient(_Connection):
+    _insecure_channel = staticmethod(grpc.aio.insecure_channel)
+    _secure_channel = staticmethod(grpc.aio.secure_channel)
 
     async def _call(self, method, request):
         try:

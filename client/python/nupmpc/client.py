@@ -27,8 +27,12 @@ def spec_of(problem):
     raise TypeError(f"problem: expected a nupmpc.Problem, GpProblem or ProblemSpec, got {type(problem).__name__}")
 
 
-class Client:
-    """A connection to nupmpc-server. `deadline_s` bounds each unary call (None: none)."""
+class _Connection:
+    """What the blocking and the asyncio client share: the target, credentials checked up
+    front, and channels made with them. Subclasses say how a channel is opened."""
+
+    _insecure_channel = None
+    _secure_channel = None
 
     def __init__(self, target, tls=False, ca_file=None, cert_file=None, key_file=None, server_name=None,
                  token=None, deadline_s=None):
@@ -46,8 +50,15 @@ class Client:
         connection of its own, for a session's reconnect attempts)."""
         options = channel_options(self._server_name, own_subchannel)
         if self._credentials is None:
-            return grpc.insecure_channel(self.target, options=options)
-        return grpc.secure_channel(self.target, self._credentials, options=options)
+            return type(self)._insecure_channel(self.target, options=options)
+        return type(self)._secure_channel(self.target, self._credentials, options=options)
+
+
+class Client(_Connection):
+    """A connection to nupmpc-server. `deadline_s` bounds each unary call (None: none)."""
+
+    _insecure_channel = staticmethod(grpc.insecure_channel)
+    _secure_channel = staticmethod(grpc.secure_channel)
 
     def _call(self, method, request):
         try:
