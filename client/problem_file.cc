@@ -337,10 +337,14 @@ absl::StatusOr<ProblemFile> LoadBenchmarkInstanceSpec(const std::string& path) {
 absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path) {
   absl::StatusOr<std::string> text = ReadTextFile(path);
   if (!text.ok()) return text.status();
-  if (text->find("\"dims\"") != std::string::npos) return InstanceFromText(path, *text);  // the benchmark format
+  return ParseProblemFile(path, *text);
+}
+
+absl::StatusOr<ProblemFile> ParseProblemFile(const std::string& name, const std::string& text) {
+  if (text.find("\"dims\"") != std::string::npos) return InstanceFromText(name, text);  // the benchmark format
   ProblemFile out;
-  const auto status = google::protobuf::util::JsonStringToMessage(*text, &out.spec);
-  if (!status.ok()) return absl::InvalidArgumentError(absl::StrCat(path, ": not a ProblemSpec: ", status.ToString()));
+  const auto status = google::protobuf::util::JsonStringToMessage(text, &out.spec);
+  if (!status.ok()) return absl::InvalidArgumentError(absl::StrCat(name, ": not a ProblemSpec: ", status.ToString()));
   return out;
 }
 

@@ -27,6 +27,8 @@ struct ProblemFile {
 };
 
 absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path);
+// The same from the file's text (`name` prefixes the errors).
+absl::StatusOr<ProblemFile> ParseProblemFile(const std::string& name, const std::string& text);
 
 // An instance in the ../shared/benchmarks format as a ProblemSpec: benchmark x_1 = x[0],
 // y_n = y[n-1] (no output prior at step N); R and Qy must be diagonal (the priors are per

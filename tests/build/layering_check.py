@@ -20,7 +20,7 @@ import sys
 # Most specific first: a file (or an included path) belongs to the first room whose folder
 # is a prefix of it. "proto" stands for the generated headers nupmpc/v1/*.pb.h.
 ROOMS = ["core/gp", "core/examples", "core", "cli", "proto", "server", "client", "loadtest/instances",
-         "loadtest/bench/gp", "loadtest/bench", "loadtest", "tests"]
+         "loadtest/bench/gp", "loadtest/bench", "loadtest", "fuzz", "tests"]
 
 ALLOWED = {
     # nupmpc_core: Eigen and Abseil only; never the GP library or the seed applications.
@@ -38,6 +38,8 @@ ALLOWED = {
     "loadtest/instances": {"loadtest/instances", "client", "server", "core", "proto"},
     "loadtest/bench": {"loadtest/bench", "loadtest/instances", "core", "cli"},
     "loadtest/bench/gp": {"loadtest/bench/gp", "core", "core/gp", "core/examples", "cli"},
+    # The fuzz targets drive the server's code paths and the client's readers in-process.
+    "fuzz": {"fuzz", "server", "client", "proto", "core"},
     "tests": set(ROOMS),
 }
 
