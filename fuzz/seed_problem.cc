@@ -27,7 +27,7 @@ v1::ProblemSpec SeedSpec() {
   Fill(m->add_a(), kM, kM, {1, 0, 0.1, 0, 0, 1, 0, 0.1, -0.2, 0.1, 1, 0, 0.1, -0.2, 0, 1});
   Fill(m->add_b(), kM, kL, {0, 0, -0.1, 0.1});
   Fill(m->add_c(), kK, kM, {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1});
-  s.mutable_initial_state()->mutable_mean()->Add(kM, 0.0);
+  s.mutable_initial_state()->mutable_mean()->Resize(kM, 0.0);
   v1::ComponentPrior* u = s.add_input_priors();
   u->set_kind(v1::PRIOR_KIND_BOX);
   u->add_weight(1.0);
@@ -40,7 +40,7 @@ v1::ProblemSpec SeedSpec() {
     y->add_lower(-4.0);
     y->add_upper(4.0);
   }
-  s.mutable_terminal()->mutable_target()->Add(kM, 0.0);
+  s.mutable_terminal()->mutable_target()->Resize(kM, 0.0);
   Fill(s.mutable_terminal()->mutable_weight(), kM, kM, {5, 0, 0, 0, 0, 5, 0, 0, 0, 0, 5, 0, 0, 0, 0, 5});
   return s;
 }
