@@ -89,7 +89,14 @@ absl::Status TokenStore::Read(const FileStamp& stamp) {
 
 absl::StatusOr<bool> TokenStore::ReloadIfChanged() {
   absl::StatusOr<FileStamp> stamp = Stamp();
-  if (!stamp.ok()) return stamp.status();
+  if (!stamp.ok()) {
+    // A missing file is reported once, not at every check; the tokens read last stay.
+    const FileStamp missing{.mtime_ns = -2};
+    std::lock_guard<std::mutex> lock(mu_);
+    if (stamp_ == missing) return false;
+    stamp_ = missing;
+    return stamp.status();
+  }
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (*stamp == stamp_) return false;

@@ -40,8 +40,12 @@ class Interrupt {
   // Fires when the limits' cancel flag is raised (kCancelled) or their time limit, counted
   // from `start`, has passed (kTimeLimit). `flops_per_step`: one time step of one pass
   // (EstimateFootprint), which sets pass_interval().
+  // A time limit of kNeverSeconds or more never fires: it is past any solve, and larger ones
+  // would overflow the clock's 64-bit nanoseconds (292 years) when added to `start`.
+  static constexpr double kNeverSeconds = 1e9;
   Interrupt(const SolveLimits& limits, Clock::time_point start, double flops_per_step)
-      : cancel_(limits.cancel), has_deadline_(limits.time_limit_seconds > 0.0) {
+      : cancel_(limits.cancel),
+        has_deadline_(limits.time_limit_seconds > 0.0 && limits.time_limit_seconds < kNeverSeconds) {
     if (has_deadline_) {
       deadline_ = start + std::chrono::duration_cast<Clock::duration>(
                               std::chrono::duration<double>(limits.time_limit_seconds));

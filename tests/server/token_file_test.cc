@@ -72,6 +72,14 @@ TEST(TokenStore, AChangedFileIsReReadAndABrokenOneKeepsTheTokensBefore) {
   EXPECT_FALSE((*store)->ReloadIfChanged().ok());
   EXPECT_TRUE((*store)->Authenticate("bbbbbbbbbbbbbbbbbbbb").has_value());
 
+  std::filesystem::remove(path);  // reported once; the tokens stay
+  EXPECT_FALSE((*store)->ReloadIfChanged().ok());
+  EXPECT_FALSE(*(*store)->ReloadIfChanged());
+  EXPECT_TRUE((*store)->Authenticate("bbbbbbbbbbbbbbbbbbbb").has_value());
+  write("cccccccccccccccccccc carol\n");  // and a file that comes back is read again
+  EXPECT_TRUE(*(*store)->ReloadIfChanged());
+  EXPECT_EQ((*store)->Authenticate("cccccccccccccccccccc")->name, "carol");
+
   EXPECT_FALSE(TokenStore::Open(path + ".missing").ok());
   std::filesystem::remove(path);
 }
