@@ -100,10 +100,19 @@ absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> ChannelCredentialsFor(
                                                                  token_needs));
 }
 
-void AddSecurityArguments(const ChannelSecurity& security, grpc::ChannelArguments* args) {
-  if (security.uses_tls() && !security.tls_server_name.empty()) {
-    args->SetSslTargetNameOverride(security.tls_server_name);
-  }
+std::shared_ptr<grpc::Channel> CreateChannel(const std::string& target,
+                                             const std::shared_ptr<grpc::ChannelCredentials>& credentials,
+                                             const ChannelSecurity& security, grpc::ChannelArguments args) {
+  if (security.uses_tls() && !security.tls_server_name.empty()) args.SetSslTargetNameOverride(security.tls_server_name);
+  return grpc::CreateCustomChannel(target, credentials, args);
+}
+
+absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target,
+                                                             const ChannelSecurity& security,
+                                                             grpc::ChannelArguments args) {
+  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
+  if (!credentials.ok()) return credentials.status();
+  return CreateChannel(target, *credentials, security, std::move(args));
 }
 
 absl::StatusOr<ChannelSecurity> ChannelSecurityFromEnvironment() {

@@ -25,8 +25,7 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target,
   args.SetMaxReceiveMessageSize(-1);
   args.SetMaxSendMessageSize(-1);
   if (own_subchannel) args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-  AddSecurityArguments(security, &args);
-  return grpc::CreateCustomChannel(target, credentials, args);
+  return CreateChannel(target, credentials, security, std::move(args));
 }
 }  // namespace
 

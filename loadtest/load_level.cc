@@ -17,13 +17,10 @@ namespace {
 // would (gRPC would otherwise share one connection between channels to the same target).
 absl::StatusOr<std::shared_ptr<grpc::Channel>> OwnConnection(const std::string& target,
                                                             const ChannelSecurity& security) {
-  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
-  if (!credentials.ok()) return credentials.status();
   grpc::ChannelArguments args;
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   args.SetMaxReceiveMessageSize(-1);
-  AddSecurityArguments(security, &args);
-  return grpc::CreateCustomChannel(target, *credentials, args);
+  return CreateChannel(target, security, std::move(args));
 }
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }

@@ -37,12 +37,11 @@ grpc::Status Check(grpc::GenericStub& stub, grpc::CompletionQueue& cq) {
 
 absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, int calls,
                                                      const ChannelSecurity& security) {
-  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
-  if (!credentials.ok()) return credentials.status();
   grpc::ChannelArguments arguments;
   arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // not shared with the streams' channels
-  AddSecurityArguments(security, &arguments);
-  grpc::GenericStub stub(grpc::CreateCustomChannel(target, *credentials, arguments));
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = CreateChannel(target, security, std::move(arguments));
+  if (!channel.ok()) return channel.status();
+  grpc::GenericStub stub(*std::move(channel));
   grpc::CompletionQueue cq;
   std::vector<double> micros;
   micros.reserve(calls);
