@@ -2,6 +2,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/catch_exceptions.h"
+#include "server/grpc_handover.h"
 #include "server/log_context.h"
 #include "server/raw_messages.h"
 #include "server/session_factory.h"
@@ -34,22 +35,22 @@ ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* co
 
 void ControlStream::Begin() {
   if (state_->draining.load()) {
-    Finish(state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down")));
+    End(state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down")));
     return;
   }
   counted_ = true;
   if (state_->control_streams.fetch_add(1) >= state_->options.max_control_streams) {
-    Finish(state_->ToGrpc(Rpc::kControl, absl::ResourceExhaustedError(
+    End(state_->ToGrpc(Rpc::kControl, absl::ResourceExhaustedError(
         absl::StrCat("the server has its maximum of ", state_->options.max_control_streams,
                      " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
     return;
   }
   if (absl::Status quota = state_->principal_streams.Acquire(caller_.principal); !quota.ok()) {
-    Finish(state_->ToGrpc(Rpc::kControl, quota));
+    End(state_->ToGrpc(Rpc::kControl, quota));
     return;
   }
   counted_for_principal_ = true;
-  StartRead(&read_buffer_);
+  ReadNext();
 }
 
 bool ControlStream::ShouldReadLocked() {
@@ -98,6 +99,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
 }
 
 void ControlStream::OnReadDone(bool ok) {
+  TakeFromGrpc(this);
   if (!ok) {  // the client half-closed (or went away)
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -146,7 +148,7 @@ void ControlStream::OnReadDone(bool ok) {
     }
     read_more = ShouldReadLocked();
   }
-  if (read_more) StartRead(&read_buffer_);
+  if (read_more) ReadNext();
   Pump();
 }
 
@@ -197,7 +199,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
       read_more = ShouldReadLocked();
     }
   }
-  if (read_more) StartRead(&read_buffer_);
+  if (read_more) ReadNext();
   Pump();
 }
 
@@ -298,11 +300,27 @@ void ControlStream::Pump() {
       finish = true;
     }
   }
-  if (to_write != nullptr) StartWrite(to_write);
-  if (finish) Finish(final_status_);
+  if (to_write != nullptr) Write(to_write);
+  if (finish) End(final_status_);
+}
+
+void ControlStream::ReadNext() {
+  HandToGrpc(this);
+  StartRead(&read_buffer_);
+}
+
+void ControlStream::Write(const grpc::ByteBuffer* bytes) {
+  HandToGrpc(this);
+  StartWrite(bytes);
+}
+
+void ControlStream::End(const grpc::Status& status) {
+  HandToGrpc(this);
+  Finish(status);
 }
 
 void ControlStream::OnWriteDone(bool ok) {
+  TakeFromGrpc(this);
   bool resume_reading = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -315,13 +333,17 @@ void ControlStream::OnWriteDone(bool ok) {
     }
     resume_reading = reading_ == Reading::kPaused && ShouldReadLocked();
   }
-  if (resume_reading) StartRead(&read_buffer_);
+  if (resume_reading) ReadNext();
   Pump();
 }
 
-void ControlStream::OnCancel() { cancelled_.store(true); }
+void ControlStream::OnCancel() {
+  TakeFromGrpc(this);
+  cancelled_.store(true);
+}
 
 void ControlStream::OnDone() {
+  TakeFromGrpc(this);
   // Deletes this stream on return unless a pool task still holds it.
   const std::shared_ptr<ControlStream> last_reference_maybe = std::move(grpc_reference_);
   if (counted_) state_->control_streams.fetch_sub(1);
@@ -341,6 +363,7 @@ void ControlStream::OnDone() {
       spdlog::info("session {}: its Control stream detached", entry_->id);
     }
   }
+  HandToGrpc(state_);  // before grpc::Server::Shutdown returns (GrpcServer::Shutdown)
 }
 
 }  // namespace nupmpc::server

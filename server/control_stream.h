@@ -73,6 +73,11 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   bool ShouldReadLocked();
   // Starts the next write / finishes the stream if nothing is left. Called without mu_.
   void Pump();
+  // gRPC's StartRead / StartWrite / Finish, each announced to ThreadSanitizer as a hand-over
+  // to gRPC's threads (server/grpc_handover.h).
+  void ReadNext();
+  void Write(const grpc::ByteBuffer* bytes);
+  void End(const grpc::Status& status);
 
   ServerState* const state_;
   // Valid until OnDone; read only while the stream cannot finish (a read pending, the

@@ -3,6 +3,7 @@
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "server/grpc_handover.h"
 #include "server/metrics_exposition.h"
 #include "server/process_memory.h"
 #include "spdlog/spdlog.h"
@@ -106,7 +107,10 @@ void GrpcServer::Shutdown() {
   ReportNotServing();
   const auto grace = std::chrono::duration_cast<std::chrono::milliseconds>(
       std::chrono::duration<double>(state_->options.grace_period_s));
-  if (server_ != nullptr) server_->Shutdown(std::chrono::system_clock::now() + grace);
+  if (server_ != nullptr) {
+    server_->Shutdown(std::chrono::system_clock::now() + grace);
+    TakeFromGrpc(state_.get());  // every call's OnDone has run (server/grpc_handover.h)
+  }
   state_->pool.Shutdown();
   metrics_.reset();  // last: scrapes see the drain to its end
 }

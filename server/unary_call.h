@@ -10,6 +10,7 @@
 #include "grpcpp/grpcpp.h"
 #include "server/caller.h"
 #include "server/catch_exceptions.h"
+#include "server/grpc_handover.h"
 #include "server/log_context.h"
 #include "server/raw_messages.h"
 #include "server/server_context.h"
@@ -52,6 +53,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     const absl::Status parsed = ParseRaw(&bytes, &call->request_);
     call->parsed_ = parsed.ok();
     if (!call->parsed_) call->Reply(parsed);
+    HandToGrpc(call);  // gRPC may cancel it from now on
     return call;
   }
 
@@ -64,6 +66,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     const grpc::Status sent =
         state_->ToGrpc(RpcOf<Request>::value, status.ok() ? SerializeRaw(response_, raw_response_) : status);
     if (spdlog::should_log(spdlog::level::debug)) LogAccess(sent);
+    HandToGrpc(this);
     Finish(sent);
   }
 
@@ -99,8 +102,15 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     if (!queued.ok()) Reply(queued);
   }
 
-  void OnCancel() override { cancelled_.store(true); }
-  void OnDone() override { delete this; }
+  void OnCancel() override {
+    TakeFromGrpc(this);
+    cancelled_.store(true);
+  }
+  void OnDone() override {
+    TakeFromGrpc(this);
+    HandToGrpc(state_);  // before grpc::Server::Shutdown returns (GrpcServer::Shutdown)
+    delete this;
+  }
 
  private:
   void LogAccess(const grpc::Status& sent) const {

@@ -328,29 +328,37 @@ TEST_F(ServiceTest, ConcurrentSolvesOnOneSessionLeaveTheOtherWorkerFree) {
   absl::StatusOr<v1::CreateSessionResponse> slow = client_->CreateSession(slow_spec);
   absl::StatusOr<v1::CreateSessionResponse> fast = client_->CreateSession(fast_spec);
   ASSERT_TRUE(slow.ok() && fast.ok());
-  constexpr double kSlowSolveMs = 300.0;  // each slow solve runs into this time limit
+  constexpr double kSlowSolveMs = 1000.0;  // each slow solve runs into this time limit
   v1::Step slow_step;
   slow_step.set_time_limit_ms(kSlowSolveMs);
   slow_step.set_warm_start(v1::WARM_START_COLD);
   std::vector<std::thread> slow_callers;
   std::atomic<int> slow_ok{0};
+  std::atomic<int> slow_done{0};
   for (int i = 0; i < 2; ++i) {
     slow_callers.emplace_back([&] {
       Client caller(target_);
       if (caller.Solve(slow->session_id(), slow_step).ok()) ++slow_ok;
+      ++slow_done;
     });
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(50));  // both slow solves are in
-  const auto start = std::chrono::steady_clock::now();
+  // Both slow solves are in: one on a worker, the other waiting in the session's strand.
+  absl::StatusOr<std::shared_ptr<server::SessionEntry>> slow_entry = server_->state().registry.Find(slow->session_id());
+  ASSERT_TRUE(slow_entry.ok()) << slow_entry.status();
+  const server::SessionStrand& slow_strand = *(*slow_entry)->strand;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while ((server_->state().pool.busy() < 1 || slow_strand.waiting() < 1) && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_EQ(slow_strand.waiting(), 1) << "the second slow solve never queued";
   absl::StatusOr<v1::SolveResult> quick = client_->Solve(fast->session_id(), v1::Step());
-  const double quick_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  const int slow_done_before_quick = slow_done.load();
   for (std::thread& t : slow_callers) t.join();
   ASSERT_TRUE(quick.ok()) << quick.status();
   EXPECT_EQ(slow_ok.load(), 2);
   // Before the strand, the second slow solve held the other worker waiting for the
-  // session's lock and the quick solve waited about kSlowSolveMs.
-  EXPECT_LT(quick_ms, kSlowSolveMs / 2) << "the quick solve waited behind the slow session";
+  // session's lock, and the quick solve waited for the first slow solve to end.
+  EXPECT_EQ(slow_done_before_quick, 0) << "the quick solve waited behind the slow session";
 }
 
 }  // namespace
