@@ -1,10 +1,10 @@
 // The hostile-input catalogue's rule class (issue 23 §4): every validation rule of a spec
 // (dimensions and limits, each matrix, per-step array, enum, bound relation, prior
 // parameter, option, multi-level inputs, input differences, keep-out regions, the GP
-// model) and of a step, broken one at a time. Each case gets its code and a message naming
-// the field or the rule, from SolveOnce and CreateSession alike (a refused step leaves its
-// session as it was); after each one a healthy session still answers with the
-// bit-identical plan and the server's resident memory has not jumped.
+// model), of a step and of a FitGpModel request, broken one at a time. Each case gets its
+// code and a message naming the field or the rule, from SolveOnce and CreateSession alike
+// (a refused step leaves its session as it was); after each one a healthy session still
+// answers with the bit-identical plan and the server's resident memory has not jumped.
 #include <functional>
 #include <iterator>
 #include <limits>
@@ -605,6 +605,62 @@ TEST_F(HostileSpecRulesTest, EveryRuleOfKeepOutRegions) {
 }
 
 TEST_F(HostileSpecRulesTest, EveryRuleOfAGpSpec) { ExpectEveryRuleRefused(GpRules(), "spec rules: GP"); }
+
+// FitGpModel's request: the GP spec's model, one rule broken at a time.
+TEST_F(HostileSpecRulesTest, EveryRuleOfAFitGpModelRequest) {
+  v1::FitGpModelRequest valid;
+  *valid.mutable_model() = GpSpec().gp().model();
+  ASSERT_TRUE(client_->FitGpModel(valid).ok()) << "the cases' base request must be valid";
+  struct Rule {
+    const char* rule;
+    std::function<void(v1::FitGpModelRequest*)> mutate;
+    C code;
+    const char* field;
+  };
+  const Rule rules[] = {
+      {"no model", [](v1::FitGpModelRequest* r) { r->clear_model(); }, C::kInvalidArgument, "model: required"},
+      {"iterations over the limit", [](v1::FitGpModelRequest* r) { r->set_max_iterations(100001); },
+       C::kInvalidArgument, "max_iterations"},
+      {"lags over the limit", [](v1::FitGpModelRequest* r) { r->mutable_model()->set_output_lags(65); },
+       C::kInvalidArgument, "model.output_lags/input_lags"},
+      {"data both logged and as pairs", [](v1::FitGpModelRequest* r) { r->mutable_model()->add_logged_inputs(0.0); },
+       C::kInvalidArgument, "model: give the training data either"},
+      {"logged inputs fewer than outputs",
+       [](v1::FitGpModelRequest* r) {
+         v1::GpModel* m = r->mutable_model();
+         m->clear_regressors();
+         m->clear_targets();
+         for (int i = 0; i < 10; ++i) m->add_logged_outputs(0.1 * i);
+         for (int i = 0; i < 9; ++i) m->add_logged_inputs(0.0);
+       },
+       C::kInvalidArgument, "model.logged_inputs"},
+      {"too few logged samples for the lags",
+       [](v1::FitGpModelRequest* r) {
+         v1::GpModel* m = r->mutable_model();
+         m->clear_regressors();
+         m->clear_targets();
+         m->add_logged_outputs(1.0);
+         m->add_logged_inputs(0.0);
+       },
+       C::kInvalidArgument, "model.logged_outputs"},
+      {"points over the limit", [](v1::FitGpModelRequest* r) { r->mutable_model()->mutable_regressors()->set_rows(5001); },
+       C::kResourceExhausted, "model.regressors.rows"},
+      {"regressors data short",
+       [](v1::FitGpModelRequest* r) { r->mutable_model()->mutable_regressors()->mutable_data()->RemoveLast(); },
+       C::kInvalidArgument, "model.regressors.data"},
+      {"starting kernel with a negative signal variance",
+       [](v1::FitGpModelRequest* r) { r->mutable_model()->mutable_kernel()->set_signal_variance(-1.0); },
+       C::kInvalidArgument, "model.kernel.signal_variance"},
+  };
+  for (const Rule& r : rules) {
+    SCOPED_TRACE(r.rule);
+    v1::FitGpModelRequest bad = valid;
+    r.mutate(&bad);
+    ExpectRefused(client_->FitGpModel(bad).status(), r.code, r.field);
+    ExpectServerUnharmed();
+  }
+  CountCases("FitGpModel rules", static_cast<int>(std::size(rules)));
+}
 
 // A step that breaks a rule on `session`, which must answer `reference` again afterwards.
 struct StepRule {
