@@ -28,7 +28,8 @@ server_tests=(service_solve_test service_validation_test service_transform_test 
               service_gp_test control_stream_lifetime_test worker_pool_test session_strand_test loadtest_test
               server_binary_test service_admission_test service_stream_bounds_test service_malformed_bytes_test
               memory_budget_test client_reconnect_test closed_loop_restart_test reconnect_fidelity_test
-              client_spec_update_test session_routing_test auth_test log_format_test hostile_numbers_test)
+              client_spec_update_test session_routing_test auth_test log_format_test hostile_numbers_test
+              hostile_spec_rules_test hostile_sessions_test hostile_control_protocol_test hostile_transport_test)
 targets=()
 for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-asan -j "$jobs" "${targets[@]}"

@@ -3,7 +3,9 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
 
@@ -161,6 +163,22 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
   return absl::OkStatus();
 }
 
+// A message of core::Validate about `Problem.x`, naming the spec's field instead (a client
+// knows its spec, not the core's problem).
+std::string InSpecTerms(absl::string_view core_message) {
+  static constexpr std::pair<absl::string_view, absl::string_view> kFields[] = {
+      {"Problem.initial_covariance", "spec.initial_state.covariance"},
+      {"Problem.initial_mean", "spec.initial_state.mean"},
+      {"Problem.terminal", "spec.terminal"},
+  };
+  for (const auto& [core_field, spec_field] : kFields) {
+    if (absl::StartsWith(core_message, core_field)) {
+      return absl::StrCat(spec_field, core_message.substr(core_field.size()));
+    }
+  }
+  return absl::StrCat("spec: ", core_message);
+}
+
 }  // namespace
 
 absl::StatusOr<Eigen::MatrixXd> MatrixFromProto(const v1::Matrix& m, int rows, int cols, const std::string& path) {
@@ -295,7 +313,7 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
   }
   // The core's own checks (covariance definiteness, ...) as the last line.
   absl::Status core_check = core::Validate(p);
-  if (!core_check.ok()) return Invalid("spec: ", core_check.message());
+  if (!core_check.ok()) return Invalid(InSpecTerms(core_check.message()));
   return p;
 }
 

@@ -2,15 +2,17 @@
 // numeric field kind of a spec and of a step, denormal and huge finite values, and
 // dimensions whose product is a memory bomb while each is within its limit. Every case
 // gets its code and a message naming the field; after each one a healthy session still
-// answers with the bit-identical plan and the server's resident memory has not jumped.
+// answers with the bit-identical plan and the server's resident memory has not jumped
+// (tests/server/hostile_catalogue.h).
 #include <cmath>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <string>
 #include <vector>
 
 #include "gmock/gmock.h"
-#include "tests/server/service_fixture.h"
+#include "tests/server/hostile_catalogue.h"
 
 namespace nupmpc::testing {
 namespace {
@@ -123,55 +125,7 @@ std::string NamedField(const Field& f, double value) {
   return field;
 }
 
-class HostileNumbersTest : public ServiceTest {
- protected:
-  void SetUp() override {
-    ServiceTest::SetUp();
-    instance_ = LoadInstanceOrDie("masses_N30");
-    spec_ = SpecOrDie(instance_.problem);
-    auto healthy = client_->CreateSession(spec_);
-    ASSERT_TRUE(healthy.ok()) << healthy.status();
-    healthy_id_ = healthy->session_id();
-    auto before = client_->Solve(healthy_id_, StateStep(4));
-    ASSERT_TRUE(before.ok());
-    healthy_result_ = *before;
-    rss_before_ = Rss();
-  }
-  v1::Step StateStep(int t) const {
-    v1::Step step;
-    const Eigen::VectorXd& x = instance_.closed_loop->x1[t];
-    step.mutable_state()->Add(x.data(), x.data() + x.size());
-    step.set_warm_start(v1::WARM_START_COLD);
-    return step;
-  }
-  std::uint64_t Rss() {
-    auto info = client_->GetServerInfo();
-    EXPECT_TRUE(info.ok());
-    return info.ok() ? info->resident_memory_bytes() : 0;
-  }
-  // What every case ends with: the healthy session answers as before, and memory did not jump.
-  void ExpectServerUnharmed() {
-    auto again = client_->Solve(healthy_id_, StateStep(4));
-    ASSERT_TRUE(again.ok()) << again.status();
-    EXPECT_EQ(again->objective(), healthy_result_.objective());
-    ASSERT_EQ(again->inputs_size(), healthy_result_.inputs_size());
-    for (int i = 0; i < again->inputs_size(); ++i) EXPECT_EQ(again->inputs(i), healthy_result_.inputs(i));
-    EXPECT_LT(Rss(), rss_before_ + (std::uint64_t{256} << 20)) << "resident memory jumped";
-  }
-  // A plan that left the server: no NaN or Inf anywhere in it.
-  static void ExpectFinite(const v1::SolveResult& r) {
-    for (double v : r.inputs()) EXPECT_TRUE(std::isfinite(v));
-    for (double v : r.states()) EXPECT_TRUE(std::isfinite(v));
-    for (double v : r.outputs()) EXPECT_TRUE(std::isfinite(v));
-    EXPECT_TRUE(std::isfinite(r.objective()) || !r.has_plan());
-  }
-
-  bench::BenchmarkInstance instance_;
-  v1::ProblemSpec spec_;
-  std::string healthy_id_;
-  v1::SolveResult healthy_result_;
-  std::uint64_t rss_before_ = 0;
-};
+class HostileNumbersTest : public HostileCatalogueTest {};
 
 TEST_F(HostileNumbersTest, NanAndInfinitiesInEverySpecFieldKind) {
   int refused = 0, accepted = 0;
@@ -191,11 +145,12 @@ TEST_F(HostileNumbersTest, NanAndInfinitiesInEverySpecFieldKind) {
         EXPECT_EQ(client_->CreateSession(spec).status().code(), C::kInvalidArgument);
         ++refused;
       }
+      ExpectServerUnharmed();
     }
   }
-  ExpectServerUnharmed();
   std::printf("spec fields: %d refused, %d accepted (an infinity meaning no bound)\n", refused, accepted);
   EXPECT_GE(refused, 50);
+  CountCases("numbers: NaN/Inf in a spec", refused + accepted);
 }
 
 TEST_F(HostileNumbersTest, NanAndInfinitiesInEveryStepFieldKindLeaveTheSessionAsItWas) {
@@ -223,16 +178,19 @@ TEST_F(HostileNumbersTest, NanAndInfinitiesInEveryStepFieldKindLeaveTheSessionAs
         EXPECT_EQ(again->objective(), reference->objective()) << "a refused step changed the session";
       }
       ASSERT_TRUE(client_->CloseSession(id).ok());
+      ExpectServerUnharmed();
     }
   }
-  ExpectServerUnharmed();
   EXPECT_GE(refused, 12);
+  CountCases("numbers: NaN/Inf in a step", static_cast<int>(StepFields().size()) * 3);
 }
 
 TEST_F(HostileNumbersTest, DenormalAndHugeFiniteNumbersNeverLeaveTheServerAsNanOrInf) {
+  int cases = 0;
   for (const SpecField& f : SpecFields()) {
     for (const double value : {std::numeric_limits<double>::denorm_min(), 1e-300, 1e300, -1e300}) {
       SCOPED_TRACE(std::string(f.field) + " = " + std::to_string(value));
+      ++cases;
       v1::ProblemSpec spec = spec_;
       f.set(&spec, value);
       absl::StatusOr<v1::SolveResult> once = client_->SolveOnce(spec);
@@ -245,9 +203,10 @@ TEST_F(HostileNumbersTest, DenormalAndHugeFiniteNumbersNeverLeaveTheServerAsNanO
             << once.status();
         EXPECT_THAT(std::string(once.status().message()), HasSubstr("spec")) << once.status();
       }
+      ExpectServerUnharmed();
     }
   }
-  ExpectServerUnharmed();
+  CountCases("numbers: denormal and huge", cases);
 }
 
 TEST_F(HostileNumbersTest, DimensionsWhoseProductIsAMemoryBombAreRefusedBeforeAllocating) {
@@ -255,8 +214,9 @@ TEST_F(HostileNumbersTest, DimensionsWhoseProductIsAMemoryBombAreRefusedBeforeAl
     const char* name;
     std::uint32_t states, inputs, horizon;
   };
-  for (const Bomb& b : {Bomb{"M at its limit, N at its limit", 1000, 1, 100000},
-                        Bomb{"N at its limit, many inputs", 10, 1000, 100000}}) {
+  const Bomb bombs[] = {Bomb{"M at its limit, N at its limit", 1000, 1, 100000},
+                        Bomb{"N at its limit, many inputs", 10, 1000, 100000}};
+  for (const Bomb& b : bombs) {
     SCOPED_TRACE(b.name);
     v1::ProblemSpec spec;
     v1::Model* m = spec.mutable_model();
@@ -280,6 +240,7 @@ TEST_F(HostileNumbersTest, DimensionsWhoseProductIsAMemoryBombAreRefusedBeforeAl
     EXPECT_EQ(client_->CreateSession(spec).status().code(), C::kResourceExhausted);
     ExpectServerUnharmed();
   }
+  CountCases("memory bombs", static_cast<int>(std::size(bombs)));
 }
 
 }  // namespace

@@ -4,65 +4,12 @@
 #include <string>
 
 #include "gmock/gmock.h"
-#include "grpcpp/generic/generic_stub.h"
-#include "tests/server/service_fixture.h"
+#include "tests/server/hostile_catalogue.h"
 
 namespace nupmpc::testing {
 namespace {
 
 using ::testing::HasSubstr;
-
-grpc::Status CallWithBytes(const std::string& target, const std::string& method, const std::string& bytes) {
-  grpc::GenericStub stub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
-  grpc::CompletionQueue queue;
-  grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  grpc::Slice slice(bytes);
-  const grpc::ByteBuffer request(&slice, 1);
-  std::unique_ptr<grpc::GenericClientAsyncResponseReader> call =
-      stub.PrepareUnaryCall(&context, "/nupmpc.v1.MpcService/" + method, request, &queue);
-  call->StartCall();
-  grpc::ByteBuffer response;
-  grpc::Status status;
-  call->Finish(&response, &status, reinterpret_cast<void*>(1));
-  void* tag = nullptr;
-  bool ok = false;
-  EXPECT_TRUE(queue.Next(&tag, &ok));
-  queue.Shutdown();
-  while (queue.Next(&tag, &ok)) {
-  }
-  return status;
-}
-
-// Opens a Control stream, sends `bytes` as its first message and returns the status the
-// stream ends with.
-grpc::Status ControlWithBytes(const std::string& target, const std::string& bytes) {
-  grpc::GenericStub stub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
-  grpc::CompletionQueue queue;
-  grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> stream =
-      stub.PrepareCall(&context, "/nupmpc.v1.MpcService/Control", &queue);
-  void* tag = nullptr;
-  bool ok = false;
-  const auto next = [&] { EXPECT_TRUE(queue.Next(&tag, &ok)); };
-  stream->StartCall(reinterpret_cast<void*>(1));
-  next();
-  grpc::Slice slice(bytes);
-  stream->Write(grpc::ByteBuffer(&slice, 1), reinterpret_cast<void*>(2));
-  next();
-  grpc::ByteBuffer answer;
-  stream->Read(&answer, reinterpret_cast<void*>(3));
-  next();
-  EXPECT_FALSE(ok) << "the stream answered a message it could not parse";
-  grpc::Status status;
-  stream->Finish(&status, reinterpret_cast<void*>(4));
-  next();
-  queue.Shutdown();
-  while (queue.Next(&tag, &ok)) {
-  }
-  return status;
-}
 
 class ServiceMalformedBytesTest : public ServiceTest {};
 
