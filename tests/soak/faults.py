@@ -107,7 +107,8 @@ def restart(quick):
     server = harness.Server("--threads", "2")
     try:
         duration = 6 if quick else 20
-        probe = subprocess.Popen([PROBE_BINARY, "--server", server.target, "--probe", "streams", "--streams", "32",
+        probe = subprocess.Popen([PROBE_BINARY, "--server", server.target, "--instance", str(harness.MASSES),
+                                  "--probe", "streams", "--streams", "32",
                                   "--duration_s", str(duration), "--verify_every", "25"],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         r.check(wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 32, 20), "32 streams never opened")
@@ -119,7 +120,8 @@ def restart(quick):
         r.check(wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 32, 30),
                 "the 32 streams did not come back to the new server")
         out, err = probe.communicate(timeout=duration + 120)
-        r.check(probe.returncode == 0, f"probe exited with {probe.returncode}: {err[-500:]}")
+        if probe.returncode != 0:
+            raise harness.HarnessError(f"nupmpc-scaleout-probe exited with {probe.returncode}: {err[-500:]}")
         report = json.loads(out)
         r.figures.update({k: report[k] for k in ("steps", "failed_steps", "no_plan", "reconnects", "longest_outage_s",
                                                  "verified", "mismatched", "max_plan_difference")})
@@ -164,7 +166,7 @@ def sigterm(quick):
                     # down"; a step in flight at the signal must get its plan; anything
                     # else is a call the drain broke.
                     refused = "shutting down" in error.details and sent_at > signalled_at[0]
-                    stream_outcomes["refused after the signal" if refused else f"broken: {error.code.name}"] += 1
+                    stream_outcomes["refused after the signal" if refused else f"broken: {error.code.name}: {error.details[:80]} (sent {sent_at - signalled_at[0]:+.3f} s)"] += 1
                     return
                 t += 1
 
@@ -174,12 +176,13 @@ def sigterm(quick):
         for w in workers:
             w.start()
         r.check(wait_for(lambda: server.metric_sum("nupmpc_active_sessions") == 8, 30), "the streams never opened")
-        # Two long solves running and one waiting for a worker when the signal comes.
+        # Three long solves on two workers: every stream's next step waits behind them, so
+        # the pool holds 11 tasks (one per stream, three solves) once all have arrived.
         workers += [threading.Thread(target=one_off) for _ in range(3)]
         for w in workers[8:]:
             w.start()
-        r.check(wait_for(lambda: server.metric_sum("nupmpc_workers_busy") == 2 and
-                         server.metric_sum("nupmpc_queue_depth") >= 1, 30), "the load never filled both workers")
+        r.check(wait_for(lambda: server.metric_sum("nupmpc_workers_busy") + server.metric_sum("nupmpc_queue_depth") == 11,
+                         30), "the solves and steps never all reached the server")
         signalled_at[0] = time.monotonic()
         exit_code = server.terminate(timeout_s=60)
         r.figures["drain_s"] = round(time.monotonic() - signalled_at[0], 2)

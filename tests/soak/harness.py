@@ -26,6 +26,7 @@ from nupmpc._proto import pb  # noqa: E402
 
 SERVER_BINARY = os.environ.get("NUPMPC_SERVER_BINARY", str(REPO / "build" / "bin" / "nupmpc-server"))
 BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO.parent / "shared" / "benchmarks")))
+MASSES = BENCHMARKS / "masses_N30.json"
 
 
 class HarnessError(RuntimeError):
@@ -132,7 +133,7 @@ class Server:
 
 def masses():
     """The masses_N30 benchmark (12 states, 3 inputs, 12 outputs) and its recorded states."""
-    instance = nupmpc.load_instance(BENCHMARKS / "masses_N30.json")
+    instance = nupmpc.load_instance(MASSES)
     return instance.spec, np.asarray(instance.closed_loop_states)
 
 

@@ -144,7 +144,8 @@ class RssSampler(threading.Thread):
 
 def run_bulk(target, streams, duration_s):
     """One period of nupmpc-loadtest; its JSON level report."""
-    command = [LOADTEST_BINARY, "--server", target, "--concurrency", str(streams), "--duration_s", str(duration_s),
+    command = [LOADTEST_BINARY, "--server", target, "--instance", str(harness.MASSES),
+               "--concurrency", str(streams), "--duration_s", str(duration_s),
                "--warmup_s", "0", "--new_references", "--echo=false", "--baseline_rounds", "1",
                "--transport_calls", "10", "--progress", "off", "--json"]
     done = subprocess.run(command, capture_output=True, text=True, timeout=duration_s + 120)
