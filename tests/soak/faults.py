@@ -40,7 +40,8 @@ from nupmpc.security import channel_options
 BIN = harness.REPO / "build" / "bin"
 PROBE_BINARY = os.environ.get("NUPMPC_PROBE_BINARY", str(BIN / "nupmpc-scaleout-probe"))
 CLI_BINARY = os.environ.get("NUPMPC_CLI_BINARY", str(BIN / "nupmpc"))
-LONG_SOLVE = harness.BENCHMARKS / "random_outbox_M40_K20_L20_N1000_s1.json"  # a cold solve of about a second
+# The slowest benchmark solve: long enough to signal or kill a client in the middle of it.
+LONG_SOLVE = harness.BENCHMARKS / "random_outbox_M40_K20_L20_N1000_s1.json"
 FIRST_MESSAGE_TIMEOUT_S = 2.0
 CONNECTION_IDLE_TIMEOUT_S = 2.0
 NO_RECONNECT = nupmpc.ReconnectOptions(budget_s=0)
