@@ -169,8 +169,9 @@ def main():
     parser.add_argument("--max_drift", type=float, default=0.05, help="allowed RSS growth after the warm-up")
     args = parser.parse_args()
     periods = max(1, round(args.seconds / args.period_s))
-    if args.warmup_s >= periods * args.period_s:
-        sys.exit("--warmup_s must leave at least one period to compare")
+    if periods * args.period_s - args.warmup_s < 2 * args.period_s:
+        parser.error(f"--seconds {args.seconds:g}: must leave two periods of --period_s {args.period_s:g} after "
+                     f"--warmup_s {args.warmup_s:g} (the first is the one the others are compared with)")
 
     spec, states = harness.masses()
     server = harness.Server("--threads", "2")
