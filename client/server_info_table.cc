@@ -99,6 +99,8 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
       {"max message", Mib(l.max_message_bytes())},
       {"stream answers unread", absl::StrCat("at most ", l.max_stream_answers())},
       {"calls per connection", absl::StrCat("at most ", l.max_streams_per_connection())},
+      {"first message within", Seconds(l.first_message_timeout_s(), "no limit")},
+      {"idle connections closed", Seconds(l.connection_idle_timeout_s(), "never")},
   };
   std::size_t width = 0;
   for (const auto& [key, value] : rows) width = std::max(width, key.size());

@@ -1,5 +1,6 @@
 #include "loadtest/load_stream.h"
 
+#include <cmath>
 #include <utility>
 
 #include "absl/status/status.h"
@@ -10,6 +11,18 @@ namespace {
 std::string CodeName(int code) { return absl::StatusCodeToString(static_cast<absl::StatusCode>(code)); }
 
 }  // namespace
+
+v1::PriorUpdate MovingReferences(const v1::ProblemSpec& spec, std::uint64_t sequence) {
+  v1::PriorUpdate update;
+  for (int k = 0; k < spec.output_priors_size(); ++k) {
+    v1::PriorUpdate::Entry* entry = update.add_outputs();
+    entry->set_index(static_cast<std::uint32_t>(k));
+    *entry->mutable_prior() = spec.output_priors(k);  // weights and bounds stay as specified
+    entry->mutable_prior()->clear_target();
+    entry->mutable_prior()->add_target(0.5 * std::sin(0.05 * static_cast<double>(sequence) + k));
+  }
+  return update;
+}
 
 void StreamTally::MergeFrom(const StreamTally& other) {
   latency_ms.insert(latency_ms.end(), other.latency_ms.begin(), other.latency_ms.end());
@@ -85,6 +98,7 @@ void LoadStream::SendLocked(Clock::time_point scheduled) {
   // Wrapping around starts a new episode at the instance's first state: a cold start,
   // as the core baseline does.
   if (next_state_ == 0 && next_sequence_ > 1) step->set_warm_start(v1::WARM_START_COLD);
+  if (plan_.new_references) *step->mutable_update() = MovingReferences(*plan_.spec, next_sequence_);
   next_state_ = (next_state_ + 1) % states.size();
   outstanding_.emplace(next_sequence_, Outstanding{scheduled, Clock::now()});
   ++next_sequence_;

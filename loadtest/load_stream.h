@@ -3,7 +3,8 @@
 
 // One simulated controller of nupmpc-loadtest: a Control stream (gRPC callback API, so
 // 64 streams need no 64 threads) that creates its session, then sends one measured state
-// per request, cycling through the instance's closed-loop states.
+// per request, cycling through the instance's closed-loop states (and, optionally, new
+// output references).
 //
 // Closed loop: the next state goes out when the previous answer arrives.
 // Open loop:   the load generator calls Send() at Poisson arrival times whether or not
@@ -48,10 +49,18 @@ struct StreamTally {
   void MergeFrom(const StreamTally& other);
 };
 
+// StreamPlan.new_references: every output's prior as the spec has it, with one target for
+// the whole horizon that moves with the step's sequence number (a slow sinusoid, amplitude
+// 0.5, a different phase per output). Nothing for a spec without output priors (GP).
+v1::PriorUpdate MovingReferences(const v1::ProblemSpec& spec, std::uint64_t sequence);
+
 struct StreamPlan {
   const v1::ProblemSpec* spec = nullptr;
   const std::vector<std::vector<double>>* states = nullptr;  ///< cycled through
   bool closed_loop = true;
+  // Every step also moves each output's reference (MovingReferences), as a tracking
+  // controller does: each step is a changed problem, not only a changed state.
+  bool new_references = false;
 };
 
 class LoadStream : public grpc::ClientBidiReactor<v1::ControlRequest, v1::ControlResponse> {

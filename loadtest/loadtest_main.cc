@@ -52,6 +52,8 @@ ABSL_FLAG(bool, inline_solve, false,
           "(a server that solves where the request arrives: the lowest round trip any design could reach)");
 ABSL_FLAG(double, serve_echo_busy_us, -1.0,
           "internal: run as the echo peer's child process, busy this long per step (>= 0), until stdin closes");
+ABSL_FLAG(bool, new_references, false,
+          "every step also sends new output references (the instance's output priors with a moving target)");
 ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
 ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
 ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
@@ -196,7 +198,7 @@ int main(int argc, char** argv) {
                              .echo = echo != nullptr,
                              .inline_solve = inline_solve != nullptr};
   if (!json) lt::PrintHeader(header);
-  const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed"};
+  const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed", absl::GetFlag(FLAGS_new_references)};
   std::vector<lt::LevelReport> reports;
   for (const int c : *levels) {
     lt::LevelConfig config;

@@ -50,7 +50,29 @@ void ControlStream::Begin() {
     return;
   }
   counted_for_principal_ = true;
+  const auto timeout = std::chrono::duration_cast<std::chrono::system_clock::duration>(
+      std::chrono::duration<double>(state_->options.first_message_timeout_s));
+  HandToGrpc(this);  // the alarm's callback runs on one of gRPC's threads
+  first_message_timer_.Set(std::chrono::system_clock::now() + timeout,
+                           [weak = weak_from_this()](bool fired) {
+                             if (const std::shared_ptr<ControlStream> self = weak.lock()) self->OnFirstMessageTimeout(fired);
+                           });
   ReadNext();
+}
+
+void ControlStream::OnFirstMessageTimeout(bool fired) {
+  TakeFromGrpc(this);
+  if (!fired) return;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (done_ || phase_ != Phase::kAwaitingFirst) return;
+    phase_ = Phase::kFinished;  // the pending read completes with !ok and finds the stream finished
+  }
+  End(state_->ToGrpc(
+      Rpc::kControl,
+      absl::DeadlineExceededError(absl::StrCat("first ControlRequest: none within first_message_timeout_s = ",
+                                               state_->options.first_message_timeout_s,
+                                               " s (ServerLimits.first_message_timeout_s); send the attach at once"))));
 }
 
 bool ControlStream::ShouldReadLocked() {
@@ -111,13 +133,17 @@ void ControlStream::OnReadDone(bool ok) {
   v1::ControlRequest request;
   const absl::Status parsed = ParseRaw(&read_buffer_, &request);
   read_buffer_.Clear();
-  // The next read starts only once the first message is handled, so the phase cannot
-  // leave kAwaitingFirst under this check.
+  // The next read starts only once the first message is handled. Taking the first message
+  // moves the phase on under the lock, so the first-message timer cannot end the stream
+  // while it is handled (and a message that arrives after the timer ended it is dropped).
   bool first_message;
   {
     std::lock_guard<std::mutex> lock(mu_);
+    if (phase_ == Phase::kFinished) return;
     first_message = phase_ == Phase::kAwaitingFirst;
+    if (first_message) phase_ = Phase::kAttaching;
   }
+  if (first_message) first_message_timer_.Cancel();
   if (first_message && !parsed.ok()) {
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -346,6 +372,11 @@ void ControlStream::OnDone() {
   TakeFromGrpc(this);
   // Deletes this stream on return unless a pool task still holds it.
   const std::shared_ptr<ControlStream> last_reference_maybe = std::move(grpc_reference_);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    done_ = true;
+  }
+  first_message_timer_.Cancel();
   if (counted_) state_->control_streams.fetch_sub(1);
   if (counted_for_principal_) state_->principal_streams.Release(caller_.principal);
   const LogContext log_context(entry_ != nullptr ? absl::string_view(entry_->id) : absl::string_view(),

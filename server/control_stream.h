@@ -7,6 +7,7 @@
 #include <mutex>
 #include <optional>
 
+#include "grpcpp/alarm.h"
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 #include "server/caller.h"
@@ -25,7 +26,9 @@ namespace nupmpc::server {
 //
 // Bounded: at most ServerLimits.max_stream_answers answers wait for the client to read
 // them; then the stream stops reading (HTTP/2 flow control holds the client's writes) until
-// it does. At most max_control_streams streams are open server-wide.
+// it does. At most max_control_streams streams are open server-wide. A stream whose first
+// message has not arrived within first_message_timeout_s is ended with DEADLINE_EXCEEDED,
+// so silent streams cannot hold those slots.
 //
 // Messages are parsed here from raw bytes: a first message that does not parse ends the
 // stream with INVALID_ARGUMENT, a later one is answered with error_code 3 (sequence 0).
@@ -51,8 +54,10 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
 
  private:
   ControlStream(ServerState* state, grpc::CallbackServerContext* context);
-  // Starts reading, or refuses the call while the server drains.
+  // Starts reading (and the first message's timer), or refuses the call while the server drains.
   void Begin();
+  // The first message's timer fired (`fired`: not cancelled): ends a stream still waiting for it.
+  void OnFirstMessageTimeout(bool fired);
   // The session the first message names or creates (marked attached).
   absl::StatusOr<std::shared_ptr<SessionEntry>> Attach(const v1::ControlRequest& first);
   // Handles the first message: on the pool when it carries a spec (building a session
@@ -115,6 +120,10 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   std::deque<grpc::ByteBuffer> writes_;        // serialized answers; front is being written when writing_
   bool writing_ = false;
   grpc::Status final_status_;
+  // Set by Begin; cancelled once the first message arrives (the callback holds only a weak
+  // reference, so a pending timer never keeps the stream alive).
+  grpc::Alarm first_message_timer_;
+  bool done_ = false;  // OnDone ran: context_ is gone
 };
 
 }  // namespace nupmpc::server

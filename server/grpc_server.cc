@@ -1,5 +1,8 @@
 #include "server/grpc_server.h"
 
+#include <algorithm>
+#include <limits>
+
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
@@ -9,6 +12,14 @@
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
+namespace {
+
+// A channel argument in milliseconds (an int), from seconds already checked to be > 0.
+int Milliseconds(double seconds) {
+  return static_cast<int>(std::clamp(seconds * 1e3, 1.0, static_cast<double>(std::numeric_limits<int>::max())));
+}
+
+}  // namespace
 
 absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOptions& options) {
   std::unique_ptr<GrpcServer> s(new GrpcServer());
@@ -41,6 +52,10 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
   builder.SetMaxSendMessageSize(options.max_message_bytes);
   // One connection cannot open calls without bound (each Control stream holds a session).
   builder.AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS, options.max_streams_per_connection);
+  // Peers that connect and say nothing, or stop calling, give their descriptors back
+  // (gRPC's own defaults: 120 s for a handshake, no limit for an idle connection).
+  builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, Milliseconds(options.first_message_timeout_s));
+  builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, Milliseconds(options.connection_idle_timeout_s));
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     return absl::UnavailableError(absl::StrCat("could not listen on ", options.address));

@@ -51,6 +51,8 @@ void ServerState::FillLimits(v1::ServerLimits* out) const {
   out->set_max_control_streams(options.max_control_streams);
   out->set_max_stream_answers(options.max_stream_answers);
   out->set_max_streams_per_connection(options.max_streams_per_connection);
+  out->set_first_message_timeout_s(options.first_message_timeout_s);
+  out->set_connection_idle_timeout_s(options.connection_idle_timeout_s);
 }
 
 std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context) {

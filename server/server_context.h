@@ -35,6 +35,8 @@ struct ServerOptions {
   int max_control_streams = 1000;         ///< open Control streams, server-wide
   int max_stream_answers = 16;            ///< answers a Control stream queues before it stops reading
   int max_streams_per_connection = 100;   ///< HTTP/2 concurrent streams (calls) per client connection
+  double first_message_timeout_s = 10.0;  ///< a connection's handshake and a Control stream's first message
+  double connection_idle_timeout_s = 600.0;  ///< a connection without calls this long is closed
   std::string metrics_address;            ///< HTTP /metrics, /healthz, /readyz; empty: none
   TlsFiles tls;                           ///< TLS / mTLS of the gRPC port; none by default
   std::string auth_tokens_file;           ///< bearer tokens (server/token_file.h); empty: none

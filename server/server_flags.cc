@@ -40,6 +40,11 @@ ABSL_FLAG(int, max_stream_answers, 16,
           "(env NUPMPC_MAX_STREAM_ANSWERS)");
 ABSL_FLAG(int, max_streams_per_connection, 100,
           "concurrent calls on one client connection (env NUPMPC_MAX_STREAMS_PER_CONNECTION)");
+ABSL_FLAG(double, first_message_timeout_s, 10,
+          "a new connection's handshake and a new Control stream's first message must arrive within this long, "
+          "else the connection is closed / the stream ended with DEADLINE_EXCEEDED (env NUPMPC_FIRST_MESSAGE_TIMEOUT_S)");
+ABSL_FLAG(double, connection_idle_timeout_s, 600,
+          "close client connections without calls for this long (env NUPMPC_CONNECTION_IDLE_TIMEOUT_S)");
 ABSL_FLAG(std::string, metrics_address, "",
           "HTTP endpoint for operators: GET /metrics (Prometheus text), /healthz, /readyz; HOST:PORT or :PORT "
           "(e.g. :9464); empty: off (env NUPMPC_METRICS_ADDRESS)");
@@ -121,6 +126,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                            "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states",
                            "max_iterations", "grace_period_s", "drain_delay_s", "memory_budget_mb", "max_session_memory_mb",
                            "max_pass_gflop", "max_control_streams", "max_stream_answers", "max_streams_per_connection",
+                           "first_message_timeout_s", "connection_idle_timeout_s",
                            "metrics_address", "tls_cert_file", "tls_key_file", "tls_client_ca_file",
                            "tls_reload_interval_s", "auth_tokens_file", "max_sessions_per_principal",
                            "max_streams_per_principal", "list_all_sessions", "slow_solve_ms", "log_format", "log_level"}) {
@@ -147,6 +153,8 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.max_control_streams = absl::GetFlag(FLAGS_max_control_streams);
   o.max_stream_answers = absl::GetFlag(FLAGS_max_stream_answers);
   o.max_streams_per_connection = absl::GetFlag(FLAGS_max_streams_per_connection);
+  o.first_message_timeout_s = absl::GetFlag(FLAGS_first_message_timeout_s);
+  o.connection_idle_timeout_s = absl::GetFlag(FLAGS_connection_idle_timeout_s);
   o.metrics_address = absl::GetFlag(FLAGS_metrics_address);
   o.tls.cert_file = absl::GetFlag(FLAGS_tls_cert_file);
   o.tls.key_file = absl::GetFlag(FLAGS_tls_key_file);
@@ -182,6 +190,10 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
         RequireAtLeast("max_control_streams", o.max_control_streams, 1),
         RequireAtLeast("max_stream_answers", o.max_stream_answers, 2),
         RequireAtLeast("max_streams_per_connection", o.max_streams_per_connection, 1),
+        RequireAtLeast("first_message_timeout_s", o.first_message_timeout_s, 0.001),
+        RequireAtMost("first_message_timeout_s", o.first_message_timeout_s, 86400.0),
+        RequireAtLeast("connection_idle_timeout_s", o.connection_idle_timeout_s, 0.001),
+        RequireAtMost("connection_idle_timeout_s", o.connection_idle_timeout_s, 1e9),
         RequireAtLeast("tls_reload_interval_s", o.tls.reload_interval_s, 1),
         RequireAtLeast("max_sessions_per_principal", o.max_sessions_per_principal, 0),
         RequireAtLeast("max_streams_per_principal", o.max_streams_per_principal, 0),

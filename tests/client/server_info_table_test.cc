@@ -34,6 +34,8 @@ v1::GetServerInfoResponse Info() {
   }
   info.mutable_limits()->set_worker_threads(2);
   info.mutable_limits()->set_max_message_bytes(64 << 20);
+  info.mutable_limits()->set_first_message_timeout_s(10);
+  info.mutable_limits()->set_connection_idle_timeout_s(600);
   return info;
 }
 
@@ -56,6 +58,8 @@ TEST(ServerInfoTable, AlignedKeysAndReadableValues) {
   EXPECT_THAT(table, HasSubstr("3.0 MiB\n"));
   EXPECT_THAT(table, HasSubstr("64.0 MiB\n"));
   EXPECT_THAT(table, HasSubstr("draining "));
+  EXPECT_THAT(table, ::testing::ContainsRegex("first message within +10 s\n"));
+  EXPECT_THAT(table, ::testing::ContainsRegex("idle connections closed +600 s\n"));
   EXPECT_THAT(table, ::testing::Not(HasSubstr("{")));  // not JSON
 }
 
@@ -64,10 +68,12 @@ TEST(ServerInfoTable, AnOlderServerWithoutCpuBaselineOrSolves) {
   info.clear_cpu_baseline();
   info.clear_solve_latency();
   info.clear_errors_by_code();
+  info.mutable_limits()->clear_first_message_timeout_s();
   const std::string table = ServerInfoTable(info);
   EXPECT_THAT(table, HasSubstr("(not reported)\n"));
   EXPECT_THAT(table, HasSubstr("no solves yet\n"));
   EXPECT_THAT(table, ::testing::ContainsRegex("errors by code +none\n"));
+  EXPECT_THAT(table, ::testing::ContainsRegex("first message within +no limit\n"));  // not reported: 0
 }
 
 }  // namespace

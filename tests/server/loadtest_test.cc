@@ -75,6 +75,43 @@ TEST_F(LoadTest, ClosedLoopLevelAnswersEveryRequestWithoutErrors) {
   EXPECT_LT(r->mean_iterations, 8.0);
 }
 
+TEST_F(LoadTest, NewReferencesMoveEveryOutputsTargetAndChangeThePlan) {
+  const v1::ProblemSpec& spec = workload_.spec;
+  const v1::PriorUpdate first = loadtest::MovingReferences(spec, 1), second = loadtest::MovingReferences(spec, 2);
+  ASSERT_EQ(first.outputs_size(), spec.output_priors_size());
+  EXPECT_EQ(first.inputs_size(), 0);
+  for (int k = 0; k < first.outputs_size(); ++k) {
+    EXPECT_EQ(first.outputs(k).index(), static_cast<std::uint32_t>(k));
+    ASSERT_EQ(first.outputs(k).prior().target_size(), 1);
+    EXPECT_NE(first.outputs(k).prior().target(0), second.outputs(k).prior().target(0));
+    // Everything but the target is the spec's own prior.
+    v1::ComponentPrior rest = first.outputs(k).prior();
+    rest.clear_target();
+    v1::ComponentPrior expected = spec.output_priors(k);
+    expected.clear_target();
+    EXPECT_EQ(rest.SerializeAsString(), expected.SerializeAsString());
+  }
+  // The server takes the update: the same state with moved references gets another plan.
+  absl::StatusOr<v1::CreateSessionResponse> a = client_->CreateSession(spec), b = client_->CreateSession(spec);
+  ASSERT_TRUE(a.ok() && b.ok());
+  v1::Step plain;
+  plain.mutable_state()->Add(workload_.states[0].begin(), workload_.states[0].end());
+  v1::Step moved = plain;
+  *moved.mutable_update() = loadtest::MovingReferences(spec, 40);
+  absl::StatusOr<v1::SolveResult> without = client_->Solve(a->session_id(), plain);
+  absl::StatusOr<v1::SolveResult> with = client_->Solve(b->session_id(), moved);
+  ASSERT_TRUE(without.ok() && with.ok()) << without.status() << with.status();
+  ASSERT_TRUE(without->has_plan() && with->has_plan());
+  EXPECT_NE(without->objective(), with->objective());
+  // And a closed-loop level with them runs without errors.
+  loadtest::LevelConfig config = ShortLevel(2);
+  absl::StatusOr<loadtest::LevelReport> r =
+      loadtest::RunLevel(target_, {&workload_.spec, &workload_.states, /*closed_loop=*/true, /*new_references=*/true}, config);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_TRUE(r->tally.errors.empty());
+  EXPECT_GT(r->tally.latency_ms.size(), 0u);
+}
+
 TEST_F(LoadTest, TransportFloorIsMeasuredOnTheServersHealthService) {
   absl::StatusOr<loadtest::TransportFloor> floor = loadtest::MeasureTransportFloor(target_, 50);
   ASSERT_TRUE(floor.ok()) << floor.status();

@@ -139,6 +139,48 @@ TEST_F(ServiceStreamBoundsTest, OpenControlStreamsHaveAServerWideLimit) {
   EXPECT_TRUE(s2->Finish().ok());
 }
 
+TEST_F(ServiceStreamBoundsTest, AStreamThatNeverSendsItsFirstMessageIsEndedAndGivesItsPlaceBack) {
+  server_->Shutdown();
+  server::ServerOptions options = DefaultOptions();
+  options.max_control_streams = 1;
+  options.first_message_timeout_s = 1.0;
+  StartServer(options);
+  // A silent stream takes the only place: without the timeout it would hold it for ever.
+  grpc::ClientContext silent_context;
+  // Without the server's timeout the client's own deadline ends it (another message).
+  silent_context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  std::unique_ptr<Stream> silent = client_->stub().Control(&silent_context);
+  v1::ControlResponse r;
+  const auto opened = std::chrono::steady_clock::now();
+  EXPECT_FALSE(silent->Read(&r));
+  const grpc::Status ended = silent->Finish();
+  EXPECT_GE(std::chrono::steady_clock::now() - opened, std::chrono::milliseconds(900));
+  EXPECT_EQ(ended.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  EXPECT_THAT(ended.error_message(), HasSubstr("first_message_timeout_s"));
+  // Its place is free again (OnDone may lag the client's Finish), and a stream that sent
+  // its attach at once stays open well past the timeout.
+  ReconnectOptions no_reconnect;
+  no_reconnect.budget = std::chrono::milliseconds(0);
+  absl::StatusOr<std::unique_ptr<Session>> session = absl::UnavailableError("not opened");
+  for (int attempt = 0; attempt < 100 && !session.ok(); ++attempt) {
+    session = client_->OpenSession(DoubleIntegrator(), no_reconnect);
+    if (!session.ok()) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(session.ok()) << session.status();
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  v1::Step step;
+  step.add_state(1.0);
+  step.add_state(0.0);
+  absl::StatusOr<v1::SolveResult> result = (*session)->Step(step);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_TRUE(result->has_plan());
+  EXPECT_EQ((*session)->reconnects(), 0);
+  absl::StatusOr<v1::GetServerInfoResponse> info = client_->GetServerInfo();
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_EQ(info->limits().first_message_timeout_s(), 1.0);
+  EXPECT_EQ(info->errors_by_code().at("DEADLINE_EXCEEDED"), 1u);
+}
+
 TEST_F(ServiceStreamBoundsTest, AResultWithoutAUsablePlanCarriesNoPlanAtAll) {
   grpc::ClientContext context;
   std::unique_ptr<Stream> stream = client_->stub().Control(&context);

@@ -1,0 +1,408 @@
+#!/usr/bin/python3
+"""Fault scenarios against the real nupmpc-server binary (issue 23 §3), each with its own
+server process, a PASS/FAIL line and its figures:
+
+  restart      SIGKILL and restart under 32 live Control streams (nupmpc-scaleout-probe,
+               the client library): every stream re-creates its session, no step fails,
+               and every resent step's plan equals the core's solve of that step's state
+  sigterm      SIGTERM with solves in flight: exit 0, every in-flight request answered
+  slow_reader  a client that sends steps and never reads: the server stops reading it
+               (memory bounded), other streams keep being served
+  idle         1,000 idle connections (half silent TCP, half HTTP/2 without calls) and 500
+               Control streams that never send: all ended by the server's timeouts
+  killed       a client killed mid-solve: the solve is cancelled, the worker free at once
+  slow_loris   connections holding half a gRPC message or half an HTTP/2 frame: ended and
+               closed, others served meanwhile
+
+    tests/soak/faults.py [--quick] [SCENARIO ...]
+
+Exit 1 when any scenario fails. --quick: shorter phases (the ctest Faults.Quick)."""
+
+import argparse
+import asyncio
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from collections import Counter
+
+import grpc
+import grpc.aio
+
+import harness
+import raw_http2
+from harness import nupmpc, pb, percentile
+from nupmpc._proto import pb_grpc
+from nupmpc.security import channel_options
+
+BIN = harness.REPO / "build" / "bin"
+PROBE_BINARY = os.environ.get("NUPMPC_PROBE_BINARY", str(BIN / "nupmpc-scaleout-probe"))
+CLI_BINARY = os.environ.get("NUPMPC_CLI_BINARY", str(BIN / "nupmpc"))
+# The slowest benchmark solve: long enough to signal or kill a client in the middle of it.
+LONG_SOLVE = harness.BENCHMARKS / "random_outbox_M40_K20_L20_N1000_s1.json"
+FIRST_MESSAGE_TIMEOUT_S = 2.0
+CONNECTION_IDLE_TIMEOUT_S = 2.0
+NO_RECONNECT = nupmpc.ReconnectOptions(budget_s=0)
+
+
+class Result:
+    def __init__(self, name):
+        self.name, self.failures, self.figures = name, [], {}
+
+    def check(self, ok, what):
+        if not ok:
+            self.failures.append(what)
+
+    def line(self):
+        return f"{'PASS' if not self.failures else 'FAIL'} {self.name}: {json.dumps(self.figures)}" + \
+            "".join(f"\n  FAIL: {f}" for f in self.failures)
+
+
+def wait_for(condition, timeout_s, every_s=0.02):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(every_s)
+    return condition()
+
+
+class Stepper(threading.Thread):
+    """A well-behaved controller stepping masses_N30 until stopped: its round trips with
+    their start times, and its errors by code."""
+
+    def __init__(self, target):
+        super().__init__(daemon=True)
+        self.target = target
+        self.spec, self.states = harness.masses()
+        self.samples, self.errors = [], Counter()
+        self.stopped = threading.Event()
+
+    def run(self):
+        with nupmpc.connect(self.target) as client:
+            session = client.session(self.spec, reconnect=NO_RECONNECT)
+            t = 0
+            while not self.stopped.is_set():
+                start = time.monotonic()
+                try:
+                    session.step(self.states[t % len(self.states)])
+                    self.samples.append((start, (time.monotonic() - start) * 1e3))
+                except nupmpc.NupmpcError as error:
+                    self.errors[error.code.name] += 1
+                    return
+                t += 1
+            session.close()
+
+    def between(self, start, end):
+        return [ms for t, ms in self.samples if start <= t < end]
+
+    def stop(self):
+        self.stopped.set()
+        self.join(timeout=30)
+
+
+def restart(quick):
+    r = Result("restart")
+    server = harness.Server("--threads", "2")
+    try:
+        duration = 6 if quick else 20
+        probe = subprocess.Popen([PROBE_BINARY, "--server", server.target, "--instance", str(harness.MASSES),
+                                  "--probe", "streams", "--streams", "32",
+                                  "--duration_s", str(duration), "--verify_every", "25"],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        r.check(wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 32, 20), "32 streams never opened")
+        time.sleep(1.0)
+        killed_at = time.monotonic()
+        server.kill()
+        server.start()
+        r.figures["restart_s"] = round(time.monotonic() - killed_at, 3)
+        r.check(wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 32, 30),
+                "the 32 streams did not come back to the new server")
+        out, err = probe.communicate(timeout=duration + 120)
+        if probe.returncode != 0:
+            raise harness.HarnessError(f"nupmpc-scaleout-probe exited with {probe.returncode}: {err[-500:]}")
+        report = json.loads(out)
+        r.figures.update({k: report[k] for k in ("steps", "failed_steps", "no_plan", "reconnects", "longest_outage_s",
+                                                 "verified", "mismatched", "max_plan_difference")})
+        r.figures["sessions_on_new_server"] = server.metric_sum("nupmpc_sessions_created_total")
+        r.check(report["reconnects"] == 32, "not every stream re-created its session exactly once")
+        r.check(report["failed_steps"] == 0, "steps failed")
+        r.check(report["mismatched"] == 0, "a plan differs from the core's solve of its own state (stale)")
+        r.check(report["verified"] >= 32, "fewer checked plans than resent steps")
+    finally:
+        server.stop()
+    return r
+
+
+def sigterm(quick):
+    r = Result("sigterm")
+    server = harness.Server("--threads", "2", "--grace_period_s", "30")
+    spec, states = harness.masses()
+    long_spec = nupmpc.load_instance(LONG_SOLVE).spec
+    one_offs, stream_outcomes = [], Counter()
+    signalled_at = [float("inf")]
+
+    def one_off():
+        with nupmpc.connect(server.target) as client:
+            try:
+                plan = client.solve_once(long_spec)
+                one_offs.append("plan" if plan.has_plan else f"no plan ({plan.status})")
+            except nupmpc.NupmpcError as error:
+                one_offs.append(f"{error.code.name}: {error.details}")
+
+    def stream(index):
+        with nupmpc.connect(server.target) as client:
+            session = client.session(spec, reconnect=NO_RECONNECT)
+            t = index
+            while True:
+                sent_at = time.monotonic()
+                try:
+                    plan = session.step(states[t % len(states)])
+                    in_flight = sent_at < signalled_at[0] < time.monotonic()
+                    stream_outcomes["plans" if not in_flight else "in flight at the signal: plan"] += plan.has_plan
+                except nupmpc.NupmpcError as error:
+                    # The server's own answer to a step sent after the signal is "shutting
+                    # down"; a step in flight at the signal must get its plan; anything
+                    # else is a call the drain broke.
+                    refused = "shutting down" in error.details and sent_at > signalled_at[0]
+                    stream_outcomes["refused after the signal" if refused else f"broken: {error.code.name}: {error.details[:80]} (sent {sent_at - signalled_at[0]:+.3f} s)"] += 1
+                    return
+                t += 1
+
+    try:
+        # Streams first: a session is built on the worker pool, behind the long solves.
+        workers = [threading.Thread(target=stream, args=(i,)) for i in range(8)]
+        for w in workers:
+            w.start()
+        r.check(wait_for(lambda: server.metric_sum("nupmpc_active_sessions") == 8, 30), "the streams never opened")
+        # Three long solves on two workers: every stream's next step waits behind them, so
+        # the pool holds 11 tasks (one per stream, three solves) once all have arrived.
+        workers += [threading.Thread(target=one_off) for _ in range(3)]
+        for w in workers[8:]:
+            w.start()
+        r.check(wait_for(lambda: server.metric_sum("nupmpc_workers_busy") + server.metric_sum("nupmpc_queue_depth") == 11,
+                         30), "the solves and steps never all reached the server")
+        signalled_at[0] = time.monotonic()
+        exit_code = server.terminate(timeout_s=60)
+        r.figures["drain_s"] = round(time.monotonic() - signalled_at[0], 2)
+        for w in workers:
+            w.join(timeout=30)
+        r.figures.update({"exit_code": exit_code, "solve_once": dict(Counter(one_offs)),
+                          "streams": dict(stream_outcomes)})
+        r.check(exit_code == 0, f"exit code {exit_code}")
+        r.check(one_offs.count("plan") == 3, "an in-flight SolveOnce was not answered with its plan")
+        r.check(not any(k.startswith("broken") for k in stream_outcomes), "a stream broke instead of being answered")
+        r.check(stream_outcomes["in flight at the signal: plan"] == 8, "a stream's step in flight was not answered")
+        r.check(stream_outcomes["refused after the signal"] == 8, "not every stream was told the server shuts down")
+    finally:
+        server.stop()
+    return r
+
+
+def slow_reader(quick):
+    r = Result("slow_reader")
+    server = harness.Server("--threads", "2")
+    spec, states = harness.masses()
+    phase_s = 2 if quick else 10
+    others = [Stepper(server.target) for _ in range(4)]
+    stop_writing = threading.Event()
+    written = Counter()
+
+    def requests():
+        yield pb.ControlRequest(sequence=1, spec=spec)
+        t = 2
+        while not stop_writing.is_set():
+            yield pb.ControlRequest(sequence=t, step=pb.Step(state=states[t % len(states)].tolist()))
+            written["steps"] += 1
+            t += 1
+
+    try:
+        for o in others:
+            o.start()
+        time.sleep(phase_s)
+        rss_before = server.rss_bytes()
+        baseline_end = time.monotonic()
+        channel = grpc.insecure_channel(server.target, options=channel_options(None, True))
+        call = pb_grpc.MpcServiceStub(channel).Control(requests())  # its answers are never read
+        rss_max = rss_before
+        while time.monotonic() < baseline_end + phase_s:
+            rss_max = max(rss_max, server.rss_bytes())
+            time.sleep(0.1)
+        held_end = time.monotonic()
+        written_while_held = written["steps"]
+        pauses = server.metric_sum("nupmpc_control_stream_read_pauses_total")
+        for o in others:
+            o.stop()
+        stop_writing.set()
+        call.cancel()
+        channel.close()
+        before = [ms for o in others for ms in o.between(0, baseline_end)]
+        during = [ms for o in others for ms in o.between(baseline_end, held_end)]
+        r.figures.update({
+            "rss_before_mib": round(rss_before / 2**20, 1), "rss_max_while_held_mib": round(rss_max / 2**20, 1),
+            "slow_reader_steps_written": written_while_held, "read_pauses": pauses,
+            "others_steps_before": len(before), "others_steps_during": len(during),
+            "others_p50_ms_before": round(percentile(before, 50), 3), "others_p50_ms_during": round(percentile(during, 50), 3),
+            "others_p99_ms_before": round(percentile(before, 99), 3), "others_p99_ms_during": round(percentile(during, 99), 3),
+            "others_errors": dict(sum((o.errors for o in others), Counter()))})
+        r.check(pauses >= 1, "the server never stopped reading the slow reader")
+        r.check(rss_max - rss_before < 32 * 2**20, "server memory grew by 32 MiB or more while the client did not read")
+        r.check(all(len(o.between(baseline_end, held_end)) > 0 for o in others), "another stream was starved")
+        r.check(not any(o.errors for o in others), "another stream saw an error")
+    finally:
+        server.stop()
+    return r
+
+
+async def silent_streams(target, count, per_connection=100):
+    """`count` Control calls that never send; the code and details each ends with."""
+    channels = [grpc.aio.insecure_channel(target, options=channel_options(None, True))
+                for _ in range((count + per_connection - 1) // per_connection)]
+    calls = [pb_grpc.MpcServiceStub(channels[i // per_connection]).Control() for i in range(count)]
+
+    async def outcome(call):
+        return await call.code(), await call.details()
+    try:
+        return await asyncio.wait_for(asyncio.gather(*(outcome(c) for c in calls)), FIRST_MESSAGE_TIMEOUT_S + 30)
+    finally:
+        for c in channels:
+            await c.close()
+
+
+def timeout_flags():
+    return ("--first_message_timeout_s", str(FIRST_MESSAGE_TIMEOUT_S),
+            "--connection_idle_timeout_s", str(CONNECTION_IDLE_TIMEOUT_S))
+
+
+def idle(quick):
+    r = Result("idle")
+    server = harness.Server("--threads", "2", *timeout_flags())
+    try:
+        fds_before, rss_before = server.open_fds(), server.rss_bytes()
+        tcp = [raw_http2.connect(server.port, handshake=False) for _ in range(500)]
+        h2 = [raw_http2.connect(server.port, handshake=True) for _ in range(500)]
+        outcomes = []
+        streams = threading.Thread(target=lambda: outcomes.extend(asyncio.run(silent_streams(server.target, 500))))
+        streams.start()
+        opened = wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 500, FIRST_MESSAGE_TIMEOUT_S)
+        fds_held, rss_held = server.open_fds(), server.rss_bytes()
+        served = Stepper(server.target)
+        served.start()
+        closed, last_close_s = raw_http2.closed_by_peer(tcp + h2, FIRST_MESSAGE_TIMEOUT_S + CONNECTION_IDLE_TIMEOUT_S + 15)
+        streams.join(timeout=60)
+        served.stop()
+        for s in tcp + h2:
+            s.close()
+        wait_for(lambda: server.open_fds() <= fds_before + 10, 10)
+        codes = Counter(code.name for code, _ in outcomes)
+        r.figures.update({
+            "fds_before": fds_before, "fds_held": fds_held, "fds_after": server.open_fds(),
+            "rss_before_mib": round(rss_before / 2**20, 1), "rss_held_mib": round(rss_held / 2**20, 1),
+            "rss_after_mib": round(server.rss_bytes() / 2**20, 1), "connections_closed_by_server": closed,
+            "last_closed_after_s": round(last_close_s, 2), "silent_streams_open_at_once": opened,
+            "silent_stream_endings": dict(codes), "other_client_steps": len(served.samples),
+            "other_client_errors": dict(served.errors)})
+        r.check(closed == 1000, f"only {closed} of 1000 idle connections were closed by the server")
+        r.check(codes["DEADLINE_EXCEEDED"] == 500 and all("first_message_timeout_s" in d for _, d in outcomes),
+                "not every silent stream was ended naming first_message_timeout_s")
+        r.check(server.open_fds() <= fds_before + 10, "file descriptors were not given back")
+        r.check(len(served.samples) > 0 and not served.errors, "a well-behaved client was not served meanwhile")
+    finally:
+        server.stop()
+    return r
+
+
+def killed(quick):
+    r = Result("killed")
+    server = harness.Server("--threads", "1")  # one worker: a stuck one would block the next solve
+    try:
+        with nupmpc.connect(server.target) as client:
+            full_ms = client.solve_once(nupmpc.load_instance(LONG_SOLVE).spec).solve_ms
+            victim = subprocess.Popen([CLI_BINARY, "--server", server.target, "solve", str(LONG_SOLVE)],
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            r.check(wait_for(lambda: server.metric_sum("nupmpc_workers_busy") == 1, 30), "the victim's solve never started")
+            victim.kill()
+            victim.wait()
+            killed_at = time.monotonic()
+            spec, _ = harness.masses()
+            next_plan = client.solve_once(spec)
+            next_round_trip_ms = (time.monotonic() - killed_at) * 1e3
+            cancelled = server.metric_sum("nupmpc_solves_total", status="cancelled")
+        r.figures.update({"uncancelled_solve_ms": round(full_ms, 1), "next_solve_round_trip_ms": round(next_round_trip_ms, 1),
+                          "cancelled_solves": cancelled, "next_has_plan": next_plan.has_plan})
+        r.check(cancelled == 1, "the killed client's solve was not cancelled")
+        r.check(next_plan.has_plan, "the next solve has no plan")
+        r.check(next_round_trip_ms < 0.5 * full_ms, "the next solve waited for the killed client's solve")
+    finally:
+        server.stop()
+    return r
+
+
+def slow_loris(quick):
+    r = Result("slow_loris")
+    server = harness.Server("--threads", "2", *timeout_flags())
+    try:
+        fds_before = server.open_fds()
+        held = []
+        for i in range(100):
+            s = raw_http2.connect(server.port)
+            raw_http2.open_stream(s, 1, server.port)
+            if i % 2 == 0:
+                raw_http2.send_partial_message(s, 1)
+            else:
+                raw_http2.send_partial_frame(s, 1)
+            held.append(s)
+        wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 100, FIRST_MESSAGE_TIMEOUT_S)
+        streams_held = server.metric_sum("nupmpc_control_streams")
+        fds_held = server.open_fds()
+        served = Stepper(server.target)
+        served.start()
+        closed, last_close_s = raw_http2.closed_by_peer(held, FIRST_MESSAGE_TIMEOUT_S + CONNECTION_IDLE_TIMEOUT_S + 15)
+        served.stop()
+        for s in held:
+            s.close()
+        ended = server.metric_sum("nupmpc_rpc_errors_total", method="Control", code="DEADLINE_EXCEEDED")
+        r.figures.update({"streams_held": streams_held, "fds_before": fds_before, "fds_held": fds_held,
+                          "streams_ended_deadline_exceeded": ended, "connections_closed_by_server": closed,
+                          "last_closed_after_s": round(last_close_s, 2), "other_client_steps": len(served.samples),
+                          "other_client_p50_ms": round(percentile([ms for _, ms in served.samples], 50), 3),
+                          "other_client_errors": dict(served.errors)})
+        r.check(closed == 100, f"only {closed} of 100 slow-loris connections were closed by the server")
+        r.check(ended == 100, "not every held stream was ended by the first-message timeout")
+        r.check(len(served.samples) > 0 and not served.errors, "a well-behaved client was not served meanwhile")
+    finally:
+        server.stop()
+    return r
+
+
+SCENARIOS = {"restart": restart, "sigterm": sigterm, "slow_reader": slow_reader, "idle": idle, "killed": killed,
+             "slow_loris": slow_loris}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="shorter phases (the ctest)")
+    parser.add_argument("scenarios", nargs="*", help=f"of {', '.join(SCENARIOS)} (default: all)")
+    args = parser.parse_args()
+    unknown = [n for n in args.scenarios if n not in SCENARIOS]
+    if unknown:
+        parser.error(f"unknown scenario {unknown[0]}: one of {', '.join(SCENARIOS)}")
+    failed = 0
+    for name in args.scenarios or SCENARIOS:
+        started = time.monotonic()
+        try:
+            result = SCENARIOS[name](args.quick)
+        except Exception as error:  # a scenario that cannot run is a failed one, with its reason
+            result = Result(name)
+            result.check(False, f"{type(error).__name__}: {error}")
+        result.figures["scenario_s"] = round(time.monotonic() - started, 1)
+        print(result.line(), flush=True)
+        failed += bool(result.failures)
+    print(f"faults: {'FAIL' if failed else 'PASS'} ({failed} failed)")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
