@@ -16,9 +16,10 @@ enum class SolveStatus {
   kTimeLimit,       ///< wall-time limit reached
   kNumericalError,  ///< a non-finite number appeared; the last finite iterate is returned
   kCancelled,       ///< the cancel flag was raised
-  // The hard output bounds were not met: the plan minimises J + slope·(distance outside
-  // them) within the input bounds (SolverOptions.elastic_slope); max_violation says by
-  // how much.
+  // The hard bounds cannot all be met. With SolverOptions.elastic_slope the plan minimises
+  // J + slope·(distance outside the output bounds) within the input bounds; without it the
+  // loop's multipliers showed an empty constraint set (core/session/infeasibility.h) and
+  // the plan is its iterate closest to the bounds. max_violation says by how much.
   kInfeasible,
 };
 const char* SolveStatusName(SolveStatus status);

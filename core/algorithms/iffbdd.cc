@@ -263,6 +263,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   xt.setZero();
   int changed = 0;
   double residual = 0.0;
+  double largest_dual = 0.0;
   // A step of this pass is cheap (Aᵀx̃ and one dot product per row): its own interval.
   const double rows_per_step = static_cast<double>(g.num_rows()) / (g.N + 1);
   StopPoll stop(interrupt_, interrupt_ != nullptr ? interrupt_->IntervalFor(2.0 * M * (M + rows_per_step + g.L)) : 1);
@@ -282,6 +283,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
         const Decision d = Decide(prior, prior.slope, msg);
         y_dual = (m_e - d.z) / V_e;  // Moreau: the exact dual decision
         if (prior.kind != PriorKind::kNone) {
+          largest_dual = std::max(largest_dual, std::abs(y_dual));
           if (d.region != region_[r]) ++changed;
           region_[r] = d.region;
           gamma_[r] = std::max(gamma_[r], GammaNext(prior, FoldGaussianPart(prior, msg)));
@@ -321,6 +323,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   scratch_.noalias() -= g.V0 * xt;
   out->x0 = scratch_.head(g.base_M);
   has_duals_ = true;
+  if (pass == Pass::kIterate) largest_dual_ = largest_dual;
   return pass == Pass::kIterate ? changed : residual;
 }
 

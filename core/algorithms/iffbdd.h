@@ -56,6 +56,7 @@ class Iffbdd final : public ActiveSetIteration {
   void AdoptCarriedRegionsForPolish() override;
   void AcceptPolishRegions() override;
   bool NextPolishSolvesInputsOnly() const override { return input_polish_ && OutputConstraintsInside(); }
+  double largest_dual() const override { return largest_dual_; }
   void ReleaseWorkspace() override;
   void AcquireWorkspace(const Problem& problem) override;
 
@@ -91,6 +92,7 @@ class Iffbdd final : public ActiveSetIteration {
   Eigen::VectorXd row_dual_;      ///< R
   std::vector<int> row_step_;     ///< the step n of each row
   bool has_duals_ = false;
+  double largest_dual_ = 0.0;  ///< max |ỹ| over the constrained rows of the last Iterate()
   bool decide_forward_next_ = false;
   // The warm polish on the input sub-problem (used when some input is constrained and every
   // output prior is a box or half-space), its regions of the input scalars (n·L + l), and

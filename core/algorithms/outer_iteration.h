@@ -84,6 +84,10 @@ class OuterIteration {
   virtual bool NextPolishSolvesInputsOnly() const { return false; }
   // How many scalars the active set covers (0 when the algorithm tracks none).
   virtual int decided_scalars() const { return 0; }
+  // Dual methods (IFFBDD): the largest |multiplier| of a constrained row in the last
+  // Iterate(). An empty constraint set makes the dual unbounded: this grows without bound
+  // while the violation does not fall (core/session/infeasibility.h). 0 for the others.
+  virtual double largest_dual() const { return 0.0; }
 
   // The algorithm's input pins (InputPinning), or null if it has none.
   virtual InputPinning* input_pinning() { return nullptr; }

@@ -91,6 +91,7 @@ absl::Status Session::Rebuild() {
   current_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   candidate_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   best_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
+  least_violation_.Resize(problem_.num_states, problem_.num_inputs, problem_.horizon);
   has_warm_state_ = false;
   DerivePriorFlags();
   return absl::OkStatus();
@@ -213,7 +214,9 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
     summary.has_plan = false;
   } else {
     summary = RunLoop(hard_limits, warm);
-    if (elastic_possible && summary.status == SolveStatus::kIterationLimit &&
+    // An empty constraint set found by the hard loop goes to the elastic form at once.
+    const bool unsolved = summary.status == SolveStatus::kIterationLimit || summary.status == SolveStatus::kInfeasible;
+    if (elastic_possible && unsolved &&
         summary.max_violation > options_.violation_tolerance * evaluator_.bound_scale()) {
       Hooks hooks(this);
       elastic_.Continue(&hooks, interrupt_, limits, max_iterations,
@@ -235,8 +238,10 @@ absl::StatusOr<SolveSummary> Session::Solve(const SolveLimits& limits, Solution*
   summary.warm_started = warm;
   summary.algorithm = algorithm_->algorithm();
   // The elastic fallback's carried state belongs to the elastic problem, not this one; an
-  // interrupted pass may have left the carried state half updated.
-  has_warm_state_ = summary.status != SolveStatus::kNumericalError && !summary.elastic && !pass_interrupted_;
+  // interrupted pass may have left the carried state half updated; an infeasible problem's
+  // multipliers grew without bound.
+  has_warm_state_ = summary.status != SolveStatus::kNumericalError && summary.status != SolveStatus::kInfeasible &&
+                    !summary.elastic && !pass_interrupted_;
   if (!has_warm_state_) algorithm_->ColdStart();
   algorithm_->set_interrupt(nullptr);
   interrupt_ = nullptr;
@@ -269,6 +274,10 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   SolveSummary summary;
   summary.status = SolveStatus::kIterationLimit;
   bool have_finite = false;  ///< best_ holds a complete, finite iterate of this loop
+  // The plain iterate of this loop closest to the bounds, returned if the loop finds them
+  // contradictory (the last iterate has then diverged with the multipliers).
+  double least_violation = kInfinity, least_violation_objective = 0.0;
+  infeasibility_.Start();
 
   const auto stop_requested = [&]() { return StopNow(interrupt_, &summary); };
 
@@ -360,6 +369,19 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
         std::abs(r.objective - previous_objective) <= options_.objective_tolerance * std::abs(r.objective);
     if (objective_settled && r.max_violation <= violation_tolerance) {
       summary.status = SolveStatus::kConverged;
+      break;
+    }
+    if (r.max_violation <= least_violation) {  // ties: the later, further converged one
+      least_violation = r.max_violation;
+      least_violation_objective = r.objective;
+      least_violation_.x0 = best_.x0;  // same sizes: no allocation
+      least_violation_.u = best_.u;
+    }
+    if (infeasibility_.Observe(algorithm_->largest_dual(), r.max_violation, objective_settled, violation_tolerance)) {
+      std::swap(best_, least_violation_);
+      summary.objective = least_violation_objective;
+      summary.max_violation = least_violation;
+      summary.status = SolveStatus::kInfeasible;
       break;
     }
     previous_objective = r.objective;

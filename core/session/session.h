@@ -13,6 +13,7 @@
 #include "core/options.h"
 #include "core/problem.h"
 #include "core/session/elastic.h"
+#include "core/session/infeasibility.h"
 #include "core/session/mpc_session.h"
 #include "core/solution.h"
 
@@ -93,6 +94,8 @@ class Session final : public MpcSession {
   std::unique_ptr<OuterIteration> algorithm_;
   ObjectiveEvaluator evaluator_;
   PrimalIterate current_, candidate_, best_;
+  PrimalIterate least_violation_;      ///< RunLoop: its plain iterate closest to the bounds
+  InfeasibilityWatch infeasibility_;  ///< RunLoop: whether its passes show no feasible point
   bool has_warm_state_ = false;
   bool has_binary_inputs_ = false;     ///< derived from problem_ whenever it is replaced
   bool has_nonconvex_priors_ = false;  ///< likewise

@@ -57,15 +57,16 @@ TEST(Elastic, AnInfeasibleProblemEndsPromptlyWithTheLeastPenaltyPlan) {
   for (int n = 1; n <= kHorizon; ++n) EXPECT_NEAR(plan.outputs(n, 0), 5.0 - kInputLimit * n, 1e-9) << n;
 }
 
-TEST(Elastic, WithoutItTheSameProblemRunsToTheIterationLimit) {
+TEST(Elastic, WithoutItTheSameProblemIsFoundInfeasibleByItsMultipliers) {
   SolverOptions options;
   options.max_iterations = 1000;
   auto session = Session::Create(Integrator(5.0), options);
   ASSERT_TRUE(session.ok());
   auto summary = (*session)->Solve(nullptr);
   ASSERT_TRUE(summary.ok());
-  EXPECT_EQ(summary->status, SolveStatus::kIterationLimit);
-  EXPECT_EQ(summary->iterations, 1000);
+  // core/session/infeasibility.h: the hard problem's duals diverge; no penalty plan.
+  EXPECT_EQ(summary->status, SolveStatus::kInfeasible);
+  EXPECT_LT(summary->iterations, 1000);
   EXPECT_FALSE(summary->elastic);
 }
 
