@@ -20,6 +20,9 @@ v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& st
   return r;
 }
 
+// The hand-over address of the first-message alarms' callbacks (server/grpc_handover.h).
+const char kFirstMessageAlarms = 0;
+
 }  // namespace
 
 ControlStream* ControlStream::Start(ServerState* state, grpc::CallbackServerContext* context) {
@@ -52,16 +55,18 @@ void ControlStream::Begin() {
   counted_for_principal_ = true;
   const auto timeout = std::chrono::duration_cast<std::chrono::system_clock::duration>(
       std::chrono::duration<double>(state_->options.first_message_timeout_s));
-  HandToGrpc(this);  // the alarm's callback runs on one of gRPC's threads
-  first_message_timer_.Set(std::chrono::system_clock::now() + timeout,
-                           [weak = weak_from_this()](bool fired) {
-                             if (const std::shared_ptr<ControlStream> self = weak.lock()) self->OnFirstMessageTimeout(fired);
-                           });
+  // The callback runs on one of gRPC's threads, after Set. For TSan: handed over through one
+  // address for all streams, as the callback cannot read its captures before it has taken
+  // them over (and the stream may be gone).
+  first_message_timer_.Set(std::chrono::system_clock::now() + timeout, [weak = weak_from_this()](bool fired) {
+    TakeFromGrpc(&kFirstMessageAlarms);
+    if (const std::shared_ptr<ControlStream> self = weak.lock()) self->OnFirstMessageTimeout(fired);
+  });
+  HandToGrpc(&kFirstMessageAlarms);
   ReadNext();
 }
 
 void ControlStream::OnFirstMessageTimeout(bool fired) {
-  TakeFromGrpc(this);
   if (!fired) return;
   {
     std::lock_guard<std::mutex> lock(mu_);

@@ -82,7 +82,13 @@ TEST(SessionStrand, WaitingTasksHoldNoWorkerAndRunInOrder) {
       << "a task waiting for its session held the other worker";
 
   release_first.set_value();
-  for (int spin = 0; spin < 1000 && strand->waiting() > 0; ++spin) std::this_thread::sleep_for(1ms);
+  // Until every task has run (waiting() falls to 0 as the last one leaves the strand, before
+  // it has run; the pool's shutdown does not wait for what it has not started).
+  const auto recorded = [&] {
+    std::lock_guard<std::mutex> lock(order_mu);
+    return order.size();
+  };
+  for (int spin = 0; spin < 10000 && recorded() < 4; ++spin) std::this_thread::sleep_for(1ms);
   pool.Shutdown();
   EXPECT_EQ(order, (std::vector<int>{0, 1, 2, 3}));
   EXPECT_EQ(most_running.load(), 1);
