@@ -10,6 +10,7 @@
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/instances/benchmark_instance.h"
+#include "tests/util/bounded_integrator.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::core {
@@ -19,18 +20,7 @@ constexpr int kHorizon = 20;
 constexpr double kInputLimit = 0.1;
 constexpr int kCap = 5000;
 
-// x[n+1] = x[n] + u[n], |u| ≤ 0.1, y = x in [0, 1] for n ≥ 1: feasible iff x0 ≤ 1.1, and
-// any plan misses the bound at step 1 by at least x0 - 1.1.
-Problem Integrator(double x0) {
-  Problem p = Problem::TimeInvariant(1, 1, 1, kHorizon);
-  p.A[0] << 1;
-  p.B[0] << 1;
-  p.C[0] << 1;
-  p.initial_mean = Eigen::VectorXd::Constant(1, x0);
-  for (ScalarPrior& prior : p.input_priors) prior = ScalarPrior::Box(-kInputLimit, kInputLimit).WithGaussian(0, 1);
-  for (int n = 1; n <= kHorizon; ++n) p.mutable_output_prior(n, 0) = ScalarPrior::Box(0, 1).WithGaussian(0.5, 1);
-  return p;
-}
+Problem Integrator(double x0) { return testing::BoundedIntegrator(x0, kHorizon, kInputLimit); }
 
 SolverOptions Capped() {
   SolverOptions options;
