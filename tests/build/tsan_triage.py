@@ -27,10 +27,11 @@ PASS_THROUGH = ("/include/c++/", "/usr/include/absl/", "<null>")
 
 # (name, reason, pattern of the attributed frame): a race is dismissed when both of its
 # accesses are attributed to third-party code (counted under the first access's rule).
+GRPC_HEADERS = re.compile(r"/usr/include/grpc(pp)?/")
 THIRD_PARTY = [
     ("grpc", "gRPC's inline callback and call-operation code (/usr/include/grpcpp) handing a call "
      "between libgrpc's threads through libgrpc's uninstrumented synchronisation",
-     re.compile(r"/usr/include/grpc(pp)?/")),
+     GRPC_HEADERS),
     ("protobuf", "messages gRPC parses and serialises on its threads (protobuf's headers and the "
      "generated code), handed over by libgrpc",
      re.compile(r"/usr/include/google/protobuf/|\.pb\.(cc|h):")),
@@ -69,7 +70,7 @@ def rule_of(kind, stacks):
     if kind not in RACE_KINDS or len(stacks) != 2:
         return None
     frames = [attributed(s) for s in stacks]
-    if kind.startswith("data race on vptr") and THIRD_PARTY[0][2].search(frames[0]) and CONSTRUCTOR.search(frames[1]):
+    if kind.startswith("data race on vptr") and GRPC_HEADERS.search(frames[0]) and CONSTRUCTOR.search(frames[1]):
         return REACTOR_DISPATCH[0]
     names = []
     for frame in frames:
