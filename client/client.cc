@@ -95,6 +95,10 @@ absl::StatusOr<v1::SolveResult> Client::Solve(const std::string& session_id, con
   return std::move(*response->mutable_result());
 }
 
+absl::StatusOr<v1::SolveFleetResponse> Client::SolveFleet(const v1::SolveFleetRequest& request) {
+  return Unary(&v1::MpcService::Stub::SolveFleet, request);
+}
+
 absl::StatusOr<v1::FitGpModelResponse> Client::FitGpModel(const v1::FitGpModelRequest& request) {
   return Unary(&v1::MpcService::Stub::FitGpModel, request);
 }

@@ -67,6 +67,10 @@ class Client {
   // (client/session_routing.h). AddressedSession adds failover on top.
   absl::StatusOr<v1::CreateSessionResponse> CreateSession(const v1::ProblemSpec& spec, std::string session_id = {});
   absl::StatusOr<v1::SolveResult> Solve(const std::string& session_id, const v1::Step& step);
+  // Steps many sessions in one call (SolveFleetRequest): one answer per step, in order, each
+  // a result or an error of its own. Not routed by session: all of them must live on the
+  // replica this client reaches.
+  absl::StatusOr<v1::SolveFleetResponse> SolveFleet(const v1::SolveFleetRequest& request);
   absl::StatusOr<v1::GetServerInfoResponse> GetServerInfo();
   absl::StatusOr<v1::FitGpModelResponse> FitGpModel(const v1::FitGpModelRequest& request);
   absl::StatusOr<v1::SessionInfo> GetSession(const std::string& session_id);

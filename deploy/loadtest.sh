@@ -1,24 +1,41 @@
 #!/usr/bin/env bash
 # The load-test figures of the service: builds, starts nupmpc-server in the background on
-# this machine, and runs nupmpc-loadtest against it (server and load generator share the
-# machine's cores: say so when you quote the figures):
-#   1. closed loop, concurrency 1, 2, 8, 64 (masses_N30 closed-loop states), each level also
-#      against the zero-work echo and the inline-solve echo (peers in child processes);
-#   2. overload: masses_N300 (a few ms per solve, so the generator can offer 10x what
+# this machine, pinned to its own CPUs, and runs nupmpc-loadtest against it from the others:
+#   1. closed loop, concurrency 1, 2, 8, 64 on masses_N30 (transport-bound, solve ~0.1 ms),
+#      with new references every step at 1 and 8, and masses_N300 (solver-bound) at 1, 2,
+#      8; every level also against the zero-work echo and the inline-solve echo (peers in
+#      child processes pinned to the server's CPUs), with the ratios nupmpc/inline;
+#   2. the fleet path: 100 masses_N30 sessions per SolveFleet call against 100 streams;
+#   3. overload: masses_N300 (a few ms per solve, so the generator can offer 10x what
 #      the server can solve), open loop at 10x the core-alone capacity, then at half of
 #      it (recovery), against a server that refuses work it could not start within 20 ms;
-#   3. 10,000 idle sessions: server RSS with them, compacted, and after they are closed.
+#   4. 10,000 idle sessions: server RSS with them, compacted, and after they are closed.
+# Pinning: on a machine with 3 or more CPUs, the server gets CPUs 0-1 (two workers, as
+# designed) and the generator the rest; on 2 CPUs, the server CPU 0 with one worker and
+# the generator CPU 1; on 1 CPU, nothing is pinned. NUPMPC_SERVER_CPUS / NUPMPC_CLIENT_CPUS
+# / NUPMPC_THREADS override.
 # Extra arguments go to every nupmpc-loadtest call (e.g. --json, --duration_s 10).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 deploy/build.sh
 benchmarks="${NUPMPC_BENCHMARKS:-../shared/benchmarks}"
 address="${NUPMPC_ADDRESS:-127.0.0.1:50052}"
+cpus=$(nproc)
+if [ "$cpus" -ge 3 ]; then
+  server_cpus=${NUPMPC_SERVER_CPUS:-0-1} client_cpus=${NUPMPC_CLIENT_CPUS:-2-$((cpus - 1))} threads=${NUPMPC_THREADS:-2}
+elif [ "$cpus" -eq 2 ]; then
+  server_cpus=${NUPMPC_SERVER_CPUS:-0} client_cpus=${NUPMPC_CLIENT_CPUS:-1} threads=${NUPMPC_THREADS:-1}
+else
+  server_cpus=${NUPMPC_SERVER_CPUS:-} client_cpus=${NUPMPC_CLIENT_CPUS:-} threads=${NUPMPC_THREADS:-2}
+fi
+pin=()
+[ -n "$server_cpus" ] && pin=(taskset -c "$server_cpus")
+echo "CPUs: server ${server_cpus:-all} (--threads $threads), load generator ${client_cpus:-all} (of $cpus)"
 
 server_pid=""
 trap '[ -n "$server_pid" ] && kill -TERM "$server_pid" 2>/dev/null || true' EXIT
 start_server() {  # flags for nupmpc-server
-  build/bin/nupmpc-server --address "$address" --log_level warn "$@" &
+  "${pin[@]}" build/bin/nupmpc-server --address "$address" --threads "$threads" --log_level warn "$@" &
   server_pid=$!
   for _ in $(seq 100); do
     build/bin/nupmpc --server "$address" info >/dev/null 2>&1 && return
@@ -33,10 +50,16 @@ stop_server() {
   server_pid=""
 }
 
-loadtest=(build/bin/nupmpc-loadtest --server "$address" "$@")
+loadtest=(build/bin/nupmpc-loadtest --server "$address" --server_cpus "$server_cpus" --client_cpus "$client_cpus" "$@")
 start_server
-echo "== closed loop, masses_N30"
+echo "== closed loop, masses_N30 (transport-bound)"
 "${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --sweep 1,2,8,64 --inline_solve
+echo "== closed loop, masses_N30, new references every step"
+"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --sweep 1,8 --inline_solve --new_references
+echo "== closed loop, masses_N300 (solver-bound)"
+"${loadtest[@]}" --instance "$benchmarks/masses_N300.json" --sweep 1,2,8 --inline_solve
+echo "== fleet: 100 masses_N30 sessions per SolveFleet call, then 100 separate Control streams"
+"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --fleet 100 --echo=false
 echo "== memory: 10,000 idle masses_N30 sessions"
 "${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --idle_sessions 10000
 stop_server

@@ -17,7 +17,8 @@ absl::Status Errno(const std::string& what) { return absl::InternalError(absl::S
 
 }  // namespace
 
-absl::StatusOr<std::unique_ptr<EchoProcess>> EchoProcess::Spawn(const std::vector<std::string>& argv) {
+absl::StatusOr<std::unique_ptr<EchoProcess>> EchoProcess::Spawn(const std::vector<std::string>& argv,
+                                                                 const cpu_set_t* cpus) {
   int to_child[2], from_child[2];
   if (pipe(to_child) != 0) return Errno("pipe");
   if (pipe(from_child) != 0) {
@@ -38,6 +39,7 @@ absl::StatusOr<std::unique_ptr<EchoProcess>> EchoProcess::Spawn(const std::vecto
     dup2(to_child[0], STDIN_FILENO);
     dup2(from_child[1], STDOUT_FILENO);
     for (const int fd : {to_child[0], to_child[1], from_child[0], from_child[1]}) close(fd);
+    if (cpus != nullptr && sched_setaffinity(0, sizeof(*cpus), cpus) != 0) _exit(126);
     execv(args[0], args.data());
     _exit(127);
   }

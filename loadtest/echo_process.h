@@ -7,6 +7,7 @@
 // in-process against 155-166 µs as a process of its own). A peer for nupmpc-server is
 // therefore a process, as the server is.
 
+#include <sched.h>
 #include <sys/types.h>
 
 #include <memory>
@@ -20,8 +21,10 @@ namespace nupmpc::loadtest {
 class EchoProcess {
  public:
   // Runs `argv` (argv[0] the executable), which must print the echo's host:port on its
-  // first line of stdout and serve until its stdin closes.
-  static absl::StatusOr<std::unique_ptr<EchoProcess>> Spawn(const std::vector<std::string>& argv);
+  // first line of stdout and serve until its stdin closes; on `cpus` when given (the CPUs
+  // the server under test has, so that the peer is measured on the same cores).
+  static absl::StatusOr<std::unique_ptr<EchoProcess>> Spawn(const std::vector<std::string>& argv,
+                                                            const cpu_set_t* cpus = nullptr);
   // Closes the child's stdin and waits for it to exit.
   ~EchoProcess();
 

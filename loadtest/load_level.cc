@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <memory>
+#include <numeric>
 #include <random>
 #include <thread>
 #include <vector>
@@ -106,7 +107,18 @@ absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan
 
   LevelReport report;
   report.config = config;
-  for (auto& s : streams) report.tally.MergeFrom(s->TakeTally());
+  std::vector<double> answered;
+  for (auto& s : streams) {
+    StreamTally tally = s->TakeTally();
+    answered.push_back(static_cast<double>(tally.latency_ms.size()));
+    report.tally.MergeFrom(tally);
+  }
+  const double mean_answered =
+      std::accumulate(answered.begin(), answered.end(), 0.0) / static_cast<double>(std::max<std::size_t>(1, answered.size()));
+  if (mean_answered > 0.0) {
+    report.stream_min_share = *std::min_element(answered.begin(), answered.end()) / mean_answered;
+    report.stream_max_share = *std::max_element(answered.begin(), answered.end()) / mean_answered;
+  }
   report.measured_s = std::max(1e-9, Seconds(std::min(stopped_at, end) - measure_from));
   StreamTally& t = report.tally;
   report.solves_per_s = static_cast<double>(t.latency_ms.size()) / report.measured_s;

@@ -35,6 +35,9 @@ struct LevelReport {
   double service_p50_ms = 0.0, service_p99_ms = 0.0;  ///< from the hand-over to gRPC
   double solve_p50_ms = 0.0;  ///< the server's own solver time, median
   double mean_iterations = 0.0;
+  // Answered solves of the least and the most served stream over the mean of all streams
+  // (1 and 1 when every stream got the same): how evenly the server shared its cores.
+  double stream_min_share = 0.0, stream_max_share = 0.0;
   // The same level against the zero-work echo server (EchoControlServer), and against the
   // echo busy for the core's median solve time in its reaction, when run.
   std::shared_ptr<const LevelReport> echo, inline_solve;

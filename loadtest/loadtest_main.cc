@@ -8,11 +8,13 @@
 //
 // Every stream creates its own session from the instance and cycles through the
 // instance's recorded closed-loop states (or, for a file without them, its initial state).
+#include <sched.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -31,6 +33,7 @@
 #include "loadtest/load_level.h"
 #include "loadtest/loadtest_report.h"
 #include "loadtest/transport_floor.h"
+#include "server/cpu_affinity.h"
 
 ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
 ABSL_FLAG(std::string, instance, "../shared/benchmarks/masses_N30.json",
@@ -54,6 +57,14 @@ ABSL_FLAG(double, serve_echo_busy_us, -1.0,
           "internal: run as the echo peer's child process, busy this long per step (>= 0), until stdin closes");
 ABSL_FLAG(bool, new_references, false,
           "every step also sends new output references (the instance's output priors with a moving target)");
+ABSL_FLAG(std::string, server_cpus, "",
+          "CPU list (e.g. 0) of the server under test: the echo peers and the core-alone baseline run there, so all "
+          "are measured on the same cores (start nupmpc-server with taskset -c on the same list); empty: not pinned");
+ABSL_FLAG(std::string, client_cpus, "",
+          "CPU list (e.g. 1) this load generator runs on, apart from the server's; empty: wherever it may");
+ABSL_FLAG(int, fleet, 0,
+          "fleet mode: step this many sessions per SolveFleet call (closed loop), then the same number of "
+          "separate Control streams, and compare");
 ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
 ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
 ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
@@ -119,9 +130,41 @@ int ServeEcho(const std::string& target, const nupmpc::ChannelSecurity& security
 
 }  // namespace
 
+// --client_cpus for this process (before any thread is started: they inherit it) and the
+// set of --server_cpus (nullopt when not given).
+absl::StatusOr<std::optional<cpu_set_t>> PinProcess() {
+  if (const std::string client = absl::GetFlag(FLAGS_client_cpus); !client.empty()) {
+    absl::StatusOr<cpu_set_t> set = nupmpc::server::ParseCpuList(client);
+    if (!set.ok()) return set.status();
+    if (absl::Status pinned = nupmpc::server::PinCallingThread(*set); !pinned.ok()) return pinned;
+  }
+  const std::string server = absl::GetFlag(FLAGS_server_cpus);
+  if (server.empty()) return std::nullopt;
+  absl::StatusOr<cpu_set_t> set = nupmpc::server::ParseCpuList(server);
+  if (!set.ok()) return set.status();
+  return *set;
+}
+
+// Runs `measure` on `cpus` (when given), then back on this thread's CPUs.
+template <typename Measure>
+auto MeasuredOn(const std::optional<cpu_set_t>& cpus, Measure measure) -> decltype(measure()) {
+  cpu_set_t own;
+  CPU_ZERO(&own);
+  if (!cpus.has_value() || sched_getaffinity(0, sizeof(own), &own) != 0 ||
+      !nupmpc::server::PinCallingThread(*cpus).ok()) {
+    return measure();
+  }
+  auto result = measure();
+  (void)nupmpc::server::PinCallingThread(own);
+  return result;
+}
+
 int main(int argc, char** argv) {
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
   nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
+  const absl::StatusOr<std::optional<cpu_set_t>> server_cpus = PinProcess();
+  if (!server_cpus.ok()) return Fail("--server_cpus/--client_cpus", server_cpus.status());
+  const std::string generator_cpus = nupmpc::server::CallingThreadCpuList();
   const std::string target = absl::GetFlag(FLAGS_server);
   const std::string instance_path = absl::GetFlag(FLAGS_instance);
   absl::StatusOr<nupmpc::ProblemFile> file = nupmpc::LoadProblemFile(instance_path);
@@ -160,8 +203,9 @@ int main(int argc, char** argv) {
   absl::StatusOr<nupmpc::v1::GetServerInfoResponse> info = (*client)->GetServerInfo();
   if (!info.ok()) return Fail(absl::StrCat("server ", target), info.status());
 
-  absl::StatusOr<lt::CoreBaseline> baseline =
-      lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, absl::GetFlag(FLAGS_baseline_rounds));
+  absl::StatusOr<lt::CoreBaseline> baseline = MeasuredOn(*server_cpus, [&] {
+    return lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, absl::GetFlag(FLAGS_baseline_rounds));
+  });
   if (!baseline.ok()) return Fail("core baseline", baseline.status());
   const double capacity_per_s = info->limits().worker_threads() / (baseline->median_ms * 1e-3);
 
@@ -176,7 +220,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> args = {self, "--server=" + target, "--instance=" + instance_path,
                                      absl::StrCat("--serve_echo_busy_us=", busy_us)};
     for (std::string& a : nupmpc::SecurityFlagArguments()) args.push_back(std::move(a));
-    return lt::EchoProcess::Spawn(args);
+    return lt::EchoProcess::Spawn(args, server_cpus->has_value() ? &**server_cpus : nullptr);
   };
   if (absl::GetFlag(FLAGS_echo)) {
     absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(0.0);
@@ -196,9 +240,25 @@ int main(int argc, char** argv) {
                              .transport = *transport,
                              .capacity_per_s = capacity_per_s,
                              .echo = echo != nullptr,
-                             .inline_solve = inline_solve != nullptr};
+                             .inline_solve = inline_solve != nullptr,
+                             .peer_cpus = server_cpus->has_value() ? nupmpc::server::CpuList(**server_cpus) : "",
+                             .generator_cpus = generator_cpus};
   if (!json) lt::PrintHeader(header);
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed", absl::GetFlag(FLAGS_new_references)};
+  if (const int fleet = absl::GetFlag(FLAGS_fleet); fleet > 0) {
+    absl::StatusOr<lt::FleetReport> stepped = lt::RunFleetLevel(target, *security, plan, fleet, absl::GetFlag(FLAGS_duration_s),
+                                                                absl::GetFlag(FLAGS_warmup_s));
+    if (!stepped.ok()) return Fail("fleet", stepped.status());
+    lt::LevelConfig config;
+    config.concurrency = fleet;
+    config.duration_s = absl::GetFlag(FLAGS_duration_s);
+    config.warmup_s = absl::GetFlag(FLAGS_warmup_s);
+    config.security = *security;
+    absl::StatusOr<lt::LevelReport> separate = lt::RunLevel(target, plan, config);
+    if (!separate.ok()) return Fail("separate streams", separate.status());
+    lt::PrintFleet(header, *stepped, *separate, json);
+    return 0;
+  }
   std::vector<lt::LevelReport> reports;
   for (const int c : *levels) {
     lt::LevelConfig config;
@@ -226,6 +286,7 @@ int main(int argc, char** argv) {
       if (!json) lt::PrintPeerLevel(label, *floor, busy_ms);
       *slot = std::make_shared<const lt::LevelReport>(*std::move(floor));
     }
+    if (!json) lt::PrintRatios(*report);
     reports.push_back(*std::move(report));
   }
   if (json) lt::PrintJson(header, reports);

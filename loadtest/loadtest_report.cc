@@ -51,8 +51,11 @@ void PrintHeader(const RunHeader& h) {
   std::printf("transport alone (grpc.health.v1 Check, answered inside gRPC): p50 %.0f \xc2\xb5s, p99 %.0f \xc2\xb5s "
               "over %d calls\n",
               h.transport.p50_us, h.transport.p99_us, h.transport.calls);
-  std::printf("(load generator and server share this machine's cores; latency is request sent, or open-loop "
-              "arrival scheduled, to answer received; svc: from the hand-over to gRPC)\n");
+  std::printf("CPUs: nupmpc-server %s (as it reports), echo peers and core baseline %s, load generator %s\n",
+              h.server.cpus().empty() ? "?" : h.server.cpus().c_str(),
+              h.peer_cpus.empty() ? "not pinned" : h.peer_cpus.c_str(), h.generator_cpus.c_str());
+  std::printf("(latency is request sent, or open-loop arrival scheduled, to answer received; svc: from the "
+              "hand-over to gRPC)\n");
   if (h.echo) {
     std::printf("(echo rows: the same level against a zero-work server, a process of its own, that answers every "
                 "step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
@@ -77,13 +80,28 @@ void PrintPeerLevel(const char* label, const LevelReport& l, double busy_ms) {
   PrintRow(label, l, "-", (l.p50_ms - busy_ms) * 1e3, "-");
 }
 
+void PrintRatios(const LevelReport& l) {
+  std::printf("%5d ratios", l.config.concurrency);
+  if (l.inline_solve != nullptr && l.inline_solve->solves_per_s > 0.0) {
+    const LevelReport& peer = *l.inline_solve;
+    std::printf("  nupmpc/inline: solves/s %.1f%%, p50 %+.0f \xc2\xb5s, p99 %.2fx", 100.0 * l.solves_per_s / peer.solves_per_s,
+                (l.p50_ms - peer.p50_ms) * 1e3, l.p99_ms / peer.p99_ms);
+  }
+  std::printf("  streams served: least %.2f, most %.2f of the mean\n", l.stream_min_share, l.stream_max_share);
+  std::fflush(stdout);
+}
+
 void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
   nlohmann::json out;
   out["instance"] = h.instance;
   out["server"] = {{"target", h.target},
                    {"version", h.server.version()},
                    {"worker_threads", h.server.limits().worker_threads()},
-                   {"queue_capacity", h.server.limits().queue_capacity()}};
+                   {"queue_capacity", h.server.limits().queue_capacity()},
+                   {"cpus", h.server.cpus()},
+                   {"inline_solve_max_ms", h.server.limits().inline_solve_max_ms()}};
+  out["peer_cpus"] = h.peer_cpus;
+  out["generator_cpus"] = h.generator_cpus;
   out["core_baseline"] = {{"median_ms", h.baseline.median_ms},
                           {"p99_ms", h.baseline.p99_ms},
                           {"mean_iterations", h.baseline.mean_iterations},
@@ -111,13 +129,47 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                             {"no_plan", l.tally.no_plan},
                             {"errors", l.tally.errors},
                             {"overhead_p50_us", OverheadUs(h, l)},
-                            {"fraction_of_capacity", l.solves_per_s / h.capacity_per_s}};
+                            {"fraction_of_capacity", l.solves_per_s / h.capacity_per_s},
+                            {"stream_min_share", l.stream_min_share},
+                            {"stream_max_share", l.stream_max_share}};
     if (!l.config.closed_loop) level["offered_per_s"] = l.config.rate_per_s;
     if (l.echo != nullptr) level["echo"] = PeerJson(*l.echo);
-    if (l.inline_solve != nullptr) level["inline"] = PeerJson(*l.inline_solve);
+    if (l.inline_solve != nullptr) {
+      level["inline"] = PeerJson(*l.inline_solve);
+      level["vs_inline"] = {{"solves_ratio", l.solves_per_s / l.inline_solve->solves_per_s},
+                            {"p50_delta_us", (l.p50_ms - l.inline_solve->p50_ms) * 1e3},
+                            {"p99_ratio", l.p99_ms / l.inline_solve->p99_ms}};
+    }
     out["levels"].push_back(std::move(level));
   }
   std::printf("%s\n", out.dump(2).c_str());
+}
+
+void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& separate, bool json) {
+  const double of_capacity = f.steps_per_s / h.capacity_per_s;
+  const double vs_streams = separate.solves_per_s > 0.0 ? f.steps_per_s / separate.solves_per_s : 0.0;
+  if (json) {
+    const nlohmann::json out = {{"instance", h.instance},
+                                {"sessions", f.sessions},
+                                {"calls", f.calls},
+                                {"fleet_steps_per_s", f.steps_per_s},
+                                {"call_p50_ms", f.call_p50_ms},
+                                {"call_p99_ms", f.call_p99_ms},
+                                {"step_errors", f.step_errors},
+                                {"separate_streams_solves_per_s", separate.solves_per_s},
+                                {"capacity_per_s", h.capacity_per_s},
+                                {"fraction_of_capacity", of_capacity},
+                                {"vs_separate_streams", vs_streams}};
+    std::printf("%s\n", out.dump(2).c_str());
+    return;
+  }
+  std::printf("fleet: %d sessions per SolveFleet call: %.0f steps/s (%.0f%% of capacity %.0f/s), call p50 %.3f ms, "
+              "p99 %.3f ms, %llu step errors\n",
+              f.sessions, f.steps_per_s, 100.0 * of_capacity, h.capacity_per_s, f.call_p50_ms, f.call_p99_ms,
+              static_cast<unsigned long long>(f.step_errors));
+  std::printf("       %d separate Control streams: %.0f solves/s, p50 %.3f ms; fleet / streams = %.2fx\n",
+              separate.config.concurrency, separate.solves_per_s, separate.p50_ms, vs_streams);
+  std::fflush(stdout);
 }
 
 void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& r, bool json) {

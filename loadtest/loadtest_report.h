@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "loadtest/core_baseline.h"
+#include "loadtest/fleet_level.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
 #include "loadtest/transport_floor.h"
@@ -25,6 +26,8 @@ struct RunHeader {
   double capacity_per_s = 0.0;  ///< worker threads / core median solve time
   bool echo = false;            ///< every level is also run against the zero-work echo server
   bool inline_solve = false;    ///< and against the echo busy for the core median in its reaction
+  std::string peer_cpus;        ///< CPUs the echo peers and the core baseline ran on ("": not pinned)
+  std::string generator_cpus;   ///< CPUs the load generator ran on
 };
 
 void PrintHeader(const RunHeader& header);
@@ -32,7 +35,12 @@ void PrintLevel(const RunHeader& header, const LevelReport& level);
 // The row of a level run against an echo server (`label`: echo or inline), below the real
 // level's row; its overhead is the p50 above `busy_ms`, the echo's stand-in solve.
 void PrintPeerLevel(const char* label, const LevelReport& peer, double busy_ms);
+// The server's level set against the inline peer's: solves/s ratio, p50 difference, p99
+// ratio, and how evenly the streams were served.
+void PrintRatios(const LevelReport& level);
 void PrintJson(const RunHeader& header, const std::vector<LevelReport>& levels);
+// --fleet: S sessions per SolveFleet call against S separate Control streams, same run.
+void PrintFleet(const RunHeader& header, const FleetReport& fleet, const LevelReport& separate, bool json);
 void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& report, bool json);
 
 }  // namespace nupmpc::loadtest

@@ -163,6 +163,7 @@ void ControlStream::OnReadDone(bool ok) {
     return;
   }
   bool read_more;
+  std::optional<v1::ControlRequest> start;
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!parsed.ok()) {
@@ -175,11 +176,13 @@ void ControlStream::OnReadDone(bool ok) {
       QueueWriteLocked(ErrorResponse(
           request.sequence(), state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
     } else {
-      EnqueueStepLocked(std::move(request));
+      start = EnqueueStepLocked(std::move(request));
     }
     read_more = ShouldReadLocked();
   }
+  // Reading on first: a newer step that arrives during the solve supersedes the parked one.
   if (read_more) ReadNext();
+  if (start.has_value()) StartSolve(*std::move(start));
   Pump();
 }
 
@@ -211,6 +214,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
   });
   if (!attached.ok()) entry = attached;
   bool read_more = false;
+  std::optional<v1::ControlRequest> start;
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!entry.ok()) {
@@ -220,7 +224,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
       entry_ = *std::move(entry);
       phase_ = Phase::kOpen;
       if (first.has_step()) {
-        EnqueueStepLocked(std::move(first));
+        start = EnqueueStepLocked(std::move(first));
       } else {
         v1::ControlResponse hello;
         hello.set_sequence(first.sequence());
@@ -231,14 +235,15 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
     }
   }
   if (read_more) ReadNext();
+  if (start.has_value()) StartSolve(*std::move(start));
   Pump();
 }
 
-void ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
+std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
   if (state_->draining.load()) {
     QueueWriteLocked(
         ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
-    return;
+    return std::nullopt;
   }
   if (parked_.has_value()) {
     v1::ControlResponse superseded;
@@ -247,41 +252,68 @@ void ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
     QueueWriteLocked(std::move(superseded));
   }
   parked_ = std::move(request);
-  if (!solving_) StartSolveLocked();
+  return TakeParkedLocked();
 }
 
-void ControlStream::StartSolveLocked() {
-  v1::ControlRequest request = std::move(*parked_);
+std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
+  if (solving_ || !parked_.has_value()) return std::nullopt;
+  std::optional<v1::ControlRequest> step = std::move(parked_);
   parked_.reset();
   solving_ = true;
-  const std::uint64_t sequence = request.sequence();
-  const auto queued_at = Clock::now();
-  // Through the session's strand: a unary Solve accepted just before this stream attached
-  // runs first without a worker waiting for it.
-  const absl::Status queued = SessionStrand::Submit(
-      entry_->strand, state_->pool,
-      {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
-         self->SolveOnPool(std::move(request), queued_at);
-       },
-       [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
-       entry_->last_solve_ms.load(std::memory_order_relaxed)});
-  if (!queued.ok()) {
-    solving_ = false;
-    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, queued)));
+  return step;
+}
+
+bool ControlStream::SolvesHere() const {
+  // A session's first solve (no time known) and long ones go to the pool: a reaction
+  // thread is held at most about inline_solve_max_ms by a solve.
+  const double expected_ms = entry_->last_solve_ms.load(std::memory_order_relaxed);
+  return state_->options.inline_solve_max_ms > 0.0 && expected_ms >= 0.0 &&
+         expected_ms <= state_->options.inline_solve_max_ms;
+}
+
+void ControlStream::StartSolve(v1::ControlRequest request) {
+  for (;;) {
+    const std::uint64_t sequence = request.sequence();
+    const auto queued_at = Clock::now();
+    // Through the session's strand either way: a unary Solve accepted just before this
+    // stream attached runs first, without a worker waiting for it.
+    if (SolvesHere() && SessionStrand::TryRunHere(entry_->strand, state_->pool,
+                                                  [&] { Solve(std::move(request), queued_at); })) {
+      return;
+    }
+    const absl::Status queued = SessionStrand::Submit(
+        entry_->strand, state_->pool,
+        {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
+           self->Solve(std::move(request), queued_at);
+         },
+         [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
+         entry_->last_solve_ms.load(std::memory_order_relaxed)});
+    if (queued.ok()) return;
+    std::optional<v1::ControlRequest> next;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, queued)));
+      solving_ = false;
+      next = TakeParkedLocked();  // parked while this one was being handed over
+    }
+    if (!next.has_value()) return;
+    request = *std::move(next);
   }
 }
 
 void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused) {
+  std::optional<v1::ControlRequest> next;
   {
     std::lock_guard<std::mutex> lock(mu_);
     QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, refused)));
     solving_ = false;
-    if (parked_.has_value()) StartSolveLocked();
+    next = TakeParkedLocked();
   }
+  if (next.has_value()) StartSolve(*std::move(next));
   Pump();
 }
 
-void ControlStream::SolveOnPool(v1::ControlRequest request, Clock::time_point queued_at) {
+void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_at) {
   const auto started_at = Clock::now();
   CallContext call;
   call.deadline = SteadyDeadline(*context_);
@@ -292,8 +324,9 @@ void ControlStream::SolveOnPool(v1::ControlRequest request, Clock::time_point qu
       "Control", [&] { return SolveStep(*entry_, request.step(), call, response.mutable_result()); });
   if (status.ok()) {
     state_->RecordSolve(response.result(), entry_.get(), std::chrono::duration<double>(started_at - queued_at).count(),
-                                std::chrono::duration<double>(Clock::now() - queued_at).count());
+                        std::chrono::duration<double>(Clock::now() - queued_at).count());
   }
+  std::optional<v1::ControlRequest> next;
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (status.ok()) {
@@ -302,8 +335,10 @@ void ControlStream::SolveOnPool(v1::ControlRequest request, Clock::time_point qu
       QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
     }
     solving_ = false;
-    if (parked_.has_value()) StartSolveLocked();
+    next = TakeParkedLocked();
   }
+  // Still inside this session's strand task: the next step queues behind it.
+  if (next.has_value()) StartSolve(*std::move(next));
   Pump();
 }
 

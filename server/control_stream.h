@@ -66,10 +66,18 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   // Attaches (or ends the stream with the reason it could not), answers or solves the
   // first message, and resumes reading.
   void AttachAndContinue(v1::ControlRequest first);
-  // Accepts a step: solve it now, or park it (superseding the parked one). Called with mu_.
-  void EnqueueStepLocked(v1::ControlRequest request);
-  void StartSolveLocked();
-  void SolveOnPool(v1::ControlRequest request, Clock::time_point queued_at);
+  // Accepts a step: parks it (superseding the parked one) and returns the step to start now
+  // if none is being solved (the caller passes it to StartSolve once it has let go of mu_).
+  std::optional<v1::ControlRequest> EnqueueStepLocked(v1::ControlRequest request);
+  // The parked step, marked as being solved, if none is. Called with mu_.
+  std::optional<v1::ControlRequest> TakeParkedLocked();
+  // Whether this session's steps are short enough to solve on the thread that has them.
+  bool SolvesHere() const;
+  // Solves a step taken by TakeParkedLocked: here if the session and a core are free and its
+  // solves are short (no hand-off to a worker: the latency of a transport-bound step),
+  // else on the pool through the session's strand. Called without mu_.
+  void StartSolve(v1::ControlRequest request);
+  void Solve(v1::ControlRequest request, Clock::time_point queued_at);
   // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
   void QueueWriteLocked(v1::ControlResponse response);

@@ -33,6 +33,7 @@ absl::string_view RpcName(Rpc rpc) {
     case Rpc::kCloseSession: return "CloseSession";
     case Rpc::kGetServerInfo: return "GetServerInfo";
     case Rpc::kFitGpModel: return "FitGpModel";
+    case Rpc::kSolveFleet: return "SolveFleet";
   }
   return "unknown";
 }

@@ -44,8 +44,9 @@ enum class Rpc {
   kCloseSession,
   kGetServerInfo,
   kFitGpModel,
+  kSolveFleet,
 };
-inline constexpr int kRpcCount = 9;
+inline constexpr int kRpcCount = 10;
 absl::string_view RpcName(Rpc rpc);
 
 class Metrics {

@@ -108,10 +108,13 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
   const WorkerPool& pool = state.pool;
   Gauge(out, "nupmpc_queue_depth", "Solves and other work waiting for a worker.", pool.queued());
   Gauge(out, "nupmpc_workers", "Solver worker threads.", pool.threads());
-  Gauge(out, "nupmpc_workers_busy", "Worker threads running a task now.", pool.busy());
+  Gauge(out, "nupmpc_workers_busy", "Cores running a task now (on a worker or solved where it arrived).", pool.busy());
   Counter(out, "nupmpc_worker_busy_seconds_total",
-          "Seconds the workers spent running tasks; its rate over nupmpc_workers is the pool's utilisation.",
+          "Seconds the cores spent running tasks; its rate over nupmpc_workers is the pool's utilisation.",
           pool.busy_seconds());
+  Counter(out, "nupmpc_solves_in_place_total",
+          "Control steps solved on the gRPC thread that received them (short solves, a core free: no hand-off).",
+          static_cast<double>(pool.run_here()));
 
   Gauge(out, "nupmpc_memory_budget_bytes", "The memory budget sessions and calls reserve in.",
         static_cast<double>(state.budget.capacity()));

@@ -4,6 +4,8 @@
 #include "core/platform/cpu_baseline.h"
 #include "core/util/status_macros.h"
 #include "server/control_stream.h"
+#include "server/cpu_affinity.h"
+#include "server/fleet_call.h"
 #include "server/gp_conversion.h"
 #include "server/log_context.h"
 #include "server/process_memory.h"
@@ -164,6 +166,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerCont
   response->set_memory_reserved_bytes(static_cast<std::uint64_t>(state_->budget.reserved()));
   response->set_control_streams(static_cast<std::uint32_t>(state_->control_streams.load()));
   response->set_control_stream_read_pauses(state_->stream_read_pauses.load(std::memory_order_relaxed));
+  response->set_cpus(CallingThreadCpuList());
+  response->set_solves_in_place(state_->pool.run_here());
   call->Reply(absl::OkStatus());
   return call;
 }
@@ -186,6 +190,14 @@ grpc::ServerUnaryReactor* MpcServiceImpl::FitGpModel(grpc::CallbackServerContext
                             state->budget.Reserve(fit_bytes, "model (the fit's kernel matrices)"));
     return server::FitGpModel(*request, state->options.size_limits, fit_limits, response);
   });
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::SolveFleet(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                     Raw* raw_response) {
+  auto* call = FleetCall::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  StartFleet(call, CallerOf(*context));
   return call;
 }
 

@@ -13,7 +13,8 @@ using MpcServiceBase = v1::MpcService::WithRawCallbackMethod_CreateSession<
         v1::MpcService::WithRawCallbackMethod_SolveOnce<v1::MpcService::WithRawCallbackMethod_GetSession<
             v1::MpcService::WithRawCallbackMethod_ListSessions<v1::MpcService::WithRawCallbackMethod_CloseSession<
                 v1::MpcService::WithRawCallbackMethod_GetServerInfo<
-                    v1::MpcService::WithRawCallbackMethod_FitGpModel<v1::MpcService::Service>>>>>>>>>;
+                    v1::MpcService::WithRawCallbackMethod_FitGpModel<
+                        v1::MpcService::WithRawCallbackMethod_SolveFleet<v1::MpcService::Service>>>>>>>>>>;
 
 // nupmpc.v1.MpcService on gRPC's callback API. Reactions never block: solves (and session
 // creation, which is O(N) work) run on the worker pool; lookups, listings and counters are
@@ -38,6 +39,8 @@ class MpcServiceImpl final : public MpcServiceBase {
   grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context, const Raw* request,
                                           Raw* response) override;
   grpc::ServerUnaryReactor* FitGpModel(grpc::CallbackServerContext* context, const Raw* request,
+                                       Raw* response) override;
+  grpc::ServerUnaryReactor* SolveFleet(grpc::CallbackServerContext* context, const Raw* request,
                                        Raw* response) override;
 
  private:

@@ -24,6 +24,10 @@ namespace nupmpc::server {
 struct ServerOptions {
   std::string address = "[::]:50051";
   int worker_threads = 2;
+  // Control steps of sessions whose last solve took at most this long are solved on the
+  // gRPC thread that received them when a core is free (ControlStream::StartSolve); 0: never.
+  double inline_solve_max_ms = 2.0;
+  int max_fleet_steps = 10000;  ///< steps in one SolveFleet call
   int queue_capacity = 64;
   double max_queue_wait_ms = 0.0;  ///< 0: only queue_capacity bounds the queue
   int max_sessions = 10000;

@@ -11,6 +11,11 @@
 
 ABSL_FLAG(std::string, address, "[::]:50051", "listen address host:port (env NUPMPC_ADDRESS)");
 ABSL_FLAG(int, threads, 2, "solver worker threads (env NUPMPC_THREADS)");
+ABSL_FLAG(double, inline_solve_max_ms, 2,
+          "a Control step is solved on the gRPC thread that received it (no hand-off to a worker) when its "
+          "session's last solve took at most this long and a core is free; 0: always on a worker "
+          "(env NUPMPC_INLINE_SOLVE_MAX_MS)");
+ABSL_FLAG(int, max_fleet_steps, 10000, "steps in one SolveFleet call (env NUPMPC_MAX_FLEET_STEPS)");
 ABSL_FLAG(int, queue_capacity, 64, "solves waiting for a worker before RESOURCE_EXHAUSTED (env NUPMPC_QUEUE_CAPACITY)");
 ABSL_FLAG(int, max_sessions, 10000, "maximum open sessions (env NUPMPC_MAX_SESSIONS)");
 ABSL_FLAG(double, session_idle_timeout_s, 600, "close sessions idle this long (env NUPMPC_SESSION_IDLE_TIMEOUT_S)");
@@ -122,7 +127,7 @@ const cli::ProgramInfo& ServerProgram() {
 }
 
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
-  for (const char* name : {"address", "threads", "queue_capacity", "max_sessions", "session_idle_timeout_s",
+  for (const char* name : {"address", "threads", "inline_solve_max_ms", "max_fleet_steps", "queue_capacity", "max_sessions", "session_idle_timeout_s",
                            "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states",
                            "max_iterations", "grace_period_s", "drain_delay_s", "memory_budget_mb", "max_session_memory_mb",
                            "max_pass_gflop", "max_control_streams", "max_stream_answers", "max_streams_per_connection",
@@ -137,6 +142,8 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   ServerOptions& o = out.options;
   o.address = absl::GetFlag(FLAGS_address);
   o.worker_threads = absl::GetFlag(FLAGS_threads);
+  o.inline_solve_max_ms = absl::GetFlag(FLAGS_inline_solve_max_ms);
+  o.max_fleet_steps = absl::GetFlag(FLAGS_max_fleet_steps);
   o.queue_capacity = absl::GetFlag(FLAGS_queue_capacity);
   o.max_sessions = absl::GetFlag(FLAGS_max_sessions);
   o.session_idle_timeout_s = absl::GetFlag(FLAGS_session_idle_timeout_s);
@@ -184,6 +191,9 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
         RequireAtMost("drain_delay_s", out.drain_delay_s, 3600.0),
         RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
         RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0),
+        RequireAtLeast("inline_solve_max_ms", o.inline_solve_max_ms, 0.0),
+        RequireAtMost("inline_solve_max_ms", o.inline_solve_max_ms, 1000.0),
+        RequireAtLeast("max_fleet_steps", o.max_fleet_steps, 1),
         RequireAtLeast("memory_budget_mb", absl::GetFlag(FLAGS_memory_budget_mb), 0),
         RequireAtLeast("max_session_memory_mb", absl::GetFlag(FLAGS_max_session_memory_mb), 1),
         RequireAtLeast("max_pass_gflop", absl::GetFlag(FLAGS_max_pass_gflop), 1e-6),

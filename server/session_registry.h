@@ -51,6 +51,10 @@ struct SessionEntry {
 
   std::atomic<bool> attached{false};  ///< a Control stream uses it
   std::atomic<std::uint64_t> solves{0};
+  // SolveFleet steps accepted for this session so far: a fleet step whose ticket (this
+  // count when it was accepted) is below the count when it starts has been overtaken by a
+  // newer one and is answered SUPERSEDED (server/fleet_call.h).
+  std::atomic<std::uint64_t> fleet_steps_accepted{0};
   std::atomic<double> last_solve_ms{-1.0};  ///< the pool's wait estimate; -1: not solved yet
   std::atomic<Clock::rep> last_used{0};
 

@@ -54,6 +54,24 @@ void SessionStrand::StartNext(const std::shared_ptr<SessionStrand>& strand, Work
   }
 }
 
+bool SessionStrand::TryRunHere(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
+                               const std::function<void()>& run) {
+  {
+    std::lock_guard<std::mutex> lock(strand->mu_);
+    if (strand->busy_) return false;
+    strand->busy_ = true;
+  }
+  bool ran;
+  try {
+    ran = pool.TryRunHere(run);
+  } catch (...) {
+    StartNext(strand, pool);  // the session stays usable whatever the task did
+    throw;
+  }
+  StartNext(strand, pool);  // tasks that queued up meanwhile (and, if it did not run, frees the strand)
+  return ran;
+}
+
 bool SessionStrand::RunNowIfIdle(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
                                  const std::function<void()>& work) {
   {

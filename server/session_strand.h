@@ -35,6 +35,11 @@ class SessionStrand {
   // refusal, or RESOURCE_EXHAUSTED when kMaxWaiting tasks already wait for this session.
   static absl::Status Submit(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task);
 
+  // Runs `run` now on the calling thread, as the session's next task, if no task of this
+  // session is queued or running and the pool has a core free (WorkerPool::TryRunHere);
+  // returns whether it ran. When it did not, nothing happened and the caller submits it.
+  static bool TryRunHere(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
+                         const std::function<void()>& run);
   // Runs `work` now, on the calling thread, if no task of this session is queued or
   // running, and returns true; else returns false and does nothing. For short work that
   // may be skipped while the session is busy (idle compaction).

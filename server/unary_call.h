@@ -38,6 +38,8 @@ template <>
 struct RpcOf<v1::GetServerInfoRequest> : std::integral_constant<Rpc, Rpc::kGetServerInfo> {};
 template <>
 struct RpcOf<v1::FitGpModelRequest> : std::integral_constant<Rpc, Rpc::kFitGpModel> {};
+template <>
+struct RpcOf<v1::SolveFleetRequest> : std::integral_constant<Rpc, Rpc::kSolveFleet> {};
 
 // One unary call of MpcService, taken as raw bytes (server/raw_messages.h): bytes that do
 // not parse are answered with INVALID_ARGUMENT naming the expected type. The call owns its
@@ -58,6 +60,13 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
   }
 
   bool Parsed() const { return parsed_; }
+  ServerState* state() const { return state_; }
+  // The call's deadline and cancellation flag, for work that runs outside RunOnPool.
+  const CallContext& Context() {
+    call_.deadline = SteadyDeadline(*context_);
+    call_.cancel = &cancelled_;
+    return call_;
+  }
   const Request& request() const { return request_; }
   Response* response() { return &response_; }
 

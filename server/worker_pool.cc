@@ -10,7 +10,7 @@
 namespace nupmpc::server {
 
 WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms)
-    : capacity_(queue_capacity), max_queue_wait_ms_(max_queue_wait_ms) {
+    : cores_(threads), capacity_(queue_capacity), max_queue_wait_ms_(max_queue_wait_ms) {
   threads_.reserve(threads);
   for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { Run(); });
 }
@@ -25,7 +25,7 @@ absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_m
       return absl::ResourceExhaustedError(
           absl::StrCat("the solve queue is full (", capacity_, " waiting); retry later"));
     }
-    const double wait_ms = queued_ms_ / static_cast<double>(threads_.size());
+    const double wait_ms = queued_ms_ / static_cast<double>(cores_);
     if (max_queue_wait_ms_ > 0.0 && wait_ms > max_queue_wait_ms_) {
       return absl::ResourceExhaustedError(absl::StrFormat(
           "the solves queued ahead would take about %.3g ms, over the server's max_queue_wait_ms = %g; retry later",
@@ -57,16 +57,39 @@ void WorkerPool::Shutdown() {
   threads_.clear();
 }
 
+bool WorkerPool::TryRunHere(const std::function<void()>& task) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (stopping_ || !queue_.empty() || running_ >= cores_) return false;
+    ++running_;
+  }
+  run_here_.fetch_add(1, std::memory_order_relaxed);
+  const auto start = std::chrono::steady_clock::now();
+  busy_.fetch_add(1, std::memory_order_relaxed);
+  // No catch here: the caller's thread is the caller's (a gRPC reaction answers its own
+  // errors); the core is given back even if the task throws.
+  struct GiveBack {
+    WorkerPool* pool;
+    std::chrono::steady_clock::time_point start;
+    ~GiveBack() {
+      pool->Finished(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    }
+  } give_back{this, start};
+  task();
+  return true;
+}
+
 void WorkerPool::Run() {
   for (;;) {
     Task task;
     {
       std::unique_lock<std::mutex> lock(mu_);
-      ready_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+      ready_.wait(lock, [this] { return (stopping_ && queue_.empty()) || (!queue_.empty() && running_ < cores_); });
       if (queue_.empty()) return;  // stopping and drained
       task = std::move(queue_.front());
       queue_.pop_front();
       queued_ms_ = queue_.empty() ? 0.0 : queued_ms_ - task.expected_ms;  // no drift when empty
+      ++running_;
     }
     const auto start = std::chrono::steady_clock::now();
     busy_.fetch_add(1, std::memory_order_relaxed);
@@ -79,12 +102,20 @@ void WorkerPool::Run() {
     } catch (...) {
       spdlog::error("worker: a task ended with an unknown exception");
     }
-    const double took_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    busy_.fetch_sub(1, std::memory_order_relaxed);
-    busy_seconds_.fetch_add(took_ms / 1000.0, std::memory_order_relaxed);
+    task.run = nullptr;  // its captures go before the core is given back
+    Finished(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+  }
+}
+
+void WorkerPool::Finished(double took_ms) {
+  busy_.fetch_sub(1, std::memory_order_relaxed);
+  busy_seconds_.fetch_add(took_ms / 1000.0, std::memory_order_relaxed);
+  {
     std::lock_guard<std::mutex> lock(mu_);
+    --running_;
     average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
   }
+  ready_.notify_one();  // a worker may wait for this core
 }
 
 }  // namespace nupmpc::server

@@ -136,7 +136,12 @@ TEST(SessionStrand, ExclusiveWorkRunsNowWhenIdleAndRightAfterTheTaskInFlightOthe
     order.push_back(i);
   };
   TaskInFlight in_flight(strand, pool, [&] { record(0); });
-  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] { record(2); })).ok());
+  std::promise<void> last_ran;
+  ASSERT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
+                                      record(2);
+                                      last_ran.set_value();
+                                    }))
+                  .ok());
   EXPECT_FALSE(SessionStrand::RunNowIfIdle(strand, pool, [&] { record(-1); }));  // busy: skipped
   std::promise<void> closed;
   SessionStrand::RunExclusive(strand, pool, [&] {
@@ -146,7 +151,9 @@ TEST(SessionStrand, ExclusiveWorkRunsNowWhenIdleAndRightAfterTheTaskInFlightOthe
   EXPECT_EQ(strand->waiting(), 2);
   in_flight.Release();
   EXPECT_EQ(closed.get_future().wait_for(10s), std::future_status::ready);
-  for (int spin = 0; spin < 1000 && strand->waiting() > 0; ++spin) std::this_thread::sleep_for(1ms);
+  // Until the last task has run, not until the strand is empty: the last task leaves the
+  // strand before the pool has it, and a pool shut down in between would refuse it.
+  EXPECT_EQ(last_ran.get_future().wait_for(10s), std::future_status::ready);
   pool.Shutdown();
   EXPECT_THAT(order, ::testing::ElementsAre(0, 1, 2));
 }
@@ -168,6 +175,56 @@ TEST(SessionStrand, ExclusiveWorkRunsEvenWhenThePoolRefusesIt) {
   in_flight.Release();
   stopper.join();
   EXPECT_TRUE(closed);
+}
+
+TEST(SessionStrand, RunsHereOnlyWhenTheSessionAndACoreAreFree) {
+  WorkerPool pool(2, 8);
+  const auto strand = std::make_shared<SessionStrand>();
+  std::thread::id ran_on;
+  EXPECT_TRUE(SessionStrand::TryRunHere(strand, pool, [&] { ran_on = std::this_thread::get_id(); }));
+  EXPECT_EQ(ran_on, std::this_thread::get_id());
+
+  // The session busy on a worker (a core is still free): not here, and nothing changed.
+  // (Every TaskInFlight lives to the end: its task uses it until it has finished.)
+  TaskInFlight busy(strand, pool);
+  bool ran = false;
+  EXPECT_FALSE(SessionStrand::TryRunHere(strand, pool, [&] { ran = true; }));
+  EXPECT_FALSE(ran);
+  busy.Release();
+  // Every core busy with other sessions: not here, and the strand is left free.
+  const auto other = std::make_shared<SessionStrand>();
+  TaskInFlight first(other, pool);
+  const auto third = std::make_shared<SessionStrand>();
+  TaskInFlight second(third, pool);
+  EXPECT_FALSE(SessionStrand::TryRunHere(strand, pool, [&] { ran = true; }));
+  EXPECT_FALSE(ran);
+  first.Release();
+  second.Release();
+  pool.Shutdown();
+  EXPECT_EQ(strand->waiting(), 0);
+  EXPECT_TRUE(SessionStrand::RunNowIfIdle(strand, pool, [] {}));  // not left marked busy
+}
+
+TEST(SessionStrand, TasksSubmittedDuringARunHereFollowIt) {
+  WorkerPool pool(2, 8);
+  const auto strand = std::make_shared<SessionStrand>();
+  std::mutex mu;
+  std::vector<int> order;
+  std::promise<void> second_ran;
+  EXPECT_TRUE(SessionStrand::TryRunHere(strand, pool, [&] {
+    EXPECT_TRUE(SessionStrand::Submit(strand, pool, Task([&] {
+                                        std::lock_guard<std::mutex> lock(mu);
+                                        order.push_back(2);
+                                        second_ran.set_value();
+                                      }))
+                    .ok());
+    std::this_thread::sleep_for(20ms);  // the submitted task must wait for this one, however long it runs
+    std::lock_guard<std::mutex> lock(mu);
+    order.push_back(1);
+  }));
+  ASSERT_EQ(second_ran.get_future().wait_for(30s), std::future_status::ready);
+  std::lock_guard<std::mutex> lock(mu);
+  EXPECT_THAT(order, ::testing::ElementsAre(1, 2));
 }
 
 }  // namespace

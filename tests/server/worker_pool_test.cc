@@ -5,6 +5,7 @@
 #include <atomic>
 #include <future>
 #include <stdexcept>
+#include <thread>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -62,6 +63,68 @@ TEST(WorkerPool, WithoutAWaitBoundOnlyTheCapacityCounts) {
   Blocker blocker(pool);
   for (int i = 0; i < 50; ++i) EXPECT_TRUE(pool.TrySubmit([] {}, 1000.0).ok()) << i;
   blocker.Release();
+}
+
+TEST(WorkerPool, RunsATaskHereWhenACoreIsFree) {
+  WorkerPool pool(2, 4);
+  std::thread::id ran_on;
+  EXPECT_TRUE(pool.TryRunHere([&] { ran_on = std::this_thread::get_id(); }));
+  EXPECT_EQ(ran_on, std::this_thread::get_id());
+  EXPECT_EQ(pool.run_here(), 1u);
+  // One core taken by a worker's task: the other is still free.
+  Blocker blocker(pool);
+  EXPECT_TRUE(pool.TryRunHere([] {}));
+  blocker.Release();
+}
+
+TEST(WorkerPool, RunsNothingHereWhileEveryCoreIsBusyOrWorkIsQueued) {
+  WorkerPool pool(1, 4);
+  {
+    Blocker blocker(pool);
+    bool ran = false;
+    EXPECT_FALSE(pool.TryRunHere([&] { ran = true; }));  // the only core runs the blocker
+    EXPECT_FALSE(ran);
+    blocker.Release();
+  }
+  pool.Shutdown();
+  WorkerPool queued_pool(1, 4);
+  Blocker blocker(queued_pool);
+  std::promise<void> queued_ran;
+  ASSERT_TRUE(queued_pool.TrySubmit([&] { queued_ran.set_value(); }).ok());
+  blocker.Release();
+  // Whether or not the worker has taken the queued task yet, it is not overtaken: either
+  // it is still queued (refused here) or it holds the only core.
+  bool overtook = false;
+  (void)queued_pool.TryRunHere([&] { overtook = queued_ran.get_future().wait_for(std::chrono::seconds(0)) !=
+                                                std::future_status::ready; });
+  EXPECT_FALSE(overtook);
+  EXPECT_EQ(queued_ran.get_future().wait_for(std::chrono::seconds(30)), std::future_status::ready);
+}
+
+TEST(WorkerPool, WorkersWaitForTheCoreATaskRunningHereHolds) {
+  // One core: while a task runs on this thread, a submitted task must not start on the
+  // worker (two solves would share one core); it starts once this one is done.
+  WorkerPool pool(1, 4);
+  std::atomic<bool> here_done{false};
+  std::promise<bool> started_after;
+  EXPECT_TRUE(pool.TryRunHere([&] {
+    ASSERT_TRUE(pool.TrySubmit([&] { started_after.set_value(here_done.load()); }).ok());
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));  // time for a worker that would wrongly start
+    here_done.store(true);
+  }));
+  std::future<bool> result = started_after.get_future();
+  ASSERT_EQ(result.wait_for(std::chrono::seconds(30)), std::future_status::ready);
+  EXPECT_TRUE(result.get());
+  EXPECT_EQ(pool.busy(), 0);
+}
+
+TEST(WorkerPool, ATaskThatThrowsHereGivesItsCoreBack) {
+  WorkerPool pool(1, 4);
+  EXPECT_THROW(pool.TryRunHere([] { throw std::runtime_error("escaped"); }), std::runtime_error);
+  std::promise<void> ran;
+  ASSERT_TRUE(pool.TrySubmit([&] { ran.set_value(); }).ok());
+  EXPECT_EQ(ran.get_future().wait_for(std::chrono::seconds(30)), std::future_status::ready);
+  EXPECT_TRUE(pool.TryRunHere([] {}));
 }
 
 }  // namespace

@@ -1,0 +1,31 @@
+#ifndef NUPMPC_LOADTEST_FLEET_LEVEL_H_
+#define NUPMPC_LOADTEST_FLEET_LEVEL_H_
+
+// nupmpc-loadtest --fleet S: S sessions stepped together, one SolveFleet call per period
+// (closed loop: the next call when the answer arrives), each session cycling through the
+// instance's closed-loop states from its own offset.
+
+#include <cstdint>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "client/channel_security.h"
+#include "loadtest/load_stream.h"
+
+namespace nupmpc::loadtest {
+
+struct FleetReport {
+  int sessions = 0;
+  double measured_s = 0.0;
+  std::uint64_t calls = 0;
+  double steps_per_s = 0.0;  ///< answered steps with a result (solved or superseded)
+  double call_p50_ms = 0.0, call_p99_ms = 0.0;
+  std::uint64_t step_errors = 0;  ///< answers with an error code
+};
+
+absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const ChannelSecurity& security,
+                                          const StreamPlan& plan, int sessions, double duration_s, double warmup_s);
+
+}  // namespace nupmpc::loadtest
+
+#endif  // NUPMPC_LOADTEST_FLEET_LEVEL_H_

@@ -1,0 +1,29 @@
+#ifndef NUPMPC_SERVER_FLEET_CALL_H_
+#define NUPMPC_SERVER_FLEET_CALL_H_
+
+// SolveFleet: many sessions' steps in one call (SolveFleetRequest in the .proto), solved in
+// parallel on the workers, each answered on its own, the call answered once all are done.
+//
+// The steps are shared out by at most worker_threads runner tasks on the pool (so one call
+// takes at most that many queue places, however many steps it has). A runner solves a
+// step right where it is when the step's session is idle; a session that is busy (a step
+// of an earlier call, a unary Solve) gets the step through its strand, where it waits
+// without holding the runner. Newest state wins per session through a ticket: every
+// accepted fleet step of a session takes the next number, and a step that finds a higher
+// number taken when it starts is answered SUPERSEDED without touching the session.
+
+#include "nupmpc/v1/nupmpc.pb.h"
+#include "server/caller.h"
+#include "server/unary_call.h"
+
+namespace nupmpc::server {
+
+using FleetCall = UnaryCall<v1::SolveFleetRequest, v1::SolveFleetResponse>;
+
+// Checks the request, accepts its steps for `caller` and starts them; `call` is answered
+// when the last step is.
+void StartFleet(FleetCall* call, const Caller& caller);
+
+}  // namespace nupmpc::server
+
+#endif  // NUPMPC_SERVER_FLEET_CALL_H_

@@ -1,0 +1,158 @@
+// Where a Control step is solved (ControlStream::StartSolve): a step of a session whose
+// solves are short runs on the gRPC thread that received it while a core is free, others
+// on the workers. The answers are the same either way, and long solves occupying every
+// worker hold back neither health checks nor another session's steps beyond one long solve.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "loadtest/transport_floor.h"
+#include "tests/server/service_fixture.h"
+
+namespace nupmpc::testing {
+namespace {
+
+v1::Step StepAt(const Eigen::VectorXd& x) {
+  v1::Step step;
+  step.mutable_state()->Add(x.data(), x.data() + x.size());
+  return step;
+}
+
+// The masses_N30 closed loop through one session on a server started with `options`: the
+// plans, and how many steps the server solved in place.
+struct ClosedLoopRun {
+  std::vector<std::vector<double>> plans;
+  std::uint64_t in_place = 0;
+};
+
+class SolvePlacementTest : public ServiceTest {
+ protected:
+  void SetUp() override { spdlog::set_level(spdlog::level::warn); }
+
+  ClosedLoopRun RunClosedLoop(const server::ServerOptions& options) {
+    StartServer(options);
+    const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
+    ClosedLoopRun run;
+    auto session = client_->OpenSession(SpecOrDie(inst.problem));
+    EXPECT_TRUE(session.ok()) << session.status();
+    if (!session.ok()) return run;
+    for (const Eigen::VectorXd& x : inst.closed_loop->x1) {
+      absl::StatusOr<v1::SolveResult> r = (*session)->Step(StepAt(x));
+      EXPECT_TRUE(r.ok()) << r.status();
+      if (!r.ok()) return run;
+      EXPECT_EQ(r->status(), v1::SOLVE_STATUS_CONVERGED);
+      run.plans.emplace_back(r->inputs().begin(), r->inputs().end());
+    }
+    absl::StatusOr<v1::GetServerInfoResponse> info = client_->GetServerInfo();
+    EXPECT_TRUE(info.ok()) << info.status();
+    if (info.ok()) run.in_place = info->solves_in_place();
+    EXPECT_TRUE((*session)->Close().ok());
+    session->reset();
+    TearDown();
+    return run;
+  }
+};
+
+TEST_F(SolvePlacementTest, ShortStepsAreSolvedInPlaceAndAnsweredAsOnTheWorkers) {
+  server::ServerOptions in_place = DefaultOptions();
+  in_place.inline_solve_max_ms = 1000.0;  // every warm step counts as short, whatever the build's speed
+  const ClosedLoopRun here = RunClosedLoop(in_place);
+  server::ServerOptions on_workers = DefaultOptions();
+  on_workers.inline_solve_max_ms = 0.0;
+  const ClosedLoopRun workers = RunClosedLoop(on_workers);
+
+  ASSERT_GE(here.plans.size(), 10u);
+  // The first step has no solve time yet and goes to a worker; a later step may too when
+  // it arrives before the worker that answered the previous one has let go of the session.
+  EXPECT_GE(here.in_place, (here.plans.size() - 1) / 2);
+  EXPECT_LE(here.in_place, here.plans.size() - 1);
+  EXPECT_EQ(workers.in_place, 0u);
+  // The same solver code on the same steps: the same numbers, bit for bit.
+  EXPECT_EQ(here.plans, workers.plans);
+}
+
+TEST_F(SolvePlacementTest, LongSolvesOnEveryWorkerHoldBackHealthChecksAndShortStepsAtMostOneSolve) {
+  server::ServerOptions options = DefaultOptions();
+  // One worker: the test's clients and gRPC's threads keep a core of a 2-core machine, so
+  // what is measured is whether a health check waits for a solve, not the CPU's sharing.
+  options.worker_threads = 1;
+  options.inline_solve_max_ms = 2.0;
+  StartServer(options);
+  const bench::BenchmarkInstance long_inst = LoadInstanceOrDie("masses_N3000");
+  const bench::BenchmarkInstance short_inst = LoadInstanceOrDie("masses_N30");
+
+  // One long session per worker, stepped without pause until the end of the test.
+  std::atomic<bool> stop{false};
+  std::atomic<int> long_started{0};
+  std::mutex mu;
+  std::vector<double> long_solve_ms;
+  std::vector<std::thread> long_streams;
+  for (int i = 0; i < options.worker_threads; ++i) {
+    long_streams.emplace_back([&] {
+      Client client(target_);
+      auto session = client.OpenSession(SpecOrDie(long_inst.problem));
+      ASSERT_TRUE(session.ok()) << session.status();
+      bool counted = false;
+      for (int t = 0; !stop.load(); ++t) {
+        // Alternating between the initial state and half of it (feasible, as both ends are):
+        // every step moves the plan.
+        const double scale = t % 2 == 0 ? 1.0 : 0.5;
+        v1::Step step = StepAt(scale * long_inst.problem.initial_mean);
+        step.set_warm_start(v1::WARM_START_COLD);  // every solve as long as the first
+        absl::StatusOr<v1::SolveResult> r = (*session)->Step(step);
+        ASSERT_TRUE(r.ok()) << r.status();
+        {
+          std::lock_guard<std::mutex> lock(mu);
+          long_solve_ms.push_back(r->solve_ms());
+        }
+        if (!counted) long_started.fetch_add(1);
+        counted = true;
+      }
+      EXPECT_TRUE((*session)->Close().ok());
+    });
+  }
+  while (long_started.load() < options.worker_threads) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+
+  // Health checks, answered inside gRPC: not behind any solve.
+  absl::StatusOr<loadtest::TransportFloor> health = loadtest::MeasureTransportFloor(target_, 40);
+  ASSERT_TRUE(health.ok()) << health.status();
+
+  // A short session's steps: each waits at most for one long solve to end.
+  auto short_session = client_->OpenSession(SpecOrDie(short_inst.problem));
+  ASSERT_TRUE(short_session.ok()) << short_session.status();
+  std::vector<double> short_ms;
+  for (int t = 0; t < 5; ++t) {
+    const auto sent = std::chrono::steady_clock::now();
+    absl::StatusOr<v1::SolveResult> r = (*short_session)->Step(StepAt(short_inst.closed_loop->x1[t]));
+    ASSERT_TRUE(r.ok()) << r.status();
+    short_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - sent).count());
+  }
+  absl::StatusOr<v1::GetServerInfoResponse> info = client_->GetServerInfo();
+  stop.store(true);
+  for (std::thread& t : long_streams) t.join();
+  ASSERT_TRUE(info.ok()) << info.status();
+
+  std::lock_guard<std::mutex> lock(mu);
+  ASSERT_FALSE(long_solve_ms.empty());
+  const double shortest_long_ms = *std::min_element(long_solve_ms.begin(), long_solve_ms.end());
+  const double longest_long_ms = *std::max_element(long_solve_ms.begin(), long_solve_ms.end());
+  ASSERT_GT(shortest_long_ms, options.inline_solve_max_ms) << "the long instance must be long for this test";
+  std::printf("long solves %.1f-%.1f ms on the worker; health checks meanwhile p50 %.0f us, p99 %.0f us; short steps "
+              "at most %.1f ms\n",
+              shortest_long_ms, longest_long_ms, health->p50_us, health->p99_us,
+              *std::max_element(short_ms.begin(), short_ms.end()));
+  // Every long solve ran on a worker: in place, at most the short session's warm steps.
+  EXPECT_LE(info->solves_in_place(), short_ms.size() - 1);
+  EXPECT_LT(health->p99_us * 1e-3, 0.25 * shortest_long_ms)
+      << "health checks waited for solves: p99 " << health->p99_us << " µs, long solves from " << shortest_long_ms << " ms";
+  EXPECT_LT(*std::max_element(short_ms.begin(), short_ms.end()), 2.0 * longest_long_ms)
+      << "a short step waited longer than one long solve";
+}
+
+}  // namespace
+}  // namespace nupmpc::testing
