@@ -10,7 +10,7 @@
 #   2. Fuzzing: every target of fuzz/ for NUPMPC_FUZZ_SECONDS (default 60) each, from the
 #      same tree (deploy/fuzz.sh).
 #   3. ThreadSanitizer (build-tsan/): the worker pool, the session strands, the Control
-#      stream and the service's unary and streaming calls; reports triaged by
+#      stream, the service's unary and streaming calls and SolveFleet; reports triaged by
 #      tests/build/tsan_triage.py (only races inside gRPC's and protobuf's own code are
 #      dismissed, each rule with its reason).
 # Compiled with clang at -O1, -UNDEBUG (Eigen's assertions on), warnings as errors.
@@ -24,13 +24,15 @@ deploy/sanitizer-tree.sh asan
 core_tests=(message_passing_test scalar_rules_test nonconvex_priors_test discrete_plan_test input_differences_test
             multilevel_inputs_test keep_out_test keep_out_session_test gp_model_test nonlinear_model_test
             benchmark_reference_test session_test elastic_test infeasibility_test step_update_test)
+# The server's suites; the client library's own tests (reconnection, routing, spec updates,
+# restarts, the load generator) run in the main suite only: the server code they drive
+# runs here through the service tests.
 server_tests=(service_solve_test service_validation_test service_transform_test service_keep_out_test
-              service_gp_test control_stream_lifetime_test worker_pool_test session_strand_test loadtest_test
-              server_binary_test service_admission_test service_stream_bounds_test service_malformed_bytes_test
-              memory_budget_test client_reconnect_test closed_loop_restart_test reconnect_fidelity_test
-              client_spec_update_test session_routing_test auth_test log_format_test hostile_numbers_test
-              hostile_spec_rules_test hostile_sessions_test hostile_control_protocol_test hostile_transport_test
-              hostile_solves_test)
+              service_gp_test service_fleet_test solve_placement_test control_stream_lifetime_test
+              worker_pool_test session_strand_test server_binary_test service_admission_test
+              service_stream_bounds_test service_malformed_bytes_test memory_budget_test auth_test
+              log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
+              hostile_control_protocol_test hostile_transport_test hostile_solves_test)
 targets=()
 for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-asan -j "$jobs" "${targets[@]}"
@@ -52,7 +54,7 @@ deploy/fuzz.sh "${NUPMPC_FUZZ_SECONDS:-60}"
 echo "== sanitizer stage 3: ThreadSanitizer (build-tsan/)"
 deploy/sanitizer-tree.sh tsan
 tsan_tests=(worker_pool_test session_strand_test control_stream_lifetime_test service_stream_bounds_test
-            service_solve_test)
+            service_solve_test service_fleet_test)
 targets=()
 for t in "${tsan_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-tsan -j "$jobs" "${targets[@]}"

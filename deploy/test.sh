@@ -5,7 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 deploy/build.sh
-(cd build && ctest --output-on-failure -j "$(nproc)" --timeout 1200)
+# Twice as many tests as CPUs: many of them mostly wait (servers, balancers, timeouts).
+(cd build && ctest --output-on-failure -j "$(( $(nproc) * 2 ))" --timeout 1200)
 if [ "${NUPMPC_SANITIZERS:-1}" != 0 ]; then
   deploy/test-sanitizers.sh
 fi

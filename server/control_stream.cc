@@ -277,14 +277,18 @@ void ControlStream::StartSolve(v1::ControlRequest request) {
     const auto queued_at = Clock::now();
     // Through the session's strand either way: a unary Solve accepted just before this
     // stream attached runs first, without a worker waiting for it.
-    if (SolvesHere() && SessionStrand::TryRunHere(entry_->strand, state_->pool,
-                                                  [&] { Solve(std::move(request), queued_at); })) {
+    // In place, the answer is written by the caller's Pump once the core and the session
+    // are given back: the client's next step, sent as soon as it has the answer, then finds
+    // them free instead of going to a worker.
+    if (SolvesHere() && SessionStrand::TryRunHere(entry_->strand, state_->pool, [&] {
+          Solve(std::move(request), queued_at, /*pump=*/false);
+        })) {
       return;
     }
     const absl::Status queued = SessionStrand::Submit(
         entry_->strand, state_->pool,
         {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
-           self->Solve(std::move(request), queued_at);
+           self->Solve(std::move(request), queued_at, /*pump=*/true);
          },
          [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
          entry_->last_solve_ms.load(std::memory_order_relaxed)});
@@ -313,7 +317,7 @@ void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& 
   Pump();
 }
 
-void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_at) {
+void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump) {
   const auto started_at = Clock::now();
   CallContext call;
   call.deadline = SteadyDeadline(*context_);
@@ -339,7 +343,7 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
   }
   // Still inside this session's strand task: the next step queues behind it.
   if (next.has_value()) StartSolve(*std::move(next));
-  Pump();
+  if (pump) Pump();
 }
 
 void ControlStream::QueueWriteLocked(v1::ControlResponse response) {

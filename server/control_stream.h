@@ -75,9 +75,12 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   bool SolvesHere() const;
   // Solves a step taken by TakeParkedLocked: here if the session and a core are free and its
   // solves are short (no hand-off to a worker: the latency of a transport-bound step),
-  // else on the pool through the session's strand. Called without mu_.
+  // else on the pool through the session's strand. Called without mu_; the caller Pumps
+  // afterwards (an answer solved in place is written then).
   void StartSolve(v1::ControlRequest request);
-  void Solve(v1::ControlRequest request, Clock::time_point queued_at);
+  // Solves and queues the answer; `pump`: also starts writing it (on a worker; in place the
+  // caller of StartSolve does, after the core is given back).
+  void Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump);
   // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
   void QueueWriteLocked(v1::ControlResponse response);
