@@ -28,6 +28,7 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
 
   core::Solution solution;
   std::vector<double> times_ms;
+  std::vector<std::vector<double>> state_times_ms(states.size());
   std::uint64_t iterations = 0;
   core::StepUpdate step;  // only a measured state, as a Step with only `state` is applied
   for (int round = 0; round < rounds; ++round) {
@@ -42,12 +43,15 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
       const auto stop = std::chrono::steady_clock::now();
       if (!summary.ok()) return summary.status();
       times_ms.push_back(std::chrono::duration<double, std::milli>(stop - start).count());
+      state_times_ms[t].push_back(times_ms.back());
       iterations += summary->iterations;
     }
   }
   CoreBaseline out;
   out.solves = static_cast<int>(times_ms.size());
   out.mean_iterations = out.solves > 0 ? static_cast<double>(iterations) / out.solves : 0.0;
+  for (double t : times_ms) out.mean_ms += t / static_cast<double>(times_ms.size());
+  for (std::vector<double>& t : state_times_ms) out.state_ms.push_back(Quantile(t, 0.5));
   out.median_ms = Quantile(times_ms, 0.5);
   out.p99_ms = Quantile(times_ms, 0.99);
   return out;

@@ -15,6 +15,8 @@ namespace nupmpc::loadtest {
 struct CoreBaseline {
   double median_ms = 0.0;  ///< per step, including setting x[0] and shifting the warm start
   double p99_ms = 0.0;
+  double mean_ms = 0.0;
+  std::vector<double> state_ms;  ///< per closed-loop state, in order: its median over the rounds
   double mean_iterations = 0.0;
   int solves = 0;
 };

@@ -14,14 +14,15 @@ namespace {
 // its previous answer is written), so answers wait in a queue and go out one at a time.
 class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
  public:
-  EchoStream(const v1::SolveResult* answer, std::chrono::nanoseconds busy) : answer_(answer), busy_(busy) {
+  EchoStream(const v1::SolveResult* answer, const std::vector<std::chrono::nanoseconds>* busy)
+      : answer_(answer), busy_(busy) {
     StartRead(&incoming_);
   }
 
   void OnReadDone(bool ok) override {
-    if (ok && incoming_.has_step() && busy_.count() > 0) {
+    if (ok && incoming_.has_step() && !busy_->empty()) {
       // Stands in for a solve done right here: busy, not asleep, as a solve would be.
-      const auto until = std::chrono::steady_clock::now() + busy_;
+      const auto until = std::chrono::steady_clock::now() + (*busy_)[steps_++ % busy_->size()];
       while (std::chrono::steady_clock::now() < until) {
       }
     }
@@ -72,7 +73,8 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
   }
 
   const v1::SolveResult* const answer_;
-  const std::chrono::nanoseconds busy_;
+  const std::vector<std::chrono::nanoseconds>* const busy_;
+  std::size_t steps_ = 0;  ///< steps read (reads are one at a time)
   v1::ControlRequest incoming_;
   std::mutex mu_;
   std::deque<v1::ControlResponse> writes_;
@@ -85,22 +87,23 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
 
 class EchoControlServer::Service : public v1::MpcService::CallbackService {
  public:
-  Service(v1::SolveResult answer, std::chrono::nanoseconds busy) : answer_(std::move(answer)), busy_(busy) {}
+  Service(v1::SolveResult answer, std::vector<std::chrono::nanoseconds> busy)
+      : answer_(std::move(answer)), busy_(std::move(busy)) {}
 
   grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(
       grpc::CallbackServerContext* /*context*/) override {
-    return new EchoStream(&answer_, busy_);
+    return new EchoStream(&answer_, &busy_);
   }
 
  private:
   const v1::SolveResult answer_;
-  const std::chrono::nanoseconds busy_;
+  const std::vector<std::chrono::nanoseconds> busy_;
 };
 
-absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Start(v1::SolveResult answer,
-                                                                              std::chrono::nanoseconds busy) {
+absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Start(
+    v1::SolveResult answer, std::vector<std::chrono::nanoseconds> busy) {
   std::unique_ptr<EchoControlServer> s(new EchoControlServer());
-  s->service_ = std::make_unique<Service>(std::move(answer), busy);
+  s->service_ = std::make_unique<Service>(std::move(answer), std::move(busy));
   grpc::ServerBuilder builder;
   builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &s->port_);
   builder.RegisterService(s->service_.get());

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "grpcpp/grpcpp.h"
@@ -23,11 +24,13 @@ namespace nupmpc::loadtest {
 class EchoControlServer {
  public:
   // Listens on 127.0.0.1 at a free port; every step is answered with `answer`, after
-  // `busy` of busy-waiting inside the reaction when it is positive: a solve of that length
-  // done where the request arrives, with no hand-over to a worker (which nupmpc-server
-  // does not do: its reactions never block), the lowest round trip any server could have.
-  static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(
-      v1::SolveResult answer, std::chrono::nanoseconds busy = std::chrono::nanoseconds(0));
+  // busy-waiting inside the reaction: a stream's k-th step for busy[k % busy.size()] (none
+  // when `busy` is empty), a solve of that length done where the request arrives with no
+  // hand-over to a worker, the lowest round trip any server could have for that work.
+  // nupmpc-loadtest passes the core's own time for each closed-loop state, in the order
+  // its streams send them.
+  static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(v1::SolveResult answer,
+                                                                   std::vector<std::chrono::nanoseconds> busy = {});
   ~EchoControlServer();
 
   std::string target() const;

@@ -21,6 +21,8 @@
 
 #include "absl/flags/flag.h"
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "cli/program_flags.h"
 #include "client/client.h"
@@ -51,10 +53,12 @@ ABSL_FLAG(int, transport_calls, 2000, "health checks that measure gRPC's own rou
 ABSL_FLAG(bool, echo, true,
           "also run every level against a zero-work echo server in a child process (the transport floor at that load)");
 ABSL_FLAG(bool, inline_solve, false,
-          "also run every level against the echo server busy for the core's median solve time inside its reaction "
-          "(a server that solves where the request arrives: the lowest round trip any design could reach)");
-ABSL_FLAG(double, serve_echo_busy_us, -1.0,
-          "internal: run as the echo peer's child process, busy this long per step (>= 0), until stdin closes");
+          "also run every level against the echo server busy inside its reaction, for each step, for the core's own "
+          "time for that step (a server that solves where the request arrives: the lowest round trip any design "
+          "could reach for the same work)");
+ABSL_FLAG(std::string, serve_echo_busy_us, "",
+          "internal: run as the echo peer's child process until stdin closes, busy per step for these microseconds "
+          "(comma-separated, cycled per stream; 0: no work)");
 ABSL_FLAG(bool, new_references, false,
           "every step also sends new output references (the instance's output priors with a moving target)");
 ABSL_FLAG(std::string, server_cpus, "",
@@ -115,15 +119,24 @@ bool ShowProgress() {
 
 // The child process of an echo peer: the real server's plan for the spec is its answer.
 int ServeEcho(const std::string& target, const nupmpc::ChannelSecurity& security,
-              const nupmpc::v1::ProblemSpec& spec, double busy_us) {
+              const nupmpc::v1::ProblemSpec& spec, const std::string& busy_us) {
+  std::vector<std::chrono::nanoseconds> busy;
+  for (absl::string_view part : absl::StrSplit(busy_us, ',')) {
+    double us = 0.0;
+    if (!absl::SimpleAtod(part, &us) || !(us >= 0.0)) {
+      return Fail("--serve_echo_busy_us", absl::InvalidArgumentError(absl::StrCat("\"", part, "\" is not a duration")));
+    }
+    if (us > 0.0) {
+      busy.push_back(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double, std::micro>(us)));
+    }
+  }
   absl::StatusOr<std::unique_ptr<nupmpc::Client>> connected =
       nupmpc::Client::Connect(target, security, std::chrono::seconds(10));
   if (!connected.ok()) return Fail("connection security", connected.status());
   nupmpc::Client& client = **connected;
   absl::StatusOr<nupmpc::v1::SolveResult> answer = client.SolveOnce(spec);
   if (!answer.ok()) return Fail("SolveOnce for the echo server's answer", answer.status());
-  absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> echo = lt::EchoControlServer::Start(
-      *std::move(answer), std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double, std::micro>(busy_us)));
+  absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> echo = lt::EchoControlServer::Start(*std::move(answer), busy);
   if (!echo.ok()) return Fail("echo server", echo.status());
   return lt::ServeEchoUntilStdinCloses(**echo);
 }
@@ -176,7 +189,7 @@ int main(int argc, char** argv) {
   const std::string name = std::filesystem::path(instance_path).stem().string();
   absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
   if (!security.ok()) return Fail("connection security", security.status());
-  if (const double busy_us = absl::GetFlag(FLAGS_serve_echo_busy_us); busy_us >= 0.0) {
+  if (const std::string busy_us = absl::GetFlag(FLAGS_serve_echo_busy_us); !busy_us.empty()) {
     return ServeEcho(target, *security, file->spec, busy_us);
   }
   const bool json = absl::GetFlag(FLAGS_json);
@@ -215,20 +228,22 @@ int main(int argc, char** argv) {
   // The peers are echo servers in child processes (this program with --serve_echo_busy_us),
   // answering with the real server's plan for the instance: real message sizes.
   std::unique_ptr<lt::EchoProcess> echo, inline_solve;
-  const auto spawn_echo = [&](double busy_us) {
+  const auto spawn_echo = [&](const std::string& busy_us) {
     const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
     std::vector<std::string> args = {self, "--server=" + target, "--instance=" + instance_path,
-                                     absl::StrCat("--serve_echo_busy_us=", busy_us)};
+                                     "--serve_echo_busy_us=" + busy_us};
     for (std::string& a : nupmpc::SecurityFlagArguments()) args.push_back(std::move(a));
     return lt::EchoProcess::Spawn(args, server_cpus->has_value() ? &**server_cpus : nullptr);
   };
   if (absl::GetFlag(FLAGS_echo)) {
-    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(0.0);
+    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo("0");
     if (!started.ok()) return Fail("echo server", started.status());
     echo = *std::move(started);
   }
   if (absl::GetFlag(FLAGS_inline_solve)) {
-    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(baseline->median_ms * 1e3);
+    // The core's own time for each state, in the order every stream sends them.
+    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(absl::StrJoin(
+        baseline->state_ms, ",", [](std::string* out, double ms) { absl::StrAppend(out, ms * 1e3); }));
     if (!started.ok()) return Fail("inline-solve echo server", started.status());
     inline_solve = *std::move(started);
   }

@@ -44,9 +44,9 @@ void PrintHeader(const RunHeader& h) {
   std::printf("nupmpc-loadtest: %s against %s (nupmpc-server %s, %u workers, queue %u)\n", h.instance.c_str(),
               h.target.c_str(), h.server.version().c_str(), h.server.limits().worker_threads(),
               h.server.limits().queue_capacity());
-  std::printf("core alone, same steps: median %.4f ms, p99 %.4f ms, %.2f iterations/step over %d solves; "
-              "capacity %u workers / median = %.0f solves/s\n",
-              h.baseline.median_ms, h.baseline.p99_ms, h.baseline.mean_iterations, h.baseline.solves,
+  std::printf("core alone, same steps: median %.4f ms, mean %.4f ms, p99 %.4f ms, %.2f iterations/step over %d "
+              "solves; capacity %u workers / median = %.0f solves/s\n",
+              h.baseline.median_ms, h.baseline.mean_ms, h.baseline.p99_ms, h.baseline.mean_iterations, h.baseline.solves,
               h.server.limits().worker_threads(), h.capacity_per_s);
   std::printf("transport alone (grpc.health.v1 Check, answered inside gRPC): p50 %.0f \xc2\xb5s, p99 %.0f \xc2\xb5s "
               "over %d calls\n",
@@ -61,8 +61,9 @@ void PrintHeader(const RunHeader& h) {
                 "step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
   }
   if (h.inline_solve) {
-    std::printf("(inline rows: the same echo, busy for the core median inside its reaction before it answers: a "
-                "server that solves where the request arrives, with no hand-over; overhead = its p50 - core median)\n");
+    std::printf("(inline rows: the same echo, busy inside its reaction before it answers, for each step the core's "
+                "own time for that step: a server that solves where the request arrives, with no hand-over and "
+                "nothing else; overhead = its p50 - core median)\n");
   }
   std::printf("(no plan: answers without SolveResult.has_plan, whose inputs a controller must not apply; the load "
               "test sends recorded states and applies no input)\n");
@@ -103,6 +104,7 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
   out["peer_cpus"] = h.peer_cpus;
   out["generator_cpus"] = h.generator_cpus;
   out["core_baseline"] = {{"median_ms", h.baseline.median_ms},
+                          {"mean_ms", h.baseline.mean_ms},
                           {"p99_ms", h.baseline.p99_ms},
                           {"mean_iterations", h.baseline.mean_iterations},
                           {"solves", h.baseline.solves},
