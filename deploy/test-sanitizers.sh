@@ -10,7 +10,8 @@
 #   2. Fuzzing: every target of fuzz/ for NUPMPC_FUZZ_SECONDS (default 60) each, from the
 #      same tree (deploy/fuzz.sh).
 #   3. ThreadSanitizer (build-tsan/): the worker pool, the session strands, the Control
-#      stream, the service's unary and streaming calls and SolveFleet; reports triaged by
+#      stream, the service's unary and streaming calls, SolveFleet and steps solved on
+#      gRPC's threads (solve_placement_test); reports triaged by
 #      tests/build/tsan_triage.py (only races inside gRPC's and protobuf's own code are
 #      dismissed, each rule with its reason).
 # Compiled with clang at -O1, -UNDEBUG (Eigen's assertions on), warnings as errors.
@@ -54,7 +55,7 @@ deploy/fuzz.sh "${NUPMPC_FUZZ_SECONDS:-60}"
 echo "== sanitizer stage 3: ThreadSanitizer (build-tsan/)"
 deploy/sanitizer-tree.sh tsan
 tsan_tests=(worker_pool_test session_strand_test control_stream_lifetime_test service_stream_bounds_test
-            service_solve_test service_fleet_test)
+            service_solve_test service_fleet_test solve_placement_test)
 targets=()
 for t in "${tsan_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-tsan -j "$jobs" "${targets[@]}"

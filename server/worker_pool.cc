@@ -18,6 +18,7 @@ WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms
 WorkerPool::~WorkerPool() { Shutdown(); }
 
 absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_ms) {
+  bool wake;
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (stopping_) return absl::UnavailableError("the server is shutting down");
@@ -34,8 +35,10 @@ absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_m
     if (expected_ms < 0.0) expected_ms = average_task_ms_;
     queue_.push_back(Task{std::move(task), expected_ms});
     queued_ms_ += expected_ms;
+    // With every core taken a woken worker would only go back to sleep; Finished wakes one.
+    wake = running_ < cores_;
   }
-  ready_.notify_one();
+  if (wake) ready_.notify_one();
   return absl::OkStatus();
 }
 
@@ -110,12 +113,16 @@ void WorkerPool::Run() {
 void WorkerPool::Finished(double took_ms) {
   busy_.fetch_sub(1, std::memory_order_relaxed);
   busy_seconds_.fetch_add(took_ms / 1000.0, std::memory_order_relaxed);
+  bool wake;
   {
     std::lock_guard<std::mutex> lock(mu_);
     --running_;
     average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
+    // Only queued work needs a worker woken for this core. Waking an idle worker for
+    // nothing costs two context switches per solve, on the core the next solve needs.
+    wake = !queue_.empty();
   }
-  ready_.notify_one();  // a worker may wait for this core
+  if (wake) ready_.notify_one();
 }
 
 }  // namespace nupmpc::server
