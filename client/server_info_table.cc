@@ -72,7 +72,7 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
       {"CPU baseline", CpuBaseline(info)},
       {"algorithms", Algorithms(info)},
       {"active sessions", absl::StrCat(info.active_sessions())},
-      {"solves", absl::StrCat(info.solves())},
+      {"solves", absl::StrCat(info.solves(), " (", info.solves_in_place(), " on the gRPC thread that received them)")},
       {"errors by code", Errors(info)},
       {"solve latency", Latency(info)},
       {"resident memory", Mib(info.resident_memory_bytes())},
@@ -83,6 +83,9 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
       {"worker threads", absl::StrCat(l.worker_threads())},
       {"queue capacity", absl::StrCat(l.queue_capacity())},
       {"max queue wait", l.max_queue_wait_ms() > 0 ? absl::StrFormat("%g ms", l.max_queue_wait_ms()) : "off"},
+      {"solved where received",
+       l.inline_solve_max_ms() > 0 ? absl::StrFormat("steps of sessions solving in ≤%g ms", l.inline_solve_max_ms())
+                                   : "never"},
       {"max sessions", absl::StrCat(l.max_sessions())},
       {"session idle timeout", Seconds(l.session_idle_timeout_s(), "never")},
       {"session compact idle", Seconds(l.session_compact_idle_s(), "never")},

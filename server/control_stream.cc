@@ -277,12 +277,15 @@ void ControlStream::StartSolve(v1::ControlRequest request) {
     const auto queued_at = Clock::now();
     // Through the session's strand either way: a unary Solve accepted just before this
     // stream attached runs first, without a worker waiting for it.
-    // In place, the answer is written by the caller's Pump once the core and the session
-    // are given back: the client's next step, sent as soon as it has the answer, then finds
-    // them free instead of going to a worker.
-    if (SolvesHere() && SessionStrand::TryRunHere(entry_->strand, state_->pool, [&] {
-          Solve(std::move(request), queued_at, /*pump=*/false);
-        })) {
+    // In place, the answer is written once the session is given back: the client's next
+    // step, sent as soon as it has the answer, then finds the session free. This thread
+    // keeps the core for up to inline_solve_max_ms more of short steps that arrived
+    // meanwhile (other streams', and this one's next), as a worker would, but without
+    // handing each to another thread.
+    const bool short_solve = SolvesHere();
+    if (short_solve && SessionStrand::TryRunHere(
+                           entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },
+                           [this] { Pump(); }, state_->options.inline_solve_max_ms)) {
       return;
     }
     const absl::Status queued = SessionStrand::Submit(
@@ -291,7 +294,8 @@ void ControlStream::StartSolve(v1::ControlRequest request) {
            self->Solve(std::move(request), queued_at, /*pump=*/true);
          },
          [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
-         entry_->last_solve_ms.load(std::memory_order_relaxed)});
+         entry_->last_solve_ms.load(std::memory_order_relaxed),
+         short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker});
     if (queued.ok()) return;
     std::optional<v1::ControlRequest> next;
     {

@@ -32,7 +32,7 @@ absl::Status SessionStrand::Start(const std::shared_ptr<SessionStrand>& strand, 
         run = nullptr;  // release the call's state before the next task starts
         StartNext(strand, pool);
       },
-      task.expected_ms);
+      task.expected_ms, task.placement);
 }
 
 void SessionStrand::StartNext(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool) {
@@ -55,20 +55,26 @@ void SessionStrand::StartNext(const std::shared_ptr<SessionStrand>& strand, Work
 }
 
 bool SessionStrand::TryRunHere(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
-                               const std::function<void()>& run) {
+                               const std::function<void()>& run, const std::function<void()>& then,
+                               double drain_ms) {
   {
     std::lock_guard<std::mutex> lock(strand->mu_);
     if (strand->busy_) return false;
     strand->busy_ = true;
   }
-  bool ran;
-  try {
-    ran = pool.TryRunHere(run);
-  } catch (...) {
-    StartNext(strand, pool);  // the session stays usable whatever the task did
-    throw;
-  }
-  StartNext(strand, pool);  // tasks that queued up meanwhile (and, if it did not run, frees the strand)
+  const bool ran = pool.TryRunHere(
+      [&] {
+        try {
+          run();
+        } catch (...) {
+          StartNext(strand, pool);  // the session stays usable whatever the task did
+          throw;
+        }
+        StartNext(strand, pool);  // tasks that queued up for the session meanwhile
+        if (then) then();
+      },
+      drain_ms);
+  if (!ran) StartNext(strand, pool);  // frees the strand
   return ran;
 }
 

@@ -28,6 +28,7 @@ class SessionStrand {
     std::function<void()> run;               ///< runs on a worker, once
     std::function<void(absl::Status)> fail;  ///< answers the call if the pool refuses it later
     double expected_ms = -1.0;               ///< for the pool's admission (WorkerPool::TrySubmit)
+    WorkerPool::Placement placement = WorkerPool::Placement::kWorker;
   };
 
   // OK: the task will run (or, if the pool refuses it once it is its turn, fail) exactly
@@ -38,8 +39,11 @@ class SessionStrand {
   // Runs `run` now on the calling thread, as the session's next task, if no task of this
   // session is queued or running and the pool has a core free (WorkerPool::TryRunHere);
   // returns whether it ran. When it did not, nothing happened and the caller submits it.
+  // After `run`, with the session given back but the core still held: `then` (if any),
+  // then up to `drain_ms` of queued short tasks (WorkerPool::TryRunHere).
   static bool TryRunHere(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
-                         const std::function<void()>& run);
+                         const std::function<void()>& run, const std::function<void()>& then = nullptr,
+                         double drain_ms = 0.0);
   // Runs `work` now, on the calling thread, if no task of this session is queued or
   // running, and returns true; else returns false and does nothing. For short work that
   // may be skipped while the session is busy (idle compaction).

@@ -17,7 +17,7 @@ WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms
 
 WorkerPool::~WorkerPool() { Shutdown(); }
 
-absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_ms) {
+absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_ms, Placement placement) {
   bool wake;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -33,9 +33,9 @@ absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_m
           wait_ms, max_queue_wait_ms_));
     }
     if (expected_ms < 0.0) expected_ms = average_task_ms_;
-    queue_.push_back(Task{std::move(task), expected_ms});
+    queue_.push_back(Task{std::move(task), expected_ms, placement});
     queued_ms_ += expected_ms;
-    // With every core taken a woken worker would only go back to sleep; Finished wakes one.
+    // With every core taken a woken worker would only go back to sleep; ReleaseCore wakes one.
     wake = running_ < cores_;
   }
   if (wake) ready_.notify_one();
@@ -60,26 +60,74 @@ void WorkerPool::Shutdown() {
   threads_.clear();
 }
 
-bool WorkerPool::TryRunHere(const std::function<void()>& task) {
+bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (stopping_ || !queue_.empty() || running_ >= cores_) return false;
     ++running_;
   }
-  run_here_.fetch_add(1, std::memory_order_relaxed);
-  const auto start = std::chrono::steady_clock::now();
   busy_.fetch_add(1, std::memory_order_relaxed);
   // No catch here: the caller's thread is the caller's (a gRPC reaction answers its own
   // errors); the core is given back even if the task throws.
   struct GiveBack {
     WorkerPool* pool;
-    std::chrono::steady_clock::time_point start;
     ~GiveBack() {
-      pool->Finished(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+      if (pool != nullptr) pool->ReleaseCore();
     }
-  } give_back{this, start};
-  task();
+  } give_back{this};
+  {
+    struct Timed {
+      WorkerPool* pool;
+      std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+      ~Timed() { pool->Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()); }
+    } timed{this};
+    run_here_.fetch_add(1, std::memory_order_relaxed);
+    task();
+  }
+  if (drain_ms > 0.0 && RunQueuedHereThenRelease(drain_ms)) give_back.pool = nullptr;
   return true;
+}
+
+bool WorkerPool::RunQueuedHereThenRelease(double drain_ms) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double, std::milli>(drain_ms);
+  for (;;) {
+    Task task;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (stopping_ || queue_.empty() || queue_.front().placement != Placement::kAnyCoreHolder ||
+          std::chrono::steady_clock::now() >= until) {
+        if (!stopping_ && queue_.empty()) {
+          // Given back under the same lock that saw the queue empty: a task queued after
+          // this point finds the core free and runs where it arrives; one queued before is
+          // taken above. None waits for a worker that nobody wakes.
+          busy_.fetch_sub(1, std::memory_order_relaxed);
+          --running_;
+          return true;
+        }
+        return false;  // the caller gives the core back, waking a worker for what is queued
+      }
+      task = std::move(queue_.front());
+      queue_.pop_front();
+      queued_ms_ = queue_.empty() ? 0.0 : queued_ms_ - task.expected_ms;
+    }
+    const auto start = std::chrono::steady_clock::now();
+    run_here_.fetch_add(1, std::memory_order_relaxed);
+    RunQueued(task);
+    Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+  }
+}
+
+void WorkerPool::RunQueued(Task& task) {
+  // Requests catch their own exceptions (RunCatchingExceptions) and answer with them;
+  // this only keeps the thread alive should a task's bookkeeping throw anyway.
+  try {
+    task.run();
+  } catch (const std::exception& e) {
+    spdlog::error("worker pool: a task ended with an exception: {}", e.what());
+  } catch (...) {
+    spdlog::error("worker pool: a task ended with an unknown exception");
+  }
+  task.run = nullptr;  // its captures go before the core is given back
 }
 
 void WorkerPool::Run() {
@@ -96,28 +144,24 @@ void WorkerPool::Run() {
     }
     const auto start = std::chrono::steady_clock::now();
     busy_.fetch_add(1, std::memory_order_relaxed);
-    // Requests catch their own exceptions (RunCatchingExceptions) and answer with them;
-    // this only keeps a worker alive should a task's bookkeeping throw anyway.
-    try {
-      task.run();
-    } catch (const std::exception& e) {
-      spdlog::error("worker: a task ended with an exception: {}", e.what());
-    } catch (...) {
-      spdlog::error("worker: a task ended with an unknown exception");
-    }
-    task.run = nullptr;  // its captures go before the core is given back
-    Finished(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    RunQueued(task);
+    Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    ReleaseCore();
   }
 }
 
-void WorkerPool::Finished(double took_ms) {
-  busy_.fetch_sub(1, std::memory_order_relaxed);
+void WorkerPool::Record(double took_ms) {
   busy_seconds_.fetch_add(took_ms / 1000.0, std::memory_order_relaxed);
+  std::lock_guard<std::mutex> lock(mu_);
+  average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
+}
+
+void WorkerPool::ReleaseCore() {
+  busy_.fetch_sub(1, std::memory_order_relaxed);
   bool wake;
   {
     std::lock_guard<std::mutex> lock(mu_);
     --running_;
-    average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
     // Only queued work needs a worker woken for this core. Waking an idle worker for
     // nothing costs two context switches per solve, on the core the next solve needs.
     wake = !queue_.empty();

@@ -34,21 +34,30 @@ class WorkerPool {
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;
 
+  // Where a queued task may run: only on a worker, or also on a thread that holds a core
+  // through TryRunHere (a short task: it holds that thread about as long as the one before).
+  enum class Placement { kWorker, kAnyCoreHolder };
+
   // Queues a task expected to run `expected_ms` (negative: unknown, the recent average of
   // the pool's tasks is used). RESOURCE_EXHAUSTED when refused as above, UNAVAILABLE when
   // the pool is shut down.
-  absl::Status TrySubmit(std::function<void()> task, double expected_ms = -1.0);
+  absl::Status TrySubmit(std::function<void()> task, double expected_ms = -1.0,
+                         Placement placement = Placement::kWorker);
   // Runs `task` now on the calling thread and returns true if a core is free for it (fewer
   // than threads() tasks run) and nothing is queued (queued tasks go first); else returns
-  // false without running it. Counted in busy() and busy_seconds() like the workers' tasks.
-  bool TryRunHere(const std::function<void()>& task);
+  // false without running it. Then, still holding the core, it runs the queued tasks
+  // submitted as kAnyCoreHolder, oldest first, while they are at the front of the queue
+  // and until `drain_ms` have passed since the first of them started: tasks that arrived
+  // while the core was busy are taken by the thread that has it instead of being handed
+  // to a worker. Counted in busy() and busy_seconds() like the workers' tasks.
+  bool TryRunHere(const std::function<void()>& task, double drain_ms = 0.0);
   // Stops accepting, runs what is queued, joins the threads. Idempotent.
   void Shutdown();
 
   int threads() const { return cores_; }
   int queue_capacity() const { return capacity_; }
   int queued() const;
-  // Tasks run on a caller's thread by TryRunHere since start.
+  // Tasks run on a caller's thread by TryRunHere since start, its own and queued ones.
   std::uint64_t run_here() const { return run_here_.load(std::memory_order_relaxed); }
   // For the metrics: workers running a task now, and the seconds all of them spent running
   // tasks since start (its rate over the worker count is the pool's utilisation).
@@ -56,14 +65,22 @@ class WorkerPool {
   double busy_seconds() const { return busy_seconds_.load(std::memory_order_relaxed); }
 
  private:
-  void Run();
-  // Bookkeeping of a finished task (either kind); called without mu_.
-  void Finished(double took_ms);
-
   struct Task {
     std::function<void()> run;
     double expected_ms;
+    Placement placement;
   };
+
+  void Run();
+  // Runs a queued task; a throwing task is logged, not propagated (it answers its own call).
+  static void RunQueued(Task& task);
+  // TryRunHere's second half: the queued kAnyCoreHolder tasks, for up to `drain_ms`.
+  // Returns true if it gave the core back itself (the queue was empty).
+  bool RunQueuedHereThenRelease(double drain_ms);
+  // Bookkeeping of a task that ran for `took_ms` (either kind); called without mu_.
+  void Record(double took_ms);
+  // Gives back the core a task held, waking a worker for queued work; called without mu_.
+  void ReleaseCore();
   const int cores_;  ///< threads started, and tasks that may run at once
   const int capacity_;
   const double max_queue_wait_ms_;

@@ -22,6 +22,7 @@ v1::GetServerInfoResponse Info() {
   info.add_algorithms(v1::ALGORITHM_IAKE);
   info.add_algorithms(v1::ALGORITHM_IFFBDD);
   info.set_solves(42);
+  info.set_solves_in_place(40);
   (*info.mutable_errors_by_code())["RESOURCE_EXHAUSTED"] = 2;
   (*info.mutable_errors_by_code())["INVALID_ARGUMENT"] = 3;
   info.set_active_sessions(5);
@@ -33,6 +34,7 @@ v1::GetServerInfoResponse Info() {
     b->set_count(count);
   }
   info.mutable_limits()->set_worker_threads(2);
+  info.mutable_limits()->set_inline_solve_max_ms(2.0);
   info.mutable_limits()->set_max_message_bytes(64 << 20);
   info.mutable_limits()->set_first_message_timeout_s(10);
   info.mutable_limits()->set_connection_idle_timeout_s(600);
@@ -58,6 +60,8 @@ TEST(ServerInfoTable, AlignedKeysAndReadableValues) {
   EXPECT_THAT(table, HasSubstr("3.0 MiB\n"));
   EXPECT_THAT(table, HasSubstr("64.0 MiB\n"));
   EXPECT_THAT(table, HasSubstr("draining "));
+  EXPECT_THAT(table, ::testing::ContainsRegex("solves +42 \\(40 on the gRPC thread that received them\\)\n"));
+  EXPECT_THAT(table, ::testing::ContainsRegex("solved where received +steps of sessions solving in ≤2 ms\n"));
   EXPECT_THAT(table, ::testing::ContainsRegex("first message within +10 s\n"));
   EXPECT_THAT(table, ::testing::ContainsRegex("idle connections closed +600 s\n"));
   EXPECT_THAT(table, ::testing::Not(HasSubstr("{")));  // not JSON

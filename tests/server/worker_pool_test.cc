@@ -4,8 +4,10 @@
 
 #include <atomic>
 #include <future>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
+#include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -90,15 +92,16 @@ TEST(WorkerPool, RunsNothingHereWhileEveryCoreIsBusyOrWorkIsQueued) {
   WorkerPool queued_pool(1, 4);
   Blocker blocker(queued_pool);
   std::promise<void> queued_ran;
+  const std::shared_future<void> queued_done = queued_ran.get_future().share();
   ASSERT_TRUE(queued_pool.TrySubmit([&] { queued_ran.set_value(); }).ok());
   blocker.Release();
   // Whether or not the worker has taken the queued task yet, it is not overtaken: either
-  // it is still queued (refused here) or it holds the only core.
+  // it is still queued (refused here) or it holds the only core, or it is done.
   bool overtook = false;
-  (void)queued_pool.TryRunHere([&] { overtook = queued_ran.get_future().wait_for(std::chrono::seconds(0)) !=
-                                                std::future_status::ready; });
+  (void)queued_pool.TryRunHere(
+      [&] { overtook = queued_done.wait_for(std::chrono::seconds(0)) != std::future_status::ready; });
   EXPECT_FALSE(overtook);
-  EXPECT_EQ(queued_ran.get_future().wait_for(std::chrono::seconds(30)), std::future_status::ready);
+  EXPECT_EQ(queued_done.wait_for(std::chrono::seconds(30)), std::future_status::ready);
 }
 
 TEST(WorkerPool, WorkersWaitForTheCoreATaskRunningHereHolds) {
@@ -119,13 +122,58 @@ TEST(WorkerPool, WorkersWaitForTheCoreATaskRunningHereHolds) {
   EXPECT_EQ(pool.busy(), 0);
 }
 
+TEST(WorkerPool, ACoreHolderRunsTheShortTasksQueuedBehindItThenLeavesTheRestToWorkers) {
+  WorkerPool pool(1, 8);
+  std::mutex mu;
+  std::vector<std::pair<int, std::thread::id>> ran;
+  std::promise<void> workers_done;
+  const auto record = [&](int i) {
+    std::lock_guard<std::mutex> lock(mu);
+    ran.emplace_back(i, std::this_thread::get_id());
+  };
+  using Placement = WorkerPool::Placement;
+  EXPECT_TRUE(pool.TryRunHere(
+      [&] {
+        // Queued while this thread holds the only core: no worker may start them.
+        for (int i = 0; i < 3; ++i) ASSERT_TRUE(pool.TrySubmit([&, i] { record(i); }, 0.1, Placement::kAnyCoreHolder).ok());
+        ASSERT_TRUE(pool.TrySubmit([&] { record(3); }, 0.1, Placement::kWorker).ok());
+        ASSERT_TRUE(pool.TrySubmit([&] { record(4); workers_done.set_value(); }, 0.1, Placement::kAnyCoreHolder).ok());
+      },
+      /*drain_ms=*/10000.0));
+  ASSERT_EQ(workers_done.get_future().wait_for(std::chrono::seconds(30)), std::future_status::ready);
+  std::lock_guard<std::mutex> lock(mu);
+  ASSERT_EQ(ran.size(), 5u);
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(ran[i].first, i);  // in the order they were queued
+  // The short tasks at the front ran here; from the first worker-only task on, a worker.
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(ran[i].second, std::this_thread::get_id()) << i;
+  for (int i = 3; i < 5; ++i) EXPECT_NE(ran[i].second, std::this_thread::get_id()) << i;
+  EXPECT_EQ(pool.run_here(), 4u);  // its own task and three queued ones
+}
+
+TEST(WorkerPool, ACoreHolderThatFindsTheQueueEmptyGivesTheCoreBackBeforeReturning) {
+  WorkerPool pool(1, 8);
+  EXPECT_TRUE(pool.TryRunHere(
+      [&] { ASSERT_TRUE(pool.TrySubmit([] {}, 0.1, WorkerPool::Placement::kAnyCoreHolder).ok()); }, 10000.0));
+  // Nothing left for a worker, and the core is free at once for the next arrival.
+  EXPECT_EQ(pool.queued(), 0);
+  EXPECT_EQ(pool.busy(), 0);
+  EXPECT_TRUE(pool.TryRunHere([] {}));
+  EXPECT_EQ(pool.run_here(), 3u);
+}
+
 TEST(WorkerPool, ATaskThatThrowsHereGivesItsCoreBack) {
   WorkerPool pool(1, 4);
   EXPECT_THROW(pool.TryRunHere([] { throw std::runtime_error("escaped"); }), std::runtime_error);
   std::promise<void> ran;
   ASSERT_TRUE(pool.TrySubmit([&] { ran.set_value(); }).ok());
   EXPECT_EQ(ran.get_future().wait_for(std::chrono::seconds(30)), std::future_status::ready);
-  EXPECT_TRUE(pool.TryRunHere([] {}));
+  // The worker gives its core back just after the task's last statement.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  bool ran_here = false;
+  while (!(ran_here = pool.TryRunHere([] {})) && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  EXPECT_TRUE(ran_here);
 }
 
 }  // namespace
