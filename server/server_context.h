@@ -25,7 +25,8 @@ struct ServerOptions {
   std::string address = "[::]:50051";
   int worker_threads = 2;
   // Control steps of sessions whose last solve took at most this long are solved on the
-  // gRPC thread that received them when a core is free (ControlStream::StartSolve); 0: never.
+  // gRPC thread that received them when a core is free, and that thread runs such steps
+  // queued behind it for up to this long (ControlStream::StartSolve); 0: never.
   double inline_solve_max_ms = 2.0;
   int max_fleet_steps = 10000;  ///< steps in one SolveFleet call
   int queue_capacity = 64;

@@ -36,7 +36,7 @@ absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_m
     queue_.push_back(Task{std::move(task), expected_ms, placement});
     queued_ms_ += expected_ms;
     // With every core taken a woken worker would only go back to sleep; ReleaseCore wakes one.
-    wake = running_ < cores_;
+    wake = running_ < cores_ && here_waiting_ == 0;
   }
   if (wake) ready_.notify_one();
   return absl::OkStatus();
@@ -54,6 +54,7 @@ void WorkerPool::Shutdown() {
     stopping_ = true;
   }
   ready_.notify_all();
+  core_free_.notify_all();
   for (std::thread& t : threads_) {
     if (t.joinable()) t.join();
   }
@@ -62,8 +63,21 @@ void WorkerPool::Shutdown() {
 
 bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) {
   {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (stopping_ || !queue_.empty() || running_ >= cores_) return false;
+    std::unique_lock<std::mutex> lock(mu_);
+    if (drain_ms > 0.0 && !stopping_ && running_ >= cores_ && running_long_ == 0) {
+      // Every core runs a short task: the next to end gives its core to this thread
+      // (workers step aside while one waits), which then also runs what queued meanwhile,
+      // instead of a worker handing those steps over one by one.
+      ++here_waiting_;
+      core_free_.wait_for(lock, std::chrono::duration<double, std::milli>(drain_ms),
+                          [this] { return stopping_ || running_ < cores_; });
+      --here_waiting_;
+    }
+    if (stopping_ || running_ >= cores_) return false;
+    if (!queue_.empty() && (drain_ms <= 0.0 || queue_.front().placement != Placement::kAnyCoreHolder)) {
+      if (here_waiting_ == 0) ready_.notify_one();  // it is a worker's, and this core is free
+      return false;
+    }
     ++running_;
   }
   busy_.fetch_add(1, std::memory_order_relaxed);
@@ -75,6 +89,8 @@ bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) 
       if (pool != nullptr) pool->ReleaseCore();
     }
   } give_back{this};
+  // Short tasks queued before this one arrived go first.
+  if (drain_ms > 0.0) RunQueuedHere(drain_ms, /*release_when_empty=*/false);
   {
     struct Timed {
       WorkerPool* pool;
@@ -84,11 +100,11 @@ bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) 
     run_here_.fetch_add(1, std::memory_order_relaxed);
     task();
   }
-  if (drain_ms > 0.0 && RunQueuedHereThenRelease(drain_ms)) give_back.pool = nullptr;
+  if (drain_ms > 0.0 && RunQueuedHere(drain_ms, /*release_when_empty=*/true)) give_back.pool = nullptr;
   return true;
 }
 
-bool WorkerPool::RunQueuedHereThenRelease(double drain_ms) {
+bool WorkerPool::RunQueuedHere(double drain_ms, bool release_when_empty) {
   const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double, std::milli>(drain_ms);
   for (;;) {
     Task task;
@@ -96,12 +112,13 @@ bool WorkerPool::RunQueuedHereThenRelease(double drain_ms) {
       std::lock_guard<std::mutex> lock(mu_);
       if (stopping_ || queue_.empty() || queue_.front().placement != Placement::kAnyCoreHolder ||
           std::chrono::steady_clock::now() >= until) {
-        if (!stopping_ && queue_.empty()) {
+        if (release_when_empty && !stopping_ && queue_.empty()) {
           // Given back under the same lock that saw the queue empty: a task queued after
           // this point finds the core free and runs where it arrives; one queued before is
           // taken above. None waits for a worker that nobody wakes.
           busy_.fetch_sub(1, std::memory_order_relaxed);
           --running_;
+          if (here_waiting_ > 0) core_free_.notify_one();
           return true;
         }
         return false;  // the caller gives the core back, waking a worker for what is queued
@@ -135,18 +152,23 @@ void WorkerPool::Run() {
     Task task;
     {
       std::unique_lock<std::mutex> lock(mu_);
-      ready_.wait(lock, [this] { return (stopping_ && queue_.empty()) || (!queue_.empty() && running_ < cores_); });
+      // A free core goes to a thread waiting in TryRunHere first (it takes the queue too).
+      ready_.wait(lock, [this] {
+        return (stopping_ && queue_.empty()) || (!queue_.empty() && running_ < cores_ && here_waiting_ == 0);
+      });
       if (queue_.empty()) return;  // stopping and drained
       task = std::move(queue_.front());
       queue_.pop_front();
       queued_ms_ = queue_.empty() ? 0.0 : queued_ms_ - task.expected_ms;  // no drift when empty
       ++running_;
+      if (task.placement == Placement::kWorker) ++running_long_;
     }
     const auto start = std::chrono::steady_clock::now();
     busy_.fetch_add(1, std::memory_order_relaxed);
+    const bool long_task = task.placement == Placement::kWorker;
     RunQueued(task);
     Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
-    ReleaseCore();
+    ReleaseCore(long_task);
   }
 }
 
@@ -156,17 +178,21 @@ void WorkerPool::Record(double took_ms) {
   average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
 }
 
-void WorkerPool::ReleaseCore() {
+void WorkerPool::ReleaseCore(bool long_task) {
   busy_.fetch_sub(1, std::memory_order_relaxed);
-  bool wake;
+  bool wake_here, wake_worker;
   {
     std::lock_guard<std::mutex> lock(mu_);
     --running_;
-    // Only queued work needs a worker woken for this core. Waking an idle worker for
-    // nothing costs two context switches per solve, on the core the next solve needs.
-    wake = !queue_.empty();
+    if (long_task) --running_long_;
+    // A thread waiting in TryRunHere takes the core before the workers. Otherwise only
+    // queued work needs a worker woken: waking an idle worker for nothing costs two
+    // context switches per solve, on the core the next solve needs.
+    wake_here = here_waiting_ > 0;
+    wake_worker = !wake_here && !queue_.empty();
   }
-  if (wake) ready_.notify_one();
+  if (wake_here) core_free_.notify_one();
+  if (wake_worker) ready_.notify_one();
 }
 
 }  // namespace nupmpc::server

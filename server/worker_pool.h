@@ -45,11 +45,13 @@ class WorkerPool {
                          Placement placement = Placement::kWorker);
   // Runs `task` now on the calling thread and returns true if a core is free for it (fewer
   // than threads() tasks run) and nothing is queued (queued tasks go first); else returns
-  // false without running it. Then, still holding the core, it runs the queued tasks
-  // submitted as kAnyCoreHolder, oldest first, while they are at the front of the queue
-  // and until `drain_ms` have passed since the first of them started: tasks that arrived
-  // while the core was busy are taken by the thread that has it instead of being handed
-  // to a worker. Counted in busy() and busy_seconds() like the workers' tasks.
+  // false without running it. With `drain_ms` > 0, the thread that holds a core also
+  // runs the queued tasks submitted as kAnyCoreHolder, oldest first, while they are at
+  // the front of the queue, for up to `drain_ms` (before `task` those queued before it,
+  // after it those queued meanwhile); and when every core runs such short work, it waits
+  // up to `drain_ms` for one (workers step aside for it). Steps that arrive while a core
+  // is busy are then taken by the thread that has it instead of handed to a worker one by
+  // one. Counted in busy() and busy_seconds() like the workers' tasks.
   bool TryRunHere(const std::function<void()>& task, double drain_ms = 0.0);
   // Stops accepting, runs what is queued, joins the threads. Idempotent.
   void Shutdown();
@@ -74,23 +76,28 @@ class WorkerPool {
   void Run();
   // Runs a queued task; a throwing task is logged, not propagated (it answers its own call).
   static void RunQueued(Task& task);
-  // TryRunHere's second half: the queued kAnyCoreHolder tasks, for up to `drain_ms`.
-  // Returns true if it gave the core back itself (the queue was empty).
-  bool RunQueuedHereThenRelease(double drain_ms);
+  // Runs the queued kAnyCoreHolder tasks at the front of the queue on this thread, which
+  // holds a core, for up to `drain_ms`. With `release_when_empty`, gives the core back
+  // when it finds the queue empty and returns true.
+  bool RunQueuedHere(double drain_ms, bool release_when_empty);
   // Bookkeeping of a task that ran for `took_ms` (either kind); called without mu_.
   void Record(double took_ms);
-  // Gives back the core a task held, waking a worker for queued work; called without mu_.
-  void ReleaseCore();
+  // Gives back the core a task held (a kWorker task: `long_task`): to a thread waiting in
+  // TryRunHere, else to a worker if work is queued. Called without mu_.
+  void ReleaseCore(bool long_task = false);
   const int cores_;  ///< threads started, and tasks that may run at once
   const int capacity_;
   const double max_queue_wait_ms_;
   mutable std::mutex mu_;
-  std::condition_variable ready_;
+  std::condition_variable ready_;      ///< workers: work queued and a core free
+  std::condition_variable core_free_;  ///< threads waiting in TryRunHere for a core
   std::deque<Task> queue_;
   double queued_ms_ = 0.0;         ///< sum of the queued tasks' expected_ms
   double average_task_ms_ = 0.0;   ///< exponentially weighted, of finished tasks
   bool stopping_ = false;
   int running_ = 0;  ///< tasks running, on workers or through TryRunHere (at most threads())
+  int running_long_ = 0;  ///< of them, kWorker tasks (a caller does not wait for those)
+  int here_waiting_ = 0;  ///< callers of TryRunHere waiting for a core
   std::atomic<int> busy_{0};
   std::atomic<double> busy_seconds_{0.0};
   std::atomic<std::uint64_t> run_here_{0};

@@ -161,6 +161,46 @@ TEST(WorkerPool, ACoreHolderThatFindsTheQueueEmptyGivesTheCoreBackBeforeReturnin
   EXPECT_EQ(pool.run_here(), 3u);
 }
 
+TEST(WorkerPool, ACallerWaitsForACoreRunningShortWorkAndTakesOverTheQueue) {
+  using Placement = WorkerPool::Placement;
+  WorkerPool pool(1, 8);
+  std::promise<void> started, release;
+  std::shared_future<void> released = release.get_future().share();
+  ASSERT_TRUE(pool.TrySubmit(
+                      [&started, released] {
+                        started.set_value();
+                        released.wait();
+                      },
+                      0.1, Placement::kAnyCoreHolder)
+                  .ok());
+  started.get_future().wait();  // a worker runs short work on the only core
+  std::thread::id queued_ran_on;
+  ASSERT_TRUE(pool.TrySubmit([&] { queued_ran_on = std::this_thread::get_id(); }, 0.1, Placement::kAnyCoreHolder).ok());
+  std::thread releaser([&] {
+    // Ends the worker's task a little later: a caller that did not wait for the core
+    // would be refused meanwhile.
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    release.set_value();
+  });
+  std::thread::id ran_on;
+  EXPECT_TRUE(pool.TryRunHere([&] { ran_on = std::this_thread::get_id(); }, /*drain_ms=*/60000.0));
+  releaser.join();
+  // The core the worker gave back came here, and so did the short task queued before.
+  EXPECT_EQ(ran_on, std::this_thread::get_id());
+  EXPECT_EQ(queued_ran_on, std::this_thread::get_id());
+  EXPECT_EQ(pool.queued(), 0);
+}
+
+TEST(WorkerPool, ACallerDoesNotWaitForACoreRunningWorkMeantForWorkers) {
+  WorkerPool pool(1, 8);
+  Blocker blocker(pool);  // kWorker: of unknown length
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_FALSE(pool.TryRunHere([] {}, /*drain_ms=*/60000.0));
+  // Refused at once, not after the minute it would have waited.
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(30));
+  blocker.Release();
+}
+
 TEST(WorkerPool, ATaskThatThrowsHereGivesItsCoreBack) {
   WorkerPool pool(1, 4);
   EXPECT_THROW(pool.TryRunHere([] { throw std::runtime_error("escaped"); }), std::runtime_error);
