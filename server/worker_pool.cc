@@ -64,10 +64,12 @@ void WorkerPool::Shutdown() {
 bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) {
   {
     std::unique_lock<std::mutex> lock(mu_);
-    if (drain_ms > 0.0 && !stopping_ && running_ >= cores_ && running_long_ == 0) {
-      // Every core runs a short task: the next to end gives its core to this thread
-      // (workers step aside while one waits), which then also runs what queued meanwhile,
-      // instead of a worker handing those steps over one by one.
+    if (drain_ms > 0.0 && !stopping_ && running_ >= cores_ && running_long_ == 0 && running_here_ == 0) {
+      // Every core runs a short task on a worker: the next to end gives its core to this
+      // thread (workers step aside while one waits), which then also runs what queued
+      // meanwhile, instead of a worker handing those steps over one by one. (A core held
+      // by a caller is not waited for: that caller runs what is queued behind it, so this
+      // thread is better off going back to gRPC to read the next request.)
       ++here_waiting_;
       core_free_.wait_for(lock, std::chrono::duration<double, std::milli>(drain_ms),
                           [this] { return stopping_ || running_ < cores_; });
@@ -79,6 +81,7 @@ bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) 
       return false;
     }
     ++running_;
+    ++running_here_;
   }
   busy_.fetch_add(1, std::memory_order_relaxed);
   // No catch here: the caller's thread is the caller's (a gRPC reaction answers its own
@@ -86,7 +89,7 @@ bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) 
   struct GiveBack {
     WorkerPool* pool;
     ~GiveBack() {
-      if (pool != nullptr) pool->ReleaseCore();
+      if (pool != nullptr) pool->ReleaseCore(/*long_task=*/false, /*caller=*/true);
     }
   } give_back{this};
   // Short tasks queued before this one arrived go first.
@@ -118,6 +121,7 @@ bool WorkerPool::RunQueuedHere(double drain_ms, bool release_when_empty) {
           // taken above. None waits for a worker that nobody wakes.
           busy_.fetch_sub(1, std::memory_order_relaxed);
           --running_;
+          --running_here_;
           if (here_waiting_ > 0) core_free_.notify_one();
           return true;
         }
@@ -168,7 +172,7 @@ void WorkerPool::Run() {
     const bool long_task = task.placement == Placement::kWorker;
     RunQueued(task);
     Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
-    ReleaseCore(long_task);
+    ReleaseCore(long_task, /*caller=*/false);
   }
 }
 
@@ -178,13 +182,14 @@ void WorkerPool::Record(double took_ms) {
   average_task_ms_ = average_task_ms_ == 0.0 ? took_ms : 0.9 * average_task_ms_ + 0.1 * took_ms;
 }
 
-void WorkerPool::ReleaseCore(bool long_task) {
+void WorkerPool::ReleaseCore(bool long_task, bool caller) {
   busy_.fetch_sub(1, std::memory_order_relaxed);
   bool wake_here, wake_worker;
   {
     std::lock_guard<std::mutex> lock(mu_);
     --running_;
     if (long_task) --running_long_;
+    if (caller) --running_here_;
     // A thread waiting in TryRunHere takes the core before the workers. Otherwise only
     // queued work needs a worker woken: waking an idle worker for nothing costs two
     // context switches per solve, on the core the next solve needs.

@@ -48,10 +48,10 @@ class WorkerPool {
   // false without running it. With `drain_ms` > 0, the thread that holds a core also
   // runs the queued tasks submitted as kAnyCoreHolder, oldest first, while they are at
   // the front of the queue, for up to `drain_ms` (before `task` those queued before it,
-  // after it those queued meanwhile); and when every core runs such short work, it waits
-  // up to `drain_ms` for one (workers step aside for it). Steps that arrive while a core
-  // is busy are then taken by the thread that has it instead of handed to a worker one by
-  // one. Counted in busy() and busy_seconds() like the workers' tasks.
+  // after it those queued meanwhile); and when every core runs such short work on a
+  // worker, it waits up to `drain_ms` for one (workers step aside for it). Steps that
+  // arrive while a core is busy are then taken by the thread that has it instead of
+  // handed to a worker one by one. Counted in busy() and busy_seconds() like the workers' tasks.
   bool TryRunHere(const std::function<void()>& task, double drain_ms = 0.0);
   // Stops accepting, runs what is queued, joins the threads. Idempotent.
   void Shutdown();
@@ -82,9 +82,10 @@ class WorkerPool {
   bool RunQueuedHere(double drain_ms, bool release_when_empty);
   // Bookkeeping of a task that ran for `took_ms` (either kind); called without mu_.
   void Record(double took_ms);
-  // Gives back the core a task held (a kWorker task: `long_task`): to a thread waiting in
-  // TryRunHere, else to a worker if work is queued. Called without mu_.
-  void ReleaseCore(bool long_task = false);
+  // Gives back the core a task held (a kWorker task: `long_task`; held by a TryRunHere
+  // caller: `caller`): to a thread waiting in TryRunHere, else to a worker if work is
+  // queued. Called without mu_.
+  void ReleaseCore(bool long_task, bool caller);
   const int cores_;  ///< threads started, and tasks that may run at once
   const int capacity_;
   const double max_queue_wait_ms_;
@@ -97,6 +98,7 @@ class WorkerPool {
   bool stopping_ = false;
   int running_ = 0;  ///< tasks running, on workers or through TryRunHere (at most threads())
   int running_long_ = 0;  ///< of them, kWorker tasks (a caller does not wait for those)
+  int running_here_ = 0;  ///< of them, held by TryRunHere callers
   int here_waiting_ = 0;  ///< callers of TryRunHere waiting for a core
   std::atomic<int> busy_{0};
   std::atomic<double> busy_seconds_{0.0};

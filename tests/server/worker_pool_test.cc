@@ -191,6 +191,32 @@ TEST(WorkerPool, ACallerWaitsForACoreRunningShortWorkAndTakesOverTheQueue) {
   EXPECT_EQ(pool.queued(), 0);
 }
 
+TEST(WorkerPool, ACallerDoesNotWaitForACoreAnotherCallerHoldsButQueuesForIt) {
+  WorkerPool pool(1, 8);
+  std::promise<void> holding, release;
+  std::thread::id holder_id, queued_ran_on;
+  std::thread holder([&] {
+    holder_id = std::this_thread::get_id();
+    EXPECT_TRUE(pool.TryRunHere(
+        [&] {
+          holding.set_value();
+          release.get_future().wait();
+        },
+        /*drain_ms=*/60000.0));
+  });
+  holding.get_future().wait();
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_FALSE(pool.TryRunHere([] {}, /*drain_ms=*/60000.0));
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(30));  // refused at once
+  // What it queues instead is run by the holder, not a worker.
+  ASSERT_TRUE(
+      pool.TrySubmit([&] { queued_ran_on = std::this_thread::get_id(); }, 0.1, WorkerPool::Placement::kAnyCoreHolder)
+          .ok());
+  release.set_value();
+  holder.join();
+  EXPECT_EQ(queued_ran_on, holder_id);
+}
+
 TEST(WorkerPool, ACallerDoesNotWaitForACoreRunningWorkMeantForWorkers) {
   WorkerPool pool(1, 8);
   Blocker blocker(pool);  // kWorker: of unknown length
