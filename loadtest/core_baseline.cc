@@ -57,4 +57,34 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
   return out;
 }
 
+absl::StatusOr<double> MeasureFleetCoreMeanMs(const v1::ProblemSpec& spec,
+                                              const std::vector<std::vector<double>>& states, int sessions,
+                                              int periods) {
+  std::vector<server::BuiltSession> fleet;
+  for (int s = 0; s < sessions; ++s) {
+    absl::StatusOr<server::BuiltSession> built = server::BuildSession(spec, bench::NoSizeLimits());
+    if (!built.ok()) return built.status();
+    fleet.push_back(*std::move(built));
+  }
+  core::Solution solution;
+  core::StepUpdate step;
+  const auto start = std::chrono::steady_clock::now();
+  for (int period = 0; period < periods; ++period) {
+    for (int s = 0; s < sessions; ++s) {
+      const std::vector<double>& x = states[(static_cast<std::size_t>(period) + 7 * static_cast<std::size_t>(s)) % states.size()];
+      step.state = Eigen::Map<const Eigen::VectorXd>(x.data(), static_cast<Eigen::Index>(x.size()));
+      core::MpcSession& session = *fleet[static_cast<std::size_t>(s)].solver;
+      if (absl::Status applied = session.Apply(step); !applied.ok()) return applied;
+      session.ShiftWarmStart();
+      core::SolveLimits limits;
+      limits.warm_start = period > 0;
+      if (absl::StatusOr<core::SolveSummary> summary = session.Solve(limits, &solution); !summary.ok()) {
+        return summary.status();
+      }
+    }
+  }
+  const double total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return total_ms / std::max(1, sessions * periods);
+}
+
 }  // namespace nupmpc::loadtest

@@ -24,6 +24,14 @@ struct CoreBaseline {
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
                                                  const std::vector<std::vector<double>>& states, int rounds);
 
+// The core alone stepping `sessions` sessions of `spec` in turn, as a fleet call does
+// (session s at period p gets states[(p + 7 s) % size]), for `periods` periods: the
+// mean time per step, with every session's data as cold as a fleet's leaves it (a session
+// stepped on its own keeps its data in the caches between steps).
+absl::StatusOr<double> MeasureFleetCoreMeanMs(const v1::ProblemSpec& spec,
+                                              const std::vector<std::vector<double>>& states, int sessions,
+                                              int periods);
+
 // The q-quantile (0..1) of `values` by nearest rank; sorts them. 0 when empty.
 double Quantile(std::vector<double>& values, double q);
 

@@ -275,7 +275,11 @@ int main(int argc, char** argv) {
     config.security = *security;
     absl::StatusOr<lt::LevelReport> separate = lt::RunLevel(target, plan, config);
     if (!separate.ok()) return Fail("separate streams", separate.status());
-    lt::PrintFleet(header, *stepped, *separate, json);
+    absl::StatusOr<double> fleet_core_ms = MeasuredOn(*server_cpus, [&] {
+      return lt::MeasureFleetCoreMeanMs(file->spec, file->closed_loop_states, fleet, absl::GetFlag(FLAGS_baseline_rounds));
+    });
+    if (!fleet_core_ms.ok()) return Fail("fleet core baseline", fleet_core_ms.status());
+    lt::PrintFleet(header, *stepped, *separate, *fleet_core_ms, json);
     return 0;
   }
   std::vector<lt::LevelReport> reports;

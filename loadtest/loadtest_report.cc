@@ -147,8 +147,11 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
   std::printf("%s\n", out.dump(2).c_str());
 }
 
-void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& separate, bool json) {
+void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& separate, double fleet_core_mean_ms,
+                bool json) {
   const double of_capacity = f.steps_per_s / h.capacity_per_s;
+  const double fleet_capacity = h.server.limits().worker_threads() / (fleet_core_mean_ms * 1e-3);
+  const double of_fleet_capacity = f.steps_per_s / fleet_capacity;
   const double vs_streams = separate.solves_per_s > 0.0 ? f.steps_per_s / separate.solves_per_s : 0.0;
   if (json) {
     const nlohmann::json out = {{"instance", h.instance},
@@ -161,6 +164,9 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
                                 {"separate_streams_solves_per_s", separate.solves_per_s},
                                 {"capacity_per_s", h.capacity_per_s},
                                 {"fraction_of_capacity", of_capacity},
+                                {"core_in_turn_mean_ms", fleet_core_mean_ms},
+                                {"core_in_turn_capacity_per_s", fleet_capacity},
+                                {"fraction_of_core_in_turn_capacity", of_fleet_capacity},
                                 {"vs_separate_streams", vs_streams}};
     std::printf("%s\n", out.dump(2).c_str());
     return;
@@ -169,6 +175,10 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
               "p99 %.3f ms, %llu step errors\n",
               f.sessions, f.steps_per_s, 100.0 * of_capacity, h.capacity_per_s, f.call_p50_ms, f.call_p99_ms,
               static_cast<unsigned long long>(f.step_errors));
+  std::printf("       the core alone stepping the %d sessions in turn: mean %.4f ms per step, capacity %u workers / "
+              "mean = %.0f steps/s; the fleet call reaches %.0f%% of it\n",
+              f.sessions, fleet_core_mean_ms, h.server.limits().worker_threads(), fleet_capacity,
+              100.0 * of_fleet_capacity);
   std::printf("       %d separate Control streams: %.0f solves/s, p50 %.3f ms; fleet / streams = %.2fx\n",
               separate.config.concurrency, separate.solves_per_s, separate.p50_ms, vs_streams);
   std::fflush(stdout);

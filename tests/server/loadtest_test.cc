@@ -238,6 +238,20 @@ TEST(CoreBaseline, MeasuresEveryStepOfEveryRound) {
   EXPECT_GT(b->median_ms, 0.0);
   EXPECT_LE(b->median_ms, b->p99_ms);
   EXPECT_GT(b->mean_iterations, 1.0);
+  EXPECT_GT(b->mean_ms, 0.0);
+  // The inline peer replays these, one per closed-loop state in order.
+  ASSERT_EQ(b->state_ms.size(), w.states.size());
+  for (double ms : b->state_ms) EXPECT_GT(ms, 0.0);
+}
+
+TEST(CoreBaseline, SteppingAFleetInTurnTimesEveryStepAndRefusesAWrongState) {
+  const Workload w = MassesWorkload();
+  absl::StatusOr<double> mean_ms = loadtest::MeasureFleetCoreMeanMs(w.spec, w.states, 3, 2);
+  ASSERT_TRUE(mean_ms.ok()) << mean_ms.status();
+  EXPECT_GT(*mean_ms, 0.0);
+  EXPECT_TRUE(std::isfinite(*mean_ms));
+  const std::vector<std::vector<double>> wrong = {std::vector<double>(w.states[0].size() + 1, 0.0)};
+  EXPECT_FALSE(loadtest::MeasureFleetCoreMeanMs(w.spec, wrong, 3, 1).ok());
 }
 
 TEST(Quantile, NearestRank) {
