@@ -1,6 +1,7 @@
 #include "loadtest/echo_server.h"
 
 #include <chrono>
+#include <ctime>
 #include <deque>
 #include <mutex>
 #include <utility>
@@ -9,6 +10,12 @@
 
 namespace nupmpc::loadtest {
 namespace {
+
+std::chrono::nanoseconds ThreadCpuTime() {
+  timespec now{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return std::chrono::seconds(now.tv_sec) + std::chrono::nanoseconds(now.tv_nsec);
+}
 
 // One echoed Control stream. Reads and writes overlap (an open-loop client sends before
 // its previous answer is written), so answers wait in a queue and go out one at a time.
@@ -21,9 +28,12 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
 
   void OnReadDone(bool ok) override {
     if (ok && incoming_.has_step() && !busy_->empty()) {
-      // Stands in for a solve done right here: busy, not asleep, as a solve would be.
-      const auto until = std::chrono::steady_clock::now() + (*busy_)[steps_++ % busy_->size()];
-      while (std::chrono::steady_clock::now() < until) {
+      // Stands in for a solve done right here: busy, not asleep, as a solve would be, for
+      // that much of this thread's CPU time (not wall time: two reactions spinning at once
+      // on one core would each count the other's time as their own, doing two "solves" in
+      // the time of one).
+      const std::chrono::nanoseconds until = ThreadCpuTime() + (*busy_)[steps_++ % busy_->size()];
+      while (ThreadCpuTime() < until) {
       }
     }
     std::unique_lock<std::mutex> lock(mu_);

@@ -24,9 +24,10 @@ namespace nupmpc::loadtest {
 class EchoControlServer {
  public:
   // Listens on 127.0.0.1 at a free port; every step is answered with `answer`, after
-  // busy-waiting inside the reaction: a stream's k-th step for busy[k % busy.size()] (none
-  // when `busy` is empty), a solve of that length done where the request arrives with no
-  // hand-over to a worker, the lowest round trip any server could have for that work.
+  // busy-waiting inside the reaction: a stream's k-th step for busy[k % busy.size()] of the
+  // thread's CPU time (none when `busy` is empty), a solve of that length done where the
+  // request arrives with no hand-over to a worker, the lowest round trip any server could
+  // have for that work.
   // nupmpc-loadtest passes the core's own time for each closed-loop state, in the order
   // its streams send them.
   static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(v1::SolveResult answer,
