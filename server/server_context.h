@@ -27,7 +27,7 @@ struct ServerOptions {
   // Control steps of sessions whose last solve took at most this long are solved on the
   // gRPC thread that received them when a core is free, and that thread runs such steps
   // queued behind it for up to this long (ControlStream::StartSolve); 0: never.
-  double inline_solve_max_ms = 2.0;
+  double inline_solve_max_ms = 0.5;
   int max_fleet_steps = 10000;  ///< steps in one SolveFleet call
   int queue_capacity = 64;
   double max_queue_wait_ms = 0.0;  ///< 0: only queue_capacity bounds the queue

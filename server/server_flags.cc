@@ -11,7 +11,7 @@
 
 ABSL_FLAG(std::string, address, "[::]:50051", "listen address host:port (env NUPMPC_ADDRESS)");
 ABSL_FLAG(int, threads, 2, "solver worker threads (env NUPMPC_THREADS)");
-ABSL_FLAG(double, inline_solve_max_ms, 2,
+ABSL_FLAG(double, inline_solve_max_ms, 0.5,
           "a Control step is solved on the gRPC thread that received it (no hand-off to a worker) when its "
           "session's last solve took at most this long and a core is free (that thread also runs such steps "
           "queued behind it, for up to this long); 0: always on a worker "
