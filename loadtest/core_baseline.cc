@@ -6,7 +6,9 @@
 
 #include "core/session/mpc_session.h"
 #include "loadtest/instances/benchmark_instance.h"
+#include "loadtest/load_stream.h"
 #include "server/session_factory.h"
+#include "server/step_conversion.h"
 
 namespace nupmpc::loadtest {
 
@@ -18,7 +20,8 @@ double Quantile(std::vector<double>& values, double q) {
 }
 
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
-                                                 const std::vector<std::vector<double>>& states, int rounds) {
+                                                 const std::vector<std::vector<double>>& states, int rounds,
+                                                 bool new_references) {
   // The session the server builds for this spec (Δu, multi-level, keep-out and GP specs
   // included), without admission limits: the server checks its own; the baseline solves
   // what it gets.
@@ -30,14 +33,18 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
   std::vector<double> times_ms;
   std::vector<std::vector<double>> state_times_ms(states.size());
   std::uint64_t iterations = 0;
-  core::StepUpdate step;  // only a measured state, as a Step with only `state` is applied
+  v1::Step message;
+  std::uint64_t sequence = 1;  // as a stream numbers its requests
   for (int round = 0; round < rounds; ++round) {
-    for (std::size_t t = 0; t < states.size(); ++t) {
+    for (std::size_t t = 0; t < states.size(); ++t, ++sequence) {
       core::SolveLimits limits;
       limits.warm_start = t > 0;
+      message.mutable_state()->Assign(states[t].begin(), states[t].end());
+      if (new_references) *message.mutable_update() = MovingReferences(spec, sequence);
       const auto start = std::chrono::steady_clock::now();
-      step.state = Eigen::Map<const Eigen::VectorXd>(states[t].data(), static_cast<Eigen::Index>(states[t].size()));
-      if (absl::Status s = session.Apply(step); !s.ok()) return s;
+      absl::StatusOr<core::StepUpdate> step = server::StepUpdateFromProto(message, session.dimensions());
+      if (!step.ok()) return step.status();
+      if (absl::Status s = session.Apply(*step); !s.ok()) return s;
       session.ShiftWarmStart();
       absl::StatusOr<core::SolveSummary> summary = session.Solve(limits, &solution);
       const auto stop = std::chrono::steady_clock::now();

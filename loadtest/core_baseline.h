@@ -21,8 +21,12 @@ struct CoreBaseline {
   int solves = 0;
 };
 
+// The core alone on the steps one load-test stream sends (LoadStream): every state in
+// order, `rounds` times, each round from a cold start, and with `new_references` the same
+// moving references; converted with the server's own StepUpdateFromProto, as it does.
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
-                                                 const std::vector<std::vector<double>>& states, int rounds);
+                                                 const std::vector<std::vector<double>>& states, int rounds,
+                                                 bool new_references = false);
 
 // The core alone stepping `sessions` sessions of `spec` in turn, as a fleet call does
 // (session s at period p gets states[(p + 7 s) % size]), for `periods` periods: the

@@ -221,7 +221,8 @@ int main(int argc, char** argv) {
   if (!info.ok()) return Fail(absl::StrCat("server ", target), info.status());
 
   absl::StatusOr<lt::CoreBaseline> baseline = MeasuredOn(*server_cpus, [&] {
-    return lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, absl::GetFlag(FLAGS_baseline_rounds));
+    return lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, absl::GetFlag(FLAGS_baseline_rounds),
+                                   absl::GetFlag(FLAGS_new_references));
   });
   if (!baseline.ok()) return Fail("core baseline", baseline.status());
   const double capacity_per_s = info->limits().worker_threads() / (baseline->median_ms * 1e-3);

@@ -242,6 +242,12 @@ TEST(CoreBaseline, MeasuresEveryStepOfEveryRound) {
   // The inline peer replays these, one per closed-loop state in order.
   ASSERT_EQ(b->state_ms.size(), w.states.size());
   for (double ms : b->state_ms) EXPECT_GT(ms, 0.0);
+  // The same steps with the moving references a --new_references stream sends: accepted by
+  // the server's conversion and applied, as the server applies them.
+  absl::StatusOr<loadtest::CoreBaseline> tracking =
+      loadtest::MeasureCoreBaseline(w.spec, w.states, 2, /*new_references=*/true);
+  ASSERT_TRUE(tracking.ok()) << tracking.status();
+  EXPECT_EQ(tracking->solves, b->solves);
 }
 
 TEST(CoreBaseline, SteppingAFleetInTurnTimesEveryStepAndRefusesAWrongState) {
