@@ -19,6 +19,23 @@ double Quantile(std::vector<double>& values, double q) {
   return values[std::clamp<std::size_t>(rank, 1, values.size()) - 1];
 }
 
+namespace {
+
+// One step as the server's SolveStep runs it, without the service around it: the Step
+// message converted, applied, the warm start shifted, the solve.
+absl::StatusOr<core::SolveSummary> StepAsTheServerDoes(core::MpcSession& session, const v1::Step& message,
+                                                       bool warm_start, core::Solution* solution) {
+  absl::StatusOr<core::StepUpdate> step = server::StepUpdateFromProto(message, session.dimensions());
+  if (!step.ok()) return step.status();
+  if (absl::Status applied = session.Apply(*step); !applied.ok()) return applied;
+  session.ShiftWarmStart();
+  core::SolveLimits limits;
+  limits.warm_start = warm_start;
+  return session.Solve(limits, solution);
+}
+
+}  // namespace
+
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
                                                  const std::vector<std::vector<double>>& states, int rounds,
                                                  bool new_references) {
@@ -37,16 +54,10 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
   std::uint64_t sequence = 1;  // as a stream numbers its requests
   for (int round = 0; round < rounds; ++round) {
     for (std::size_t t = 0; t < states.size(); ++t, ++sequence) {
-      core::SolveLimits limits;
-      limits.warm_start = t > 0;
       message.mutable_state()->Assign(states[t].begin(), states[t].end());
       if (new_references) *message.mutable_update() = MovingReferences(spec, sequence);
       const auto start = std::chrono::steady_clock::now();
-      absl::StatusOr<core::StepUpdate> step = server::StepUpdateFromProto(message, session.dimensions());
-      if (!step.ok()) return step.status();
-      if (absl::Status s = session.Apply(*step); !s.ok()) return s;
-      session.ShiftWarmStart();
-      absl::StatusOr<core::SolveSummary> summary = session.Solve(limits, &solution);
+      absl::StatusOr<core::SolveSummary> summary = StepAsTheServerDoes(session, message, t > 0, &solution);
       const auto stop = std::chrono::steady_clock::now();
       if (!summary.ok()) return summary.status();
       times_ms.push_back(std::chrono::duration<double, std::milli>(stop - start).count());
@@ -74,20 +85,15 @@ absl::StatusOr<double> MeasureFleetCoreMeanMs(const v1::ProblemSpec& spec,
     fleet.push_back(*std::move(built));
   }
   core::Solution solution;
-  core::StepUpdate step;
+  v1::Step message;
   const auto start = std::chrono::steady_clock::now();
   for (int period = 0; period < periods; ++period) {
     for (int s = 0; s < sessions; ++s) {
       const std::vector<double>& x = states[(static_cast<std::size_t>(period) + 7 * static_cast<std::size_t>(s)) % states.size()];
-      step.state = Eigen::Map<const Eigen::VectorXd>(x.data(), static_cast<Eigen::Index>(x.size()));
-      core::MpcSession& session = *fleet[static_cast<std::size_t>(s)].solver;
-      if (absl::Status applied = session.Apply(step); !applied.ok()) return applied;
-      session.ShiftWarmStart();
-      core::SolveLimits limits;
-      limits.warm_start = period > 0;
-      if (absl::StatusOr<core::SolveSummary> summary = session.Solve(limits, &solution); !summary.ok()) {
-        return summary.status();
-      }
+      message.mutable_state()->Assign(x.begin(), x.end());
+      absl::StatusOr<core::SolveSummary> summary =
+          StepAsTheServerDoes(*fleet[static_cast<std::size_t>(s)].solver, message, period > 0, &solution);
+      if (!summary.ok()) return summary.status();
     }
   }
   const double total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
