@@ -38,13 +38,16 @@ absl::StatusOr<core::SolveSummary> StepAsTheServerDoes(core::MpcSession& session
 
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
                                                  const std::vector<std::vector<double>>& states, int rounds,
-                                                 bool new_references) {
-  // The session the server builds for this spec (Δu, multi-level, keep-out and GP specs
+                                                 bool new_references, int sessions) {
+  // The sessions the server builds for this spec (Δu, multi-level, keep-out and GP specs
   // included), without admission limits: the server checks its own; the baseline solves
   // what it gets.
-  absl::StatusOr<server::BuiltSession> built = server::BuildSession(spec, bench::NoSizeLimits());
-  if (!built.ok()) return built.status();
-  core::MpcSession& session = *built->solver;
+  std::vector<server::BuiltSession> built;
+  for (int s = 0; s < std::max(1, sessions); ++s) {
+    absl::StatusOr<server::BuiltSession> session = server::BuildSession(spec, bench::NoSizeLimits());
+    if (!session.ok()) return session.status();
+    built.push_back(*std::move(session));
+  }
 
   core::Solution solution;
   std::vector<double> times_ms;
@@ -56,13 +59,15 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
     for (std::size_t t = 0; t < states.size(); ++t, ++sequence) {
       message.mutable_state()->Assign(states[t].begin(), states[t].end());
       if (new_references) *message.mutable_update() = MovingReferences(spec, sequence);
-      const auto start = std::chrono::steady_clock::now();
-      absl::StatusOr<core::SolveSummary> summary = StepAsTheServerDoes(session, message, t > 0, &solution);
-      const auto stop = std::chrono::steady_clock::now();
-      if (!summary.ok()) return summary.status();
-      times_ms.push_back(std::chrono::duration<double, std::milli>(stop - start).count());
-      state_times_ms[t].push_back(times_ms.back());
-      iterations += summary->iterations;
+      for (server::BuiltSession& session : built) {
+        const auto start = std::chrono::steady_clock::now();
+        absl::StatusOr<core::SolveSummary> summary = StepAsTheServerDoes(*session.solver, message, t > 0, &solution);
+        const auto stop = std::chrono::steady_clock::now();
+        if (!summary.ok()) return summary.status();
+        times_ms.push_back(std::chrono::duration<double, std::milli>(stop - start).count());
+        state_times_ms[t].push_back(times_ms.back());
+        iterations += summary->iterations;
+      }
     }
   }
   CoreBaseline out;

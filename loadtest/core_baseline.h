@@ -24,9 +24,12 @@ struct CoreBaseline {
 // The core alone on the steps one load-test stream sends (LoadStream): every state in
 // order, `rounds` times, each round from a cold start, and with `new_references` the same
 // moving references; converted with the server's own StepUpdateFromProto, as it does.
+// With `sessions` > 1, that many sessions each take every step in turn, as a server serving
+// that many streams steps them: each step then finds its session's data as cold as the
+// other sessions' steps in between left it (one session alone keeps it in the caches).
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
                                                  const std::vector<std::vector<double>>& states, int rounds,
-                                                 bool new_references = false);
+                                                 bool new_references = false, int sessions = 1);
 
 // The core alone stepping `sessions` sessions of `spec` in turn, as a fleet call does
 // (session s at period p gets states[(p + 7 s) % size]), for `periods` periods: the

@@ -120,6 +120,11 @@ absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan
     report.stream_max_share = *std::max_element(answered.begin(), answered.end()) / mean_answered;
   }
   report.measured_s = std::max(1e-9, Seconds(std::min(stopped_at, end) - measure_from));
+  Summarize(report);
+  return report;
+}
+
+void Summarize(LevelReport& report) {
   StreamTally& t = report.tally;
   report.solves_per_s = static_cast<double>(t.latency_ms.size()) / report.measured_s;
   report.p50_ms = Quantile(t.latency_ms, 0.50);
@@ -132,7 +137,25 @@ absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan
   report.solve_p50_ms = Quantile(t.solve_ms, 0.50);
   report.mean_iterations =
       t.latency_ms.empty() ? 0.0 : static_cast<double>(t.iterations) / static_cast<double>(t.latency_ms.size());
-  return report;
+}
+
+LevelReport MergeRounds(const std::vector<LevelReport>& rounds) {
+  LevelReport merged;
+  if (rounds.empty()) return merged;
+  merged.config = rounds.front().config;
+  merged.config.duration_s = 0.0;
+  merged.stream_min_share = rounds.front().stream_min_share;
+  merged.stream_max_share = rounds.front().stream_max_share;
+  for (const LevelReport& round : rounds) {
+    merged.config.duration_s += round.config.duration_s;
+    merged.measured_s += round.measured_s;
+    merged.tally.MergeFrom(round.tally);
+    // The streams differ between rounds: the least and the most served of any round.
+    merged.stream_min_share = std::min(merged.stream_min_share, round.stream_min_share);
+    merged.stream_max_share = std::max(merged.stream_max_share, round.stream_max_share);
+  }
+  Summarize(merged);
+  return merged;
 }
 
 }  // namespace nupmpc::loadtest

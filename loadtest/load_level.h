@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "client/channel_security.h"
@@ -26,6 +27,14 @@ struct LevelConfig {
   ChannelSecurity security;    ///< TLS / token of the server under test
 };
 
+// The core alone on a level's steps, with as many sessions stepped in turn as the level
+// has streams: the inline peer's busy time per step.
+struct LevelCore {
+  double median_ms = 0.0;
+  double mean_ms = 0.0;
+  int sessions = 0;  ///< 0: not measured
+};
+
 struct LevelReport {
   LevelConfig config;
   double measured_s = 0.0;
@@ -41,10 +50,19 @@ struct LevelReport {
   // The same level against the zero-work echo server (EchoControlServer), and against the
   // echo busy for the core's median solve time in its reaction, when run.
   std::shared_ptr<const LevelReport> echo, inline_solve;
+  LevelCore inline_core;
 };
 
 // Opens the streams (each creates its session), runs the level, closes them.
 absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan& plan, const LevelConfig& config);
+
+// Recomputes the rates and quantiles of `report` from its tally and measured_s.
+void Summarize(LevelReport& report);
+
+// One report of several runs of the same level against the same target (rounds
+// interleaved with the peers' runs): tallies and measured time summed, quantiles over all
+// answers, the least and the most served stream of any round.
+LevelReport MergeRounds(const std::vector<LevelReport>& rounds);
 
 }  // namespace nupmpc::loadtest
 

@@ -11,6 +11,7 @@
 #include <sched.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -48,6 +49,10 @@ ABSL_FLAG(double, rate, 0.0, "open loop: total arrivals per second");
 ABSL_FLAG(double, rate_x, 0.0, "open loop: arrivals as a multiple of the capacity workers / core median solve time");
 ABSL_FLAG(double, duration_s, 5.0, "measured seconds per level");
 ABSL_FLAG(double, warmup_s, 0.5, "unmeasured seconds before each level");
+ABSL_FLAG(int, rounds, 3,
+          "each level alternates the server under test and its peers (--echo, --inline_solve) this many times, "
+          "each run for duration_s / rounds, and reports the runs of each merged: a machine whose speed drifts "
+          "between minutes then slows all of them alike");
 ABSL_FLAG(uint64_t, requests, 0, "stop a level once this many solves were answered (0: by time)");
 ABSL_FLAG(int, baseline_rounds, 20, "passes of the core-alone baseline over the closed-loop states");
 ABSL_FLAG(int, transport_calls, 2000, "health checks that measure gRPC's own round trip");
@@ -111,6 +116,52 @@ absl::StatusOr<std::vector<int>> ConcurrencyLevels() {
   }
   if (levels.empty()) return absl::InvalidArgumentError("--sweep: no levels");
   return levels;
+}
+
+// One level against the server under test and each peer that runs (null: not run).
+struct LevelRuns {
+  lt::LevelReport server;
+  std::vector<std::optional<lt::LevelReport>> peers;
+};
+
+// Runs the level --rounds times against the server and each peer in turn (the order
+// reversed every round), each run duration_s / rounds, and merges each one's runs.
+absl::StatusOr<LevelRuns> RunInterleaved(const std::string& server, const std::vector<lt::EchoProcess*>& peers,
+                                         const lt::StreamPlan& plan, const lt::LevelConfig& config) {
+  // Slot 0 is the server under test, 1.. the peers; peers listen in plaintext and do not
+  // print progress.
+  std::vector<std::vector<lt::LevelReport>> runs(peers.size() + 1);
+  std::vector<int> order;
+  for (int slot = 0; slot <= static_cast<int>(peers.size()); ++slot) {
+    if (slot == 0 || peers[slot - 1] != nullptr) order.push_back(slot);
+  }
+  // Without peers there is nothing to interleave: one run (its streams stay open throughout).
+  const int rounds = order.size() > 1 ? std::max(1, absl::GetFlag(FLAGS_rounds)) : 1;
+  lt::LevelConfig round_config = config;
+  round_config.duration_s = config.duration_s / rounds;
+  round_config.requests = (config.requests + rounds - 1) / rounds;
+  for (int round = 0; round < rounds; ++round) {
+    for (const int slot : order) {
+      lt::LevelConfig run_config = round_config;
+      if (slot > 0) {
+        run_config.progress = false;
+        run_config.security = {};
+      }
+      const std::string& target = slot == 0 ? server : peers[slot - 1]->target();
+      absl::StatusOr<lt::LevelReport> run = lt::RunLevel(target, plan, run_config);
+      if (!run.ok()) {
+        return absl::Status(run.status().code(),
+                            absl::StrCat(slot == 0 ? "server under test" : "peer", ": ", run.status().message()));
+      }
+      runs[slot].push_back(*std::move(run));
+    }
+    std::reverse(order.begin(), order.end());
+  }
+  LevelRuns merged{.server = lt::MergeRounds(runs[0]), .peers = {}};
+  for (std::size_t i = 1; i < runs.size(); ++i) {
+    merged.peers.push_back(runs[i].empty() ? std::nullopt : std::optional(lt::MergeRounds(runs[i])));
+  }
+  return merged;
 }
 
 bool ShowProgress() {
@@ -232,7 +283,7 @@ int main(int argc, char** argv) {
 
   // The peers are echo servers in child processes (this program with --serve_echo_busy_us),
   // answering with the real server's plan for the instance: real message sizes.
-  std::unique_ptr<lt::EchoProcess> echo, inline_solve;
+  std::unique_ptr<lt::EchoProcess> echo;
   const auto spawn_echo = [&](const std::string& busy_us) {
     const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
     std::vector<std::string> args = {self, "--server=" + target, "--instance=" + instance_path,
@@ -245,13 +296,30 @@ int main(int argc, char** argv) {
     if (!started.ok()) return Fail("echo server", started.status());
     echo = *std::move(started);
   }
-  if (absl::GetFlag(FLAGS_inline_solve)) {
-    // The core's own time for each state, in the order every stream sends them.
-    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(absl::StrJoin(
-        baseline->state_ms, ",", [](std::string* out, double ms) { absl::StrAppend(out, ms * 1e3); }));
-    if (!started.ok()) return Fail("inline-solve echo server", started.status());
-    inline_solve = *std::move(started);
-  }
+  // The inline peer of a level: busy for the core's own time for each state, in the order
+  // every stream sends them, measured with as many sessions stepped in turn as the level
+  // has streams (the server's sessions' data are that cold between their steps).
+  struct InlinePeer {
+    lt::CoreBaseline core;
+    std::unique_ptr<lt::EchoProcess> process;
+  };
+  const auto inline_peer_for = [&](int streams) -> absl::StatusOr<InlinePeer> {
+    InlinePeer peer{.core = *baseline, .process = nullptr};
+    if (streams > 1) {
+      const int rounds = std::max(1, (absl::GetFlag(FLAGS_baseline_rounds) + streams - 1) / streams);
+      absl::StatusOr<lt::CoreBaseline> in_turn = MeasuredOn(*server_cpus, [&] {
+        return lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, rounds,
+                                       absl::GetFlag(FLAGS_new_references), streams);
+      });
+      if (!in_turn.ok()) return in_turn.status();
+      peer.core = *std::move(in_turn);
+    }
+    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = spawn_echo(
+        absl::StrJoin(peer.core.state_ms, ",", [](std::string* out, double ms) { absl::StrAppend(out, ms * 1e3); }));
+    if (!started.ok()) return started.status();
+    peer.process = *std::move(started);
+    return peer;
+  };
 
   const lt::RunHeader header{.instance = name,
                              .target = target,
@@ -260,9 +328,10 @@ int main(int argc, char** argv) {
                              .transport = *transport,
                              .capacity_per_s = capacity_per_s,
                              .echo = echo != nullptr,
-                             .inline_solve = inline_solve != nullptr,
+                             .inline_solve = absl::GetFlag(FLAGS_inline_solve),
                              .peer_cpus = server_cpus->has_value() ? nupmpc::server::CpuList(**server_cpus) : "",
-                             .generator_cpus = generator_cpus};
+                             .generator_cpus = generator_cpus,
+                             .rounds = std::max(1, absl::GetFlag(FLAGS_rounds))};
   if (!json) lt::PrintHeader(header);
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed", absl::GetFlag(FLAGS_new_references)};
   if (const int fleet = absl::GetFlag(FLAGS_fleet); fleet > 0) {
@@ -296,22 +365,31 @@ int main(int argc, char** argv) {
     config.progress = ShowProgress();
     config.seed = absl::GetFlag(FLAGS_seed);
     config.security = *security;
-    absl::StatusOr<lt::LevelReport> report = lt::RunLevel(target, plan, config);
-    if (!report.ok()) return Fail(absl::StrCat("concurrency ", c), report.status());
-    if (!json) lt::PrintLevel(header, *report);
-    config.progress = false;
-    config.security = {};  // the peers listen in plaintext
-    for (const auto& [peer, slot, label, busy_ms] :
-         {std::tuple{echo.get(), &report->echo, "echo", 0.0},
-          std::tuple{inline_solve.get(), &report->inline_solve, "inline", baseline->median_ms}}) {
-      if (peer == nullptr) continue;
-      absl::StatusOr<lt::LevelReport> floor = lt::RunLevel(peer->target(), plan, config);
-      if (!floor.ok()) return Fail(absl::StrCat(label, " server, concurrency ", c), floor.status());
-      if (!json) lt::PrintPeerLevel(label, *floor, busy_ms);
-      *slot = std::make_shared<const lt::LevelReport>(*std::move(floor));
+    std::optional<InlinePeer> inline_solve;
+    if (absl::GetFlag(FLAGS_inline_solve)) {
+      absl::StatusOr<InlinePeer> started = inline_peer_for(c);
+      if (!started.ok()) return Fail(absl::StrCat("inline-solve echo server, concurrency ", c), started.status());
+      inline_solve = *std::move(started);
     }
-    if (!json) lt::PrintRatios(*report);
-    reports.push_back(*std::move(report));
+    absl::StatusOr<LevelRuns> runs = RunInterleaved(
+        target, {echo.get(), inline_solve.has_value() ? inline_solve->process.get() : nullptr}, plan, config);
+    if (!runs.ok()) return Fail(absl::StrCat("concurrency ", c), runs.status());
+    lt::LevelReport& report = runs->server;
+    if (inline_solve.has_value()) {
+      report.inline_core = lt::LevelCore{.median_ms = inline_solve->core.median_ms,
+                                         .mean_ms = inline_solve->core.mean_ms,
+                                         .sessions = c};
+    }
+    if (!json) lt::PrintLevel(header, report);
+    for (const auto& [peer, slot, label, busy_ms] :
+         {std::tuple{&runs->peers[0], &report.echo, "echo", 0.0},
+          std::tuple{&runs->peers[1], &report.inline_solve, "inline", report.inline_core.median_ms}}) {
+      if (!peer->has_value()) continue;
+      if (!json) lt::PrintPeerLevel(label, **peer, busy_ms);
+      *slot = std::make_shared<const lt::LevelReport>(**std::move(peer));
+    }
+    if (!json) lt::PrintRatios(report);
+    reports.push_back(std::move(report));
   }
   if (json) lt::PrintJson(header, reports);
   return 0;

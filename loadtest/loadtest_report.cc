@@ -54,6 +54,11 @@ void PrintHeader(const RunHeader& h) {
   std::printf("CPUs: nupmpc-server %s (as it reports), echo peers and core baseline %s, load generator %s\n",
               h.server.cpus().empty() ? "?" : h.server.cpus().c_str(),
               h.peer_cpus.empty() ? "not pinned" : h.peer_cpus.c_str(), h.generator_cpus.c_str());
+  if (h.rounds > 1 && (h.echo || h.inline_solve)) {
+    std::printf("(each level: %d rounds against nupmpc and each peer in turn, the order reversed every round, "
+                "merged per server)\n",
+                h.rounds);
+  }
   std::printf("(latency is request sent, or open-loop arrival scheduled, to answer received; svc: from the "
               "hand-over to gRPC)\n");
   if (h.echo) {
@@ -62,8 +67,9 @@ void PrintHeader(const RunHeader& h) {
   }
   if (h.inline_solve) {
     std::printf("(inline rows: the same echo, busy inside its reaction before it answers, for each step the core's "
-                "own time for that step: a server that solves where the request arrives, with no hand-over and "
-                "nothing else; overhead = its p50 - core median)\n");
+                "own time for that step (measured with as many sessions stepped in turn as the level has streams): a "
+                "server that solves where the request arrives, with no hand-over and nothing else; overhead = its "
+                "p50 - that core median)\n");
   }
   std::printf("(no plan: answers without SolveResult.has_plan, whose inputs a controller must not apply; the load "
               "test sends recorded states and applies no input)\n");
@@ -87,6 +93,10 @@ void PrintRatios(const LevelReport& l) {
     const LevelReport& peer = *l.inline_solve;
     std::printf("  nupmpc/inline: solves/s %.1f%%, p50 %+.0f \xc2\xb5s, p99 %.2fx", 100.0 * l.solves_per_s / peer.solves_per_s,
                 (l.p50_ms - peer.p50_ms) * 1e3, l.p99_ms / peer.p99_ms);
+  }
+  if (l.inline_core.sessions > 1) {
+    std::printf("  inline busy: core alone, %d sessions in turn, median %.4f ms, mean %.4f ms",
+                l.inline_core.sessions, l.inline_core.median_ms, l.inline_core.mean_ms);
   }
   std::printf("  streams served: least %.2f, most %.2f of the mean\n", l.stream_min_share, l.stream_max_share);
   std::fflush(stdout);
@@ -138,6 +148,9 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
     if (l.echo != nullptr) level["echo"] = PeerJson(*l.echo);
     if (l.inline_solve != nullptr) {
       level["inline"] = PeerJson(*l.inline_solve);
+      level["inline"]["core_median_ms"] = l.inline_core.median_ms;
+      level["inline"]["core_mean_ms"] = l.inline_core.mean_ms;
+      level["inline"]["core_sessions_in_turn"] = l.inline_core.sessions;
       level["vs_inline"] = {{"solves_ratio", l.solves_per_s / l.inline_solve->solves_per_s},
                             {"p50_delta_us", (l.p50_ms - l.inline_solve->p50_ms) * 1e3},
                             {"p99_ratio", l.p99_ms / l.inline_solve->p99_ms}};

@@ -28,6 +28,7 @@ struct RunHeader {
   bool inline_solve = false;    ///< and against the echo busy for the core median in its reaction
   std::string peer_cpus;        ///< CPUs the echo peers and the core baseline ran on ("": not pinned)
   std::string generator_cpus;   ///< CPUs the load generator ran on
+  int rounds = 1;               ///< runs of each level against each server, interleaved
 };
 
 void PrintHeader(const RunHeader& header);

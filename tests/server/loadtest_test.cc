@@ -250,6 +250,52 @@ TEST(CoreBaseline, MeasuresEveryStepOfEveryRound) {
   EXPECT_EQ(tracking->solves, b->solves);
 }
 
+TEST(CoreBaseline, SessionsInTurnEachTakeEveryStep) {
+  const Workload w = MassesWorkload();
+  absl::StatusOr<loadtest::CoreBaseline> b =
+      loadtest::MeasureCoreBaseline(w.spec, w.states, 1, /*new_references=*/false, /*sessions=*/3);
+  ASSERT_TRUE(b.ok()) << b.status();
+  EXPECT_EQ(b->solves, static_cast<int>(3 * w.states.size()));
+  // Every session goes through the same states with the same warm starts: the same
+  // iterations per step as one session alone.
+  absl::StatusOr<loadtest::CoreBaseline> one = loadtest::MeasureCoreBaseline(w.spec, w.states, 1);
+  ASSERT_TRUE(one.ok()) << one.status();
+  EXPECT_DOUBLE_EQ(b->mean_iterations, one->mean_iterations);
+  ASSERT_EQ(b->state_ms.size(), w.states.size());
+  for (double ms : b->state_ms) EXPECT_GT(ms, 0.0);
+}
+
+TEST(LevelRounds, MergedRoundsCountEveryAnswerOverTheirSummedTime) {
+  const auto round = [](std::vector<double> latency_ms, double measured_s, double least, double most) {
+    loadtest::LevelReport r;
+    r.config.concurrency = 2;
+    r.config.duration_s = measured_s;
+    r.measured_s = measured_s;
+    r.tally.latency_ms = latency_ms;
+    r.tally.service_ms = latency_ms;
+    r.tally.solve_ms = std::vector<double>(latency_ms.size(), 0.1);
+    r.tally.iterations = 2 * latency_ms.size();
+    r.tally.sent = latency_ms.size();
+    r.tally.errors["UNAVAILABLE"] = 1;
+    r.stream_min_share = least;
+    r.stream_max_share = most;
+    loadtest::Summarize(r);
+    return r;
+  };
+  const loadtest::LevelReport merged =
+      loadtest::MergeRounds({round({1, 2, 3}, 1.0, 0.9, 1.1), round({4, 5, 6, 7, 8, 9, 10}, 1.5, 0.8, 1.05)});
+  EXPECT_EQ(merged.tally.latency_ms.size(), 10u);
+  EXPECT_DOUBLE_EQ(merged.measured_s, 2.5);
+  EXPECT_DOUBLE_EQ(merged.config.duration_s, 2.5);
+  EXPECT_DOUBLE_EQ(merged.solves_per_s, 4.0);
+  EXPECT_EQ(merged.p50_ms, 5.0);  // over all answers, not a mean of the rounds' medians
+  EXPECT_EQ(merged.max_ms, 10.0);
+  EXPECT_DOUBLE_EQ(merged.mean_iterations, 2.0);
+  EXPECT_EQ(merged.tally.errors.at("UNAVAILABLE"), 2u);
+  EXPECT_DOUBLE_EQ(merged.stream_min_share, 0.8);
+  EXPECT_DOUBLE_EQ(merged.stream_max_share, 1.1);
+}
+
 TEST(CoreBaseline, SteppingAFleetInTurnTimesEveryStepAndRefusesAWrongState) {
   const Workload w = MassesWorkload();
   absl::StatusOr<double> mean_ms = loadtest::MeasureFleetCoreMeanMs(w.spec, w.states, 3, 2);
