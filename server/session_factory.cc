@@ -64,6 +64,7 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
   built.memory.scratch = reserved.Split(cost.scratch_bytes);
   built.memory.scratch_bytes = built.memory.scratch.bytes();
   built.memory.resident = std::move(reserved);
+  built.memory.max_session_bytes = limits.max_session_bytes;
   return built;
 }
 

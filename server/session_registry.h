@@ -28,6 +28,7 @@ struct SessionMemory {
   MemoryBudget::Reservation resident;
   MemoryBudget::Reservation scratch;
   std::int64_t scratch_bytes = 0;  ///< what `scratch` holds when the scratch is allocated
+  std::int64_t max_session_bytes = 0;  ///< the per-session limit when created (0: none)
 };
 
 // One client session: the core session (problem, workspace, warm start). Its strand

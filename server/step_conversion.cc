@@ -1,6 +1,7 @@
 #include "server/step_conversion.h"
 
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
 
@@ -33,6 +34,56 @@ absl::StatusOr<std::vector<core::ComponentPriors>> ComponentsFromProto(
   return components;
 }
 
+// A step index as the core takes it: out of int range is out of any session's range (the
+// session's check names it).
+int StepIndex(std::uint32_t step) {
+  return step > static_cast<unsigned>(std::numeric_limits<int>::max()) ? std::numeric_limits<int>::max()
+                                                                      : static_cast<int>(step);
+}
+
+// The matrix as given (its size is the session's to check), once its data matches it.
+absl::StatusOr<Eigen::MatrixXd> GivenMatrix(const v1::Matrix& m, const std::string& path) {
+  if (static_cast<std::uint64_t>(m.rows()) * m.cols() != static_cast<std::uint64_t>(m.data_size())) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ".data: expected ", static_cast<std::uint64_t>(m.rows()) * m.cols(),
+                                                   " values (rows*cols, row-major), got ", m.data_size()));
+  }
+  return MatrixFromProto(m, static_cast<int>(m.rows()), static_cast<int>(m.cols()), path);
+}
+
+absl::StatusOr<std::vector<core::ModelChanges::At<Eigen::MatrixXd>>> MatricesFromProto(
+    const google::protobuf::RepeatedPtrField<v1::ModelUpdate::MatrixAt>& entries, const char* field) {
+  std::vector<core::ModelChanges::At<Eigen::MatrixXd>> out(entries.size());
+  for (int i = 0; i < entries.size(); ++i) {
+    out[i].step = StepIndex(entries[i].step());
+    NUPMPC_ASSIGN_OR_RETURN(out[i].value,
+                            GivenMatrix(entries[i].matrix(), absl::StrCat("step.model.", field, "[", i, "].matrix")));
+  }
+  return out;
+}
+
+std::vector<core::ModelChanges::At<Eigen::VectorXd>> VectorsFromProto(
+    const google::protobuf::RepeatedPtrField<v1::ModelUpdate::VectorAt>& entries) {
+  std::vector<core::ModelChanges::At<Eigen::VectorXd>> out(entries.size());
+  for (int i = 0; i < entries.size(); ++i) {
+    out[i].step = StepIndex(entries[i].step());
+    out[i].value = ToVector(entries[i].values());
+  }
+  return out;
+}
+
+absl::StatusOr<core::ModelChanges> ModelChangesFromProto(const v1::ModelUpdate& m) {
+  core::ModelChanges changes;
+  changes.shift = m.shift();
+  if (m.state_offsets_size() > 0) changes.state_offsets = ToVector(m.state_offsets());
+  if (m.output_offsets_size() > 0) changes.output_offsets = ToVector(m.output_offsets());
+  NUPMPC_ASSIGN_OR_RETURN(changes.A, MatricesFromProto(m.a(), "a"));
+  NUPMPC_ASSIGN_OR_RETURN(changes.B, MatricesFromProto(m.b(), "b"));
+  NUPMPC_ASSIGN_OR_RETURN(changes.C, MatricesFromProto(m.c(), "c"));
+  changes.state_offset = VectorsFromProto(m.state_offset());
+  changes.output_offset = VectorsFromProto(m.output_offset());
+  return changes;
+}
+
 }  // namespace
 
 absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const core::Dimensions& dimensions) {
@@ -51,6 +102,9 @@ absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const
   if (step.state_size() > 0) update.state = ToVector(step.state());
   if (step.previous_input_size() > 0) update.previous_input = ToVector(step.previous_input());
   if (step.reference_size() > 0) update.reference = ToVector(step.reference());
+  if (step.has_model()) {
+    NUPMPC_ASSIGN_OR_RETURN(update.model, ModelChangesFromProto(step.model()));
+  }
   if (step.has_update()) {
     const v1::PriorUpdate& u = step.update();
     update.shift = u.shift();
@@ -63,7 +117,7 @@ absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const
 absl::Status AsStepError(const absl::Status& status) {
   if (status.ok()) return status;
   const absl::string_view message = status.message();
-  for (absl::string_view field : {"state", "update", "previous_input", "reference"}) {
+  for (absl::string_view field : {"state", "update", "previous_input", "reference", "model"}) {
     if (absl::StartsWith(message, field)) return absl::Status(status.code(), absl::StrCat("step.", message));
   }
   return absl::Status(status.code(), absl::StrCat("step: ", message));

@@ -2,6 +2,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
+#include "server/model_storage.h"
 #include "server/result_conversion.h"
 #include "server/session_factory.h"
 #include "server/step_conversion.h"
@@ -19,6 +20,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(entry.memory.scratch_bytes,
                                                        "session_id (allocating the idle session's solver scratch again)"));
   }
+  if (update.changes_model()) NUPMPC_RETURN_IF_ERROR(ReserveModelStorage(solver, update.model, &entry.memory));
   NUPMPC_RETURN_IF_ERROR(AsStepError(solver.Apply(update)));
   entry.algorithm.store(solver.algorithm());  // other priors may need another algorithm
 

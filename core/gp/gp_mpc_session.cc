@@ -58,6 +58,7 @@ absl::Status GpMpcSession::Apply(const core::StepUpdate& update) {
         "update: a GP session's costs and input box are fixed at creation; it takes a new reference in reference");
   }
   NUPMPC_RETURN_IF_ERROR(core::RefusePreviousInput(update));
+  NUPMPC_RETURN_IF_ERROR(core::RefuseModel(update, "GP sessions (the GP is their model)"));
   if (update.state.has_value()) NUPMPC_RETURN_IF_ERROR(core::CheckStepState(shape_.num_states, *update.state));
   if (update.reference.has_value()) {
     const Eigen::VectorXd& r = *update.reference;

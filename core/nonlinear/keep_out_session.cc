@@ -75,8 +75,18 @@ absl::Status KeepOutSession::Update(const Problem& plant) {
 }
 
 absl::Status KeepOutSession::Apply(const StepUpdate& update) {
+  if (update.changes_model()) {
+    // The linearisation's problem has the plant's storage of A and B: it cannot follow a
+    // change of it (checked before the planner changes anything).
+    NUPMPC_RETURN_IF_ERROR(CheckModelChanges(free_planner_->problem(), update.model));
+    if (ModelChangesStorage(free_planner_->problem(), update.model)) {
+      return absl::FailedPreconditionError(
+          "model: a keep-out session takes per-step model entries only for the matrices it stores per step; create "
+          "it with N matrices A and B (N + 1 for C) to update them step by step");
+    }
+  }
   NUPMPC_RETURN_IF_ERROR(free_planner_->Apply(update));  // checks everything; unchanged on error
-  if (update.changes_priors()) {
+  if (update.changes_priors() || update.changes_model()) {
     // Same shape and valid (the planner accepted it): the linearisation cannot refuse it.
     NUPMPC_RETURN_IF_ERROR(solver_->SetBase(free_planner_->problem()));
     free_planner_->ReleaseWorkspace();

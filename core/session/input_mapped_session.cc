@@ -64,6 +64,7 @@ absl::Status InputMappedSession::CheckPreviousInput(const StepUpdate& update) co
 
 absl::Status InputMappedSession::Apply(const StepUpdate& update) {
   NUPMPC_RETURN_IF_ERROR(RefuseReference(update));
+  NUPMPC_RETURN_IF_ERROR(RefuseModel(update, "sessions with input_levels or input_differences"));
   if (!update.inputs.empty()) {
     return absl::FailedPreconditionError(
         "update.inputs: this session's inputs are multi-level or carry input-difference priors; their priors are "

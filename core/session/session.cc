@@ -127,38 +127,53 @@ absl::Status Session::Apply(const StepUpdate& update) {
   NUPMPC_RETURN_IF_ERROR(RefusePreviousInput(update));
   NUPMPC_RETURN_IF_ERROR(RefuseReference(update));
   if (update.state.has_value()) NUPMPC_RETURN_IF_ERROR(CheckStepState(problem_.num_states, *update.state));
-  if (!update.changes_priors()) {
+  if (!update.changes_priors() && !update.changes_model()) {
     // The common per-step path: only x[0] changes.
     return update.state.has_value() ? SetInitialState(*update.state) : absl::OkStatus();
   }
-  NUPMPC_RETURN_IF_ERROR(CheckPriorChanges(problem_.num_inputs, problem_.num_outputs, problem_.horizon, update));
-  // The candidate priors are written into scratch arrays of the same size (no allocation
-  // after the first update) and swapped in; the swap leaves the previous ones in scratch.
-  scratch_input_priors_ = problem_.input_priors;
-  scratch_output_priors_ = problem_.output_priors;
-  WritePriorChanges(update, problem_.num_inputs, problem_.num_outputs, problem_.horizon, &scratch_input_priors_,
-                    &scratch_output_priors_);
+  if (update.changes_priors()) {
+    NUPMPC_RETURN_IF_ERROR(CheckPriorChanges(problem_.num_inputs, problem_.num_outputs, problem_.horizon, update));
+  }
+  if (update.changes_model()) NUPMPC_RETURN_IF_ERROR(CheckModelChanges(problem_, update.model));
+  // The candidates are written into scratch arrays of the same size (no allocation after
+  // the first update, unless a term becomes per-step) and swapped in; the swap leaves the
+  // previous ones in scratch.
+  if (update.changes_priors()) {
+    scratch_input_priors_ = problem_.input_priors;
+    scratch_output_priors_ = problem_.output_priors;
+    WritePriorChanges(update, problem_.num_inputs, problem_.num_outputs, problem_.horizon, &scratch_input_priors_,
+                      &scratch_output_priors_);
+  }
+  const bool new_storage = update.changes_model() && ModelChangesStorage(problem_, update.model);
+  if (update.changes_model()) {
+    CopyModelTerms(problem_, &scratch_model_);
+    WriteModelChanges(update.model, problem_, &scratch_model_);
+  }
   const bool was_input_constrained = AnyInputConstrained(problem_);
   const auto swap_candidate = [&] {
-    problem_.input_priors.swap(scratch_input_priors_);
-    problem_.output_priors.swap(scratch_output_priors_);
+    if (update.changes_priors()) {
+      problem_.input_priors.swap(scratch_input_priors_);
+      problem_.output_priors.swap(scratch_output_priors_);
+    }
+    if (update.changes_model()) SwapModelTerms(&problem_, &scratch_model_);
     if (update.state.has_value()) problem_.initial_mean.swap(scratch_state_);
   };
   if (update.state.has_value()) scratch_state_ = *update.state;
   swap_candidate();
-  // Each new prior was checked by CheckPriorChanges and a shift only moves checked ones:
-  // what is left is how the new priors combine.
-  absl::Status adopted = CheckPriorGrouping(problem_);
-  if (adopted.ok()) adopted = AdoptNewValues(was_input_constrained);
+  // Each new prior was checked by CheckPriorChanges and a shift only moves checked ones;
+  // the model terms by CheckModelChanges: what is left is how the new priors combine.
+  absl::Status adopted = update.changes_priors() ? CheckPriorGrouping(problem_) : absl::OkStatus();
+  if (adopted.ok()) adopted = AdoptNewValues(was_input_constrained, new_storage);
   if (!adopted.ok()) swap_candidate();  // the previous values again
   return adopted;
 }
 
-absl::Status Session::AdoptNewValues(bool was_input_constrained) {
+absl::Status Session::AdoptNewValues(bool was_input_constrained, bool new_storage) {
   NUPMPC_ASSIGN_OR_RETURN(const Algorithm selected, SelectAlgorithm(problem_, options_.algorithm));
-  // IFFBDD's graph is augmented iff some input is constrained: that is part of its shape.
+  // IFFBDD's graph is augmented iff some input is constrained: that is part of its shape;
+  // so is the storage of the model (one or per-step matrices).
   const bool same_graph =
-      selected == algorithm_->algorithm() &&
+      !new_storage && selected == algorithm_->algorithm() &&
       (selected != Algorithm::kIffbdd || AnyInputConstrained(problem_) == was_input_constrained);
   if (same_graph) {
     algorithm_->Refresh(problem_);

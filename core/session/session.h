@@ -46,8 +46,10 @@ class Session final : public MpcSession {
   Algorithm algorithm() const override;
 
   absl::Status SetInitialState(const Eigen::VectorXd& x0) override;
-  // The state and prior changes of a control period, in place (no copy of the model);
-  // previous_input and reference are refused (InputMappedSession, GpMpcSession take them).
+  // The state, prior and model changes of a control period, in place (the model terms are
+  // copied only when the update changes them); previous_input and reference are refused
+  // (InputMappedSession, GpMpcSession take them). A change that makes A, B or C per-step
+  // builds the algorithm again: the warm start restarts once.
   absl::Status Apply(const StepUpdate& update) override;
   // Replaces the problem's values, matrices included. The shape (dimensions, horizon,
   // which matrices vary per step, terminal cost present) must match: FAILED_PRECONDITION
@@ -74,7 +76,7 @@ class Session final : public MpcSession {
   // priors, refreshes the current one or builds another (other priors may need another
   // algorithm, or IFFBDD another graph), and prepares the evaluator. On error nothing but
   // problem_ has changed; the caller puts its previous values back.
-  absl::Status AdoptNewValues(bool was_input_constrained);
+  absl::Status AdoptNewValues(bool was_input_constrained, bool new_storage = false);
   // has_binary_inputs_, has_nonconvex_priors_, elastic_, flops_per_step_ from problem_.
   void DerivePriorFlags();
   // The solve's pass budget: the limits' cap within the options' one.
@@ -90,6 +92,7 @@ class Session final : public MpcSession {
   // after a swap they hold the previous ones (to put back if the new ones are refused).
   std::vector<ScalarPrior> scratch_input_priors_, scratch_output_priors_;
   Eigen::VectorXd scratch_state_;  ///< likewise for x[0] when an update changes both
+  ModelTerms scratch_model_;       ///< likewise for the model terms
   SolverOptions options_;
   std::unique_ptr<OuterIteration> algorithm_;
   ObjectiveEvaluator evaluator_;

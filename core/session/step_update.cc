@@ -83,4 +83,10 @@ absl::Status RefuseReference(const StepUpdate& update) {
   return absl::InvalidArgumentError("reference: only for GP sessions; other sessions take new references in update");
 }
 
+absl::Status RefuseModel(const StepUpdate& update, const char* session_kind) {
+  if (!update.changes_model()) return absl::OkStatus();
+  return absl::FailedPreconditionError(
+      absl::StrCat("model: ", session_kind, " take no model update (plain linear and keep-out sessions do)"));
+}
+
 }  // namespace nupmpc::core

@@ -18,6 +18,7 @@
 #include "absl/status/status.h"
 #include "core/priors/scalar_prior.h"
 #include "core/problem.h"
+#include "core/session/model_update.h"
 
 namespace nupmpc::core {
 
@@ -39,8 +40,12 @@ struct StepUpdate {
   std::optional<Eigen::VectorXd> previous_input;
   // GP sessions only: the output reference r[t..t+H-1] (H values, or 1 for all steps).
   std::optional<Eigen::VectorXd> reference;
+  // Plain linear sessions (and keep-out ones, within the storage they have): new model
+  // terms (core/session/model_update.h).
+  ModelChanges model;
 
   bool changes_priors() const { return shift || !inputs.empty() || !outputs.empty(); }
+  bool changes_model() const { return !model.empty(); }
 };
 
 // FAILED_PRECONDITION for a state of the wrong size, INVALID_ARGUMENT for a non-finite
@@ -61,6 +66,9 @@ void WritePriorChanges(const StepUpdate& update, int L, int K, int N, std::vecto
 // input differences take it) or reference (only GP sessions take it).
 absl::Status RefusePreviousInput(const StepUpdate& update);
 absl::Status RefuseReference(const StepUpdate& update);
+// FAILED_PRECONDITION naming `session_kind` (e.g. "GP sessions") when `update` changes the
+// model.
+absl::Status RefuseModel(const StepUpdate& update, const char* session_kind);
 
 }  // namespace nupmpc::core
 
