@@ -214,6 +214,32 @@ TEST_F(ModelUpdateTest, ARejectedUpdateNamesTheFieldAndLeavesTheSessionBitIdenti
   }
 }
 
+TEST_F(ModelUpdateTest, AFleetCallCarriesEachSessionsModelAndOneBadUpdateFailsOnlyItsStep) {
+  const Ltv ltv = TimeVarying(masses_.problem, 0.02);
+  v1::SolveFleetRequest request;
+  std::vector<std::string> ids;
+  for (int s = 0; s < 3; ++s) {
+    absl::StatusOr<v1::CreateSessionResponse> created = client_->CreateSession(SpecOrDie(masses_.problem));
+    ASSERT_TRUE(created.ok()) << created.status();
+    ids.push_back(created->session_id());
+    v1::SolveRequest* step = request.add_steps();
+    step->set_session_id(created->session_id());
+    *step->mutable_step() = StepAt(x0_);
+    *step->mutable_step()->mutable_model() = ltv.update;
+  }
+  request.mutable_steps(1)->mutable_step()->mutable_model()->mutable_a(0)->set_step(99);
+  absl::StatusOr<v1::SolveFleetResponse> answered = client_->SolveFleet(request);
+  ASSERT_TRUE(answered.ok()) << answered.status();
+  ASSERT_EQ(answered->answers_size(), 3);
+  const core::Solution reference = CoreSolve(ltv.problem, x0_);
+  for (int s : {0, 2}) {
+    ASSERT_EQ(answered->answers(s).error_code(), 0) << answered->answers(s).error_message();
+    EXPECT_LE(MaxInputDifference(answered->answers(s).result(), reference), 1e-9);
+  }
+  EXPECT_EQ(answered->answers(1).error_code(), static_cast<int>(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(answered->answers(1).error_message(), HasSubstr("step.model.a[0].step = 99"));
+}
+
 TEST_F(ModelUpdateTest, SessionsThatCannotTakeAModelSaySo) {
   v1::ProblemSpec spec = SpecOrDie(masses_.problem);
   for (int l = 0; l < 3; ++l) spec.mutable_input_differences()->add_priors()->add_weight(1.0);
