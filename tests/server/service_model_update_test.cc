@@ -5,8 +5,10 @@
 #include <cmath>
 #include <vector>
 
+#include "core/session/footprint.h"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
+#include "server/session_cost.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {
@@ -238,6 +240,47 @@ TEST_F(ModelUpdateTest, AFleetCallCarriesEachSessionsModelAndOneBadUpdateFailsOn
   }
   EXPECT_EQ(answered->answers(1).error_code(), static_cast<int>(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(answered->answers(1).error_message(), HasSubstr("step.model.a[0].step = 99"));
+}
+
+TEST_F(ModelUpdateTest, APerStepModelOverThePerSessionMemoryLimitIsRefusedAndChangesNothing) {
+  // A limit the time-invariant session fits in and its per-step form does not.
+  const bench::BenchmarkInstance long_horizon = LoadInstanceOrDie("masses_N3000");
+  const v1::ProblemSpec spec = SpecOrDie(long_horizon.problem);
+  server::ServerOptions options = DefaultOptions();
+  absl::StatusOr<server::SessionCost> cost = server::SpecCost(spec, options.size_limits);
+  ASSERT_TRUE(cost.ok()) << cost.status();
+  const core::Footprint per_step = core::EstimateFootprint(
+      {.num_states = 12, .num_inputs = 3, .num_outputs = 12, .horizon = 3000, .a_per_step = true,
+       .b_per_step = false, .c_per_step = false, .uncertain_initial_state = false, .terminal_cost = true});
+  const std::int64_t time_invariant_peak = std::max(cost->build_bytes, cost->session_bytes());
+  const std::int64_t per_step_peak =
+      per_step.problem_bytes + per_step.carried_bytes + per_step.workspace_bytes + per_step.transient_bytes;
+  ASSERT_LT(time_invariant_peak, per_step_peak);
+  options.size_limits.max_session_bytes = time_invariant_peak;
+  server_->Shutdown();
+  StartServer(options);
+
+  absl::StatusOr<v1::CreateSessionResponse> created = client_->CreateSession(spec);
+  ASSERT_TRUE(created.ok()) << created.status();
+  const Eigen::VectorXd x0 = long_horizon.problem.initial_mean;
+  absl::StatusOr<v1::SolveResult> before = client_->Solve(created->session_id(), StepAt(x0));
+  ASSERT_TRUE(before.ok()) << before.status();
+  v1::Step grow = StepAt(x0);
+  grow.set_warm_start(v1::WARM_START_KEEP);
+  v1::ModelUpdate::MatrixAt* a = grow.mutable_model()->add_a();
+  a->set_step(10);
+  SetMatrix(Perturbed(long_horizon.problem.A[0], 10, 0.01), a->mutable_matrix());
+  absl::StatusOr<v1::SolveResult> refused = client_->Solve(created->session_id(), grow);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(refused.status().message()), HasSubstr("step.model: a per-step model"));
+  // All-step offsets keep the storage: taken.
+  v1::Step offsets = StepAt(x0);
+  offsets.set_warm_start(v1::WARM_START_KEEP);
+  for (int i = 0; i < 12; ++i) offsets.mutable_model()->add_state_offsets(0.0);
+  absl::StatusOr<v1::SolveResult> same = client_->Solve(created->session_id(), offsets);
+  ASSERT_TRUE(same.ok()) << same.status();
+  EXPECT_NEAR(same->objective(), before->objective(), 1e-9 * std::abs(before->objective()));
 }
 
 TEST_F(ModelUpdateTest, SessionsThatCannotTakeAModelSaySo) {
