@@ -27,6 +27,74 @@ void ReplaceComponents(const google::protobuf::RepeatedPtrField<v1::PriorUpdate:
   }
 }
 
+// The model terms (Step.model), as core/session/model_update.cc writes them on the server:
+// the shift, then the all-step offsets, then single steps; a term given for one step is
+// stored per step from then on.
+template <typename T>
+void ShiftRepeated(google::protobuf::RepeatedPtrField<T>* terms) {
+  for (int n = 0; n + 1 < terms->size(); ++n) terms->Mutable(n)->CopyFrom(terms->Get(n + 1));
+}
+
+// Step n+1's `width` values become step n's (the last step kept), for a per-step array.
+void ShiftRows(int width, int steps, google::protobuf::RepeatedField<double>* values) {
+  if (width <= 0 || values->size() != width * steps) return;
+  for (int i = 0; i + width < values->size(); ++i) values->Set(i, values->Get(i + width));
+}
+
+void WriteAllSteps(const google::protobuf::RepeatedField<double>& given, int width, int steps,
+                   google::protobuf::RepeatedField<double>* values) {
+  if (given.empty()) return;
+  if (given.size() == width && values->size() == width * steps) {
+    for (int i = 0; i < values->size(); ++i) values->Set(i, given.Get(i % width));  // kept per step
+  } else {
+    *values = given;
+  }
+}
+
+void WriteMatrices(const google::protobuf::RepeatedPtrField<v1::ModelUpdate::MatrixAt>& entries, int steps,
+                   google::protobuf::RepeatedPtrField<v1::Matrix>* matrices) {
+  if (entries.empty()) return;
+  if (matrices->size() != steps) {
+    const v1::Matrix first = matrices->empty() ? v1::Matrix() : matrices->Get(0);
+    matrices->Clear();
+    for (int n = 0; n < steps; ++n) *matrices->Add() = first;
+  }
+  for (const v1::ModelUpdate::MatrixAt& e : entries) *matrices->Mutable(static_cast<int>(e.step())) = e.matrix();
+}
+
+void WriteVectors(const google::protobuf::RepeatedPtrField<v1::ModelUpdate::VectorAt>& entries, int width, int steps,
+                  google::protobuf::RepeatedField<double>* values) {
+  if (entries.empty()) return;
+  if (values->size() != width * steps) {
+    // Constant (width values) or absent (zero) until now: every step gets that value.
+    const google::protobuf::RepeatedField<double> constant = *values;
+    values->Clear();
+    for (int i = 0; i < width * steps; ++i) values->Add(constant.empty() ? 0.0 : constant.Get(i % width));
+  }
+  for (const v1::ModelUpdate::VectorAt& e : entries) {
+    for (int i = 0; i < width; ++i) values->Set(static_cast<int>(e.step()) * width + i, e.values(i));
+  }
+}
+
+void ApplyModelUpdate(const v1::ModelUpdate& update, v1::Model* model) {
+  const int M = static_cast<int>(model->num_states()), K = static_cast<int>(model->num_outputs());
+  const int N = static_cast<int>(model->horizon());
+  if (update.shift()) {
+    ShiftRepeated(model->mutable_a());
+    ShiftRepeated(model->mutable_b());
+    ShiftRepeated(model->mutable_c());
+    ShiftRows(M, N, model->mutable_state_offset());
+    ShiftRows(K, N + 1, model->mutable_output_offset());
+  }
+  WriteAllSteps(update.state_offsets(), M, N, model->mutable_state_offset());
+  WriteAllSteps(update.output_offsets(), K, N + 1, model->mutable_output_offset());
+  WriteMatrices(update.a(), N, model->mutable_a());
+  WriteMatrices(update.b(), N, model->mutable_b());
+  WriteMatrices(update.c(), N + 1, model->mutable_c());
+  WriteVectors(update.state_offset(), M, N, model->mutable_state_offset());
+  WriteVectors(update.output_offset(), K, N + 1, model->mutable_output_offset());
+}
+
 }  // namespace
 
 void ApplyStepToSpec(const v1::Step& step, const v1::SolveResult& result, v1::ProblemSpec* spec) {
@@ -48,6 +116,8 @@ void ApplyStepToSpec(const v1::Step& step, const v1::SolveResult& result, v1::Pr
     ReplaceComponents(update.inputs(), spec->mutable_input_priors());
     ReplaceComponents(update.outputs(), spec->mutable_output_priors());
   }
+  // Accepted only by sessions that take it (the server checked every entry).
+  if (step.has_model()) ApplyModelUpdate(step.model(), spec->mutable_model());
   // Δu sessions: the server carries the plan's u[0] as u[-1] of the next step (the
   // input the client is expected to apply); a step's own previous_input is for that
   // step only, and a result without a plan leaves the carried one as it was.

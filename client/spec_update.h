@@ -22,6 +22,10 @@ namespace nupmpc {
 //    repeated; length-1 arrays are constant), then the listed components replace the
 //    spec's.
 //  * reference (GP sessions): replaces gp.reference.
+//  * model: with shift, every per-step model term moves one step (n+1 → n, the last
+//    repeated); then state_offsets / output_offsets replace the affine terms of every
+//    step; then the listed steps' a, b, c, state_offset, output_offset replace theirs
+//    (a term stored once becomes one per step first).
 //  * input_differences: u[-1] of the next step is the plan's u[0] when the result has a
 //    plan (whatever previous_input this step sent); without a plan it stays.
 //  * A SUPERSEDED result: nothing of the step was applied, nothing changes.

@@ -1,8 +1,8 @@
 // A client session that the client re-creates after a server restart is the session the
 // server had (client/spec_update.h, the client's mirror of the server's step semantics):
-// for a plain session with prior updates and shifts, a Δu session and a GP session, the
-// re-created session's next plan equals, to 1e-9, that of a session that never restarted,
-// solved cold as the re-created one is.
+// for a plain session with prior updates and shifts, one with model updates, a Δu session
+// and a GP session, the re-created session's next plan equals, to 1e-9, that of a session
+// that never restarted, solved cold as the re-created one is.
 #include <cmath>
 #include <vector>
 
@@ -120,6 +120,49 @@ TEST_F(ReconnectFidelityTest, PlainSessionWithPriorUpdatesAndShifts) {
   steps[4].clear_state();  // keeps the previous state
   steps[4].mutable_update()->set_shift(true);
   steps[5].mutable_update()->set_shift(true);
+  const v1::Step next = steps.back();
+  steps.pop_back();
+  ExpectSamePlanAfterRestart(spec, steps, next);
+}
+
+v1::Matrix ScaledMatrix(const v1::Matrix& m, double scale, double shift) {
+  v1::Matrix out = m;
+  for (int i = 0; i < out.data_size(); ++i) out.set_data(i, scale * out.data(i) + (i % 5 == 0 ? shift : 0.0));
+  return out;
+}
+
+TEST_F(ReconnectFidelityTest, PlainSessionWithModelUpdatesAndShifts) {
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
+  const v1::ProblemSpec spec = SpecOrDie(inst.problem);
+  const int N = static_cast<int>(spec.model().horizon()), M = static_cast<int>(spec.model().num_states());
+  const int K = static_cast<int>(spec.model().num_outputs());
+  std::vector<v1::Step> steps(6);
+  for (std::size_t k = 0; k < steps.size(); ++k) {
+    const Eigen::VectorXd& x = inst.closed_loop->x1[k];
+    steps[k].mutable_state()->Add(x.data(), x.data() + x.size());
+  }
+  // A disturbance estimate for every step (stored once), then one step's A and C (the
+  // matrices become per-step), a shift with a new last B, per-step offsets, and a shift.
+  Set(Ramp(M, -0.02, 0.004), steps[0].mutable_model()->mutable_state_offsets());
+  v1::ModelUpdate::MatrixAt* a = steps[1].mutable_model()->add_a();
+  a->set_step(2);
+  *a->mutable_matrix() = ScaledMatrix(spec.model().a(0), 1.01, 0.002);
+  v1::ModelUpdate::MatrixAt* c = steps[1].mutable_model()->add_c();
+  c->set_step(N);
+  *c->mutable_matrix() = ScaledMatrix(spec.model().c(0), 0.98, 0.0);
+  steps[2].mutable_model()->set_shift(true);
+  v1::ModelUpdate::MatrixAt* b = steps[2].mutable_model()->add_b();
+  b->set_step(N - 1);
+  *b->mutable_matrix() = ScaledMatrix(spec.model().b(0), 1.05, 0.001);
+  v1::ModelUpdate::VectorAt* d = steps[3].mutable_model()->add_output_offset();
+  d->set_step(5);
+  Set(Ramp(K, 0.01, 0.001), d->mutable_values());
+  v1::ModelUpdate::VectorAt* cx = steps[3].mutable_model()->add_state_offset();
+  cx->set_step(N - 1);
+  Set(Ramp(M, 0.003, -0.001), cx->mutable_values());
+  steps[4].mutable_model()->set_shift(true);
+  Set(Ramp(K, -0.01, 0.0), steps[5].mutable_model()->mutable_output_offsets());
+  steps[5].mutable_model()->set_shift(true);
   const v1::Step next = steps.back();
   steps.pop_back();
   ExpectSamePlanAfterRestart(spec, steps, next);
