@@ -5,6 +5,9 @@
     with nupmpc.connect("localhost:50051") as client:
         session = client.session(problem)
         plan = session.step(x)          # plan.u (N, L), plan.x (N+1, M), plan.y (N+1, K)
+        plan = session.step(x, model=nupmpc.ModelUpdate(state_offset=d_hat))  # new model terms
+
+Nonlinear plants: nupmpc.NonlinearModel(f, h) and nupmpc.NonlinearSession (real-time iteration).
 """
 
 import pkgutil
@@ -26,12 +29,15 @@ from nupmpc.client import Client, connect  # noqa: E402
 from nupmpc.session import Session  # noqa: E402
 from nupmpc.instance import Instance, load_instance  # noqa: E402
 from nupmpc.simulate import simulate, Trajectory  # noqa: E402
+from nupmpc.model_update import ModelUpdate  # noqa: E402
+from nupmpc.nonlinear import JacobianError, Linearisation, NonlinearModel, NonlinearSession, Period  # noqa: E402
 
 __all__ = [
     "NupmpcError", "ShapeError", "error_from_code", "InvalidArgument", "NotFound", "AlreadyExists",
     "ResourceExhausted", "Unavailable", "Unauthenticated", "PermissionDenied", "DeadlineExceeded",
     "Cancelled", "FailedPrecondition", "Internal", "Problem", "GpProblem", "Ellipse", "Rectangle",
     "Plan", "ReconnectOptions", "Client", "connect", "Session", "Instance", "load_instance",
-    "simulate", "Trajectory", "aio",
+    "simulate", "Trajectory", "aio", "ModelUpdate", "NonlinearModel", "NonlinearSession", "JacobianError",
+    "Linearisation", "Period",
 ]
 from nupmpc import aio  # noqa: E402,F401  (nupmpc.aio.connect: the asyncio variant)

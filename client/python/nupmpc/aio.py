@@ -149,10 +149,10 @@ class AsyncSession:
             return response.result
 
     async def step(self, x=None, references=None, bounds=None, input_references=None, input_bounds=None,
-                   shift=False, warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None):
+                   shift=False, warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None):
         """nupmpc.Session.step, awaited."""
         step = build_step(self._spec, x, references, bounds, input_references, input_bounds, shift, warm_start,
-                          max_iterations, time_limit_ms, previous_input)
+                          max_iterations, time_limit_ms, previous_input, model)
         async with self._lock:
             start = time.perf_counter()
             try:

@@ -173,17 +173,19 @@ class Session:
         return attempt
 
     def step(self, x=None, references=None, bounds=None, input_references=None, input_bounds=None, shift=False,
-             warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None):
+             warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None):
         """Solves one period for the measured state `x` (M,) and returns its Plan.
 
         references: output references, (K,) or (N+1, K) (GP sessions: r, 1 or N values);
         bounds: (lower, upper) of the outputs, each (K,) or (N+1, K), None for a side kept;
         input_references, input_bounds: the same for the inputs ((L,) or (N, L));
         shift: move every stored per-step prior one step first (receding references);
-        warm_start: None/"shift", "keep" or "cold"; previous_input: u[-1] (Δu problems).
+        warm_start: None/"shift", "keep" or "cold"; previous_input: u[-1] (Δu problems);
+        model: new model terms for this period (a nupmpc.ModelUpdate; a pb.ModelUpdate is
+        sent unchecked), kept for later steps as the prior updates are.
         Raises ShapeError (before sending) or a typed NupmpcError from the server."""
         step = build_step(self._spec, x, references, bounds, input_references, input_bounds, shift, warm_start,
-                          max_iterations, time_limit_ms, previous_input)
+                          max_iterations, time_limit_ms, previous_input, model)
         with self._lock:
             start = time.perf_counter()
             try:

@@ -3,7 +3,10 @@ session was created from, so that a session re-created after a server restart is
 session the server had, not the one it started with.
 
 A line-by-line mirror of the C++ client's client/spec_update.cc (ApplyStepToSpec), itself
-the mirror of the server's step semantics: change one, change all.
+the mirror of the server's step semantics: change one, change all. The model update
+(Step.model, apply_model_update) mirrors the server's WriteModelChanges
+(core/session/model_update.cc), including the storage it leaves: a time-invariant matrix
+given for some steps becomes N (C: N + 1) matrices in the spec, as in the session.
 """
 
 from nupmpc._proto import pb
@@ -25,6 +28,80 @@ def _replace(entries, components):
         # The server refuses a step with an index out of range, so an accepted one has none.
         if entry.index < len(components):
             components[entry.index].CopyFrom(entry.prior)
+
+
+def _shift_steps(items):
+    """Step n+1 becomes step n, the last step repeated (a no-op on one item)."""
+    for n in range(len(items) - 1):
+        items[n].CopyFrom(items[n + 1])
+
+
+def _shift_rows(values, width):
+    """The same on a flat step-major array of `width` values per step."""
+    for i in range(len(values) - width):
+        values[i] = values[i + width]
+
+
+def _write_all_steps(values, field, width, steps):
+    """An all-step offset: `width` values keep per-step storage per step (the same at every
+    step), else replace; steps·width values replace."""
+    values = list(values)
+    if len(values) == width and len(field) == width * steps:
+        values = values * steps
+    del field[:]
+    field.extend(values)
+
+
+def _write_matrices(entries, field, steps, rows, cols):
+    if not entries:
+        return
+    if len(field) != steps:
+        first = pb.Matrix()
+        if len(field):
+            first.CopyFrom(field[0])
+        else:
+            first.rows, first.cols = rows, cols
+            first.data.extend([0.0] * (rows * cols))
+        del field[:]
+        for _ in range(steps):
+            field.add().CopyFrom(first)
+    for entry in entries:
+        field[entry.step].CopyFrom(entry.matrix)
+
+
+def _write_vectors(entries, field, steps, width):
+    if not entries:
+        return
+    if len(field) != steps * width:
+        first = list(field[:width]) if len(field) else [0.0] * width
+        del field[:]
+        field.extend(first * steps)
+    for entry in entries:
+        for i, v in enumerate(entry.values):
+            field[entry.step * width + i] = v
+
+
+def apply_model_update(update, spec):
+    """Writes an accepted pb.ModelUpdate into `spec`'s model as the server does: shift, then
+    the all-step offsets, then the single steps."""
+    m = spec.model
+    M, K, N = m.num_states, m.num_outputs, m.horizon
+    if update.shift:
+        for field in (m.a, m.b, m.c):
+            _shift_steps(field)
+        if len(m.state_offset) == N * M:
+            _shift_rows(m.state_offset, M)
+        if len(m.output_offset) == (N + 1) * K:
+            _shift_rows(m.output_offset, K)
+    if update.state_offsets:
+        _write_all_steps(update.state_offsets, m.state_offset, M, N)
+    if update.output_offsets:
+        _write_all_steps(update.output_offsets, m.output_offset, K, N + 1)
+    _write_matrices(update.a, m.a, N, M, M)
+    _write_matrices(update.b, m.b, N, M, m.num_inputs)
+    _write_matrices(update.c, m.c, N + 1, K, M)
+    _write_vectors(update.state_offset, m.state_offset, N, M)
+    _write_vectors(update.output_offset, m.output_offset, N + 1, K)
 
 
 def apply_step_to_spec(step, result, spec):
@@ -50,6 +127,8 @@ def apply_step_to_spec(step, result, spec):
                 shift_components(spec.input_differences.priors)
         _replace(update.inputs, spec.input_priors)
         _replace(update.outputs, spec.output_priors)
+    if step.HasField("model"):
+        apply_model_update(step.model, spec)
     # Δu sessions: the server carries the plan's u[0] as u[-1] of the next step; a step's
     # own previous_input is for that step only; a result without a plan leaves it.
     L = spec.model.num_inputs

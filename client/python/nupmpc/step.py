@@ -3,7 +3,8 @@
 Updates of references and bounds are whole ComponentPriors on the wire (PriorUpdate
 replaces the listed components); they are built from the session's current spec (kept
 current by apply_step_to_spec), shifted first when the step shifts, so that only what the
-caller gives changes."""
+caller gives changes. Model updates (Step.model) come from a nupmpc.ModelUpdate, checked
+against the spec's dimensions, or as a pb.ModelUpdate sent as it is (the server checks it)."""
 
 import math
 
@@ -12,6 +13,7 @@ import numpy as np
 from nupmpc._proto import pb
 from nupmpc.arrays import as_array, finite, per_step, vector
 from nupmpc.errors import ShapeError
+from nupmpc.model_update import ModelUpdate
 from nupmpc.spec_update import shift_components
 
 _WARM = {None: pb.WARM_START_UNSPECIFIED, "shift": pb.WARM_START_SHIFT, "keep": pb.WARM_START_KEEP,
@@ -65,8 +67,19 @@ def _update_components(current, count, steps, which, references, bounds, entries
         entries.add(index=i, prior=prior)
 
 
+def _model(spec, model, step):
+    if model is None:
+        return
+    if isinstance(model, pb.ModelUpdate):
+        step.model.CopyFrom(model)  # as given: the server checks it
+    elif isinstance(model, ModelUpdate):
+        step.model.CopyFrom(model.to_proto(spec))
+    else:
+        raise ShapeError("model", f"expected a nupmpc.ModelUpdate, got {type(model).__name__}")
+
+
 def build_step(spec, x=None, references=None, bounds=None, input_references=None, input_bounds=None,
-               shift=False, warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None):
+               shift=False, warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None):
     """The Step for `session.step(...)`; see Session.step for the arguments."""
     M, L, K, N = dims_of(spec)
     step = pb.Step(max_iterations=max_iterations, time_limit_ms=time_limit_ms)
@@ -75,6 +88,7 @@ def build_step(spec, x=None, references=None, bounds=None, input_references=None
     step.warm_start = _WARM[warm_start]
     if x is not None:
         step.state.extend(finite(vector(x, "x", M), "x").tolist())
+    _model(spec, model, step)
     if spec.HasField("gp"):
         if bounds is not None or input_references is not None or input_bounds is not None or shift:
             raise ShapeError("bounds", "a GP session takes only x and references (its bounds are fixed)")
