@@ -24,7 +24,8 @@ echo "== sanitizer stage 1: AddressSanitizer + UndefinedBehaviorSanitizer (build
 deploy/sanitizer-tree.sh asan
 core_tests=(message_passing_test scalar_rules_test nonconvex_priors_test discrete_plan_test input_differences_test
             multilevel_inputs_test keep_out_test keep_out_session_test gp_model_test nonlinear_model_test
-            benchmark_reference_test session_test elastic_test infeasibility_test step_update_test)
+            benchmark_reference_test session_test elastic_test infeasibility_test step_update_test
+            model_update_test)
 # The server's suites; the client library's own tests (reconnection, routing, spec updates,
 # restarts, the load generator) run in the main suite only: the server code they drive
 # runs here through the service tests.
@@ -33,7 +34,7 @@ server_tests=(service_solve_test service_validation_test service_transform_test 
               worker_pool_test session_strand_test server_binary_test service_admission_test
               service_stream_bounds_test service_malformed_bytes_test memory_budget_test auth_test
               log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
-              hostile_control_protocol_test hostile_transport_test hostile_solves_test)
+              hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test)
 targets=()
 for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-asan -j "$jobs" "${targets[@]}"
