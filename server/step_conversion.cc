@@ -43,6 +43,12 @@ int StepIndex(std::uint32_t step) {
 
 // The matrix as given (its size is the session's to check), once its data matches it.
 absl::StatusOr<Eigen::MatrixXd> GivenMatrix(const v1::Matrix& m, const std::string& path) {
+  // Larger than any session's matrices (which the session checks), and than an int.
+  constexpr std::uint32_t kLargest = 1u << 20;
+  if (m.rows() > kLargest || m.cols() > kLargest) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": ", m.rows(), "x", m.cols(), " is larger than any session's matrices"));
+  }
   if (static_cast<std::uint64_t>(m.rows()) * m.cols() != static_cast<std::uint64_t>(m.data_size())) {
     return absl::InvalidArgumentError(absl::StrCat(path, ".data: expected ", static_cast<std::uint64_t>(m.rows()) * m.cols(),
                                                    " values (rows*cols, row-major), got ", m.data_size()));

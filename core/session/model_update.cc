@@ -61,7 +61,6 @@ void ShiftSteps(std::vector<T>* terms) {
   terms->back() = (*terms)[terms->size() - 2];
 }
 
-
 void WriteAllSteps(const Eigen::VectorXd& values, int width, int steps, std::vector<Eigen::VectorXd>* terms) {
   if (values.size() == width) {
     if (static_cast<int>(terms->size()) == steps) {

@@ -189,6 +189,11 @@ TEST_F(ModelUpdateTest, ARejectedUpdateNamesTheFieldAndLeavesTheSessionBitIdenti
        [](v1::ModelUpdate* m) { m->add_state_offsets(1.0); }},
       {"step.model.a[3].matrix.data[5] = nan: must be finite",
        [](v1::ModelUpdate* m) { m->mutable_a(3)->mutable_matrix()->set_data(5, std::nan("")); }},
+      {"step.model.b[1].matrix: 4294967295x0 is larger than any session's matrices", [](v1::ModelUpdate* m) {
+         m->mutable_b(1)->mutable_matrix()->set_rows(4294967295u);
+         m->mutable_b(1)->mutable_matrix()->set_cols(0);
+         m->mutable_b(1)->mutable_matrix()->clear_data();
+       }},
       {"step.model.c[0].matrix.data: expected 144 values", [](v1::ModelUpdate* m) {
          v1::ModelUpdate::MatrixAt* c = m->add_c();
          c->mutable_matrix()->set_rows(12);
