@@ -1,5 +1,7 @@
 #include "client/spec_update.h"
 
+#include <cstdint>
+
 namespace nupmpc {
 namespace {
 
@@ -51,11 +53,19 @@ void WriteAllSteps(const google::protobuf::RepeatedField<double>& given, int wid
   }
 }
 
-void WriteMatrices(const google::protobuf::RepeatedPtrField<v1::ModelUpdate::MatrixAt>& entries, int steps,
-                   google::protobuf::RepeatedPtrField<v1::Matrix>* matrices) {
+void WriteMatrices(const google::protobuf::RepeatedPtrField<v1::ModelUpdate::MatrixAt>& entries, int steps, int rows,
+                   int cols, google::protobuf::RepeatedPtrField<v1::Matrix>* matrices) {
   if (entries.empty()) return;
   if (matrices->size() != steps) {
-    const v1::Matrix first = matrices->empty() ? v1::Matrix() : matrices->Get(0);
+    // Stored once until now (or absent, zero: C of a model without outputs).
+    v1::Matrix first;
+    if (matrices->empty()) {
+      first.set_rows(static_cast<std::uint32_t>(rows));
+      first.set_cols(static_cast<std::uint32_t>(cols));
+      first.mutable_data()->Resize(rows * cols, 0.0);
+    } else {
+      first = matrices->Get(0);
+    }
     matrices->Clear();
     for (int n = 0; n < steps; ++n) *matrices->Add() = first;
   }
@@ -88,9 +98,10 @@ void ApplyModelUpdate(const v1::ModelUpdate& update, v1::Model* model) {
   }
   WriteAllSteps(update.state_offsets(), M, N, model->mutable_state_offset());
   WriteAllSteps(update.output_offsets(), K, N + 1, model->mutable_output_offset());
-  WriteMatrices(update.a(), N, model->mutable_a());
-  WriteMatrices(update.b(), N, model->mutable_b());
-  WriteMatrices(update.c(), N + 1, model->mutable_c());
+  const int L = static_cast<int>(model->num_inputs());
+  WriteMatrices(update.a(), N, M, M, model->mutable_a());
+  WriteMatrices(update.b(), N, M, L, model->mutable_b());
+  WriteMatrices(update.c(), N + 1, K, M, model->mutable_c());
   WriteVectors(update.state_offset(), M, N, model->mutable_state_offset());
   WriteVectors(update.output_offset(), K, N + 1, model->mutable_output_offset());
 }
