@@ -4,7 +4,8 @@
 #   1. closed loop, concurrency 1, 2, 8, 64 on masses_N30 (transport-bound, solve ~0.1 ms),
 #      with new references every step at 1 and 8, and masses_N300 (solver-bound) at 1, 2,
 #      8; every level also against the zero-work echo and the inline-solve echo (peers in
-#      child processes pinned to the server's CPUs), with the ratios nupmpc/inline;
+#      child processes pinned to the server's CPUs, interleaved with nupmpc in 3 rounds),
+#      with the ratios nupmpc/inline;
 #   2. the fleet path: 100 masses_N30 sessions per SolveFleet call against 100 streams;
 #   3. overload: masses_N300 (a few ms per solve, so the generator can offer 10x what
 #      the server can solve), open loop at 10x the core-alone capacity, then at half of
