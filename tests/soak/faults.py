@@ -257,7 +257,9 @@ def slow_reader(quick):
 
 
 async def silent_streams(target, count, per_connection=100):
-    """`count` Control calls that never send; the code and details each ends with."""
+    """`count` Control calls that never send; the code and details each ends with. Run in a
+    process of its own (silent_streams_in_child): grpcio's asyncio stack next to its
+    synchronous one in one process (the Stepper) can stall (grpc/grpc#22733)."""
     channels = [grpc.aio.insecure_channel(target, options=channel_options(None, True))
                 for _ in range((count + per_connection - 1) // per_connection)]
     calls = [pb_grpc.MpcServiceStub(channels[i // per_connection]).Control() for i in range(count)]
@@ -269,6 +271,16 @@ async def silent_streams(target, count, per_connection=100):
     finally:
         for c in channels:
             await c.close()
+
+
+def silent_streams_in_child(target, count, outcomes):
+    """silent_streams in a child process (this script with --silent_streams); appends its
+    (code name, details) pairs to `outcomes`."""
+    done = subprocess.run([sys.executable, __file__, "--silent_streams", target, str(count)], capture_output=True,
+                          text=True, timeout=FIRST_MESSAGE_TIMEOUT_S + 60)
+    if done.returncode != 0:
+        raise RuntimeError(f"silent streams exited with {done.returncode}: {done.stderr[-2000:]}")
+    outcomes.extend(tuple(pair) for pair in json.loads(done.stdout))
 
 
 def timeout_flags():
@@ -284,7 +296,7 @@ def idle(quick):
         tcp = [raw_http2.connect(server.port, handshake=False) for _ in range(500)]
         h2 = [raw_http2.connect(server.port, handshake=True) for _ in range(500)]
         outcomes = []
-        streams = threading.Thread(target=lambda: outcomes.extend(asyncio.run(silent_streams(server.target, 500))))
+        streams = threading.Thread(target=silent_streams_in_child, args=(server.target, 500, outcomes))
         streams.start()
         opened = wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 500, FIRST_MESSAGE_TIMEOUT_S)
         fds_held, rss_held = server.open_fds(), server.rss_bytes()
@@ -296,7 +308,7 @@ def idle(quick):
         for s in tcp + h2:
             s.close()
         wait_for(lambda: server.open_fds() <= fds_before + 10, 10)
-        codes = Counter(code.name for code, _ in outcomes)
+        codes = Counter(code for code, _ in outcomes)
         r.figures.update({
             "fds_before": fds_before, "fds_held": fds_held, "fds_after": server.open_fds(),
             "rss_before_mib": round(rss_before / 2**20, 1), "rss_held_mib": round(rss_held / 2**20, 1),
@@ -384,8 +396,16 @@ SCENARIOS = {"restart": restart, "sigterm": sigterm, "slow_reader": slow_reader,
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="shorter phases (the ctest)")
+    parser.add_argument("--silent_streams", nargs=2, metavar=("TARGET", "COUNT"),
+                        help="internal (the idle scenario's child): open COUNT silent Control streams, print how "
+                             "each ended as JSON")
     parser.add_argument("scenarios", nargs="*", help=f"of {', '.join(SCENARIOS)} (default: all)")
     args = parser.parse_args()
+    if args.silent_streams:
+        target, count = args.silent_streams[0], int(args.silent_streams[1])
+        ended = asyncio.run(silent_streams(target, count))
+        print(json.dumps([[code.name, details] for code, details in ended]))
+        return 0
     unknown = [n for n in args.scenarios if n not in SCENARIOS]
     if unknown:
         parser.error(f"unknown scenario {unknown[0]}: one of {', '.join(SCENARIOS)}")
