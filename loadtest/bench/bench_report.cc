@@ -50,8 +50,38 @@ struct InstanceResult {
   std::string status;
   bool polished = false;
   double gflops = NAN;
+  double flops_per_iteration = 0.0;
   int N = 0;
 };
+
+// The scaling sweep's instances, kept to be solved again interleaved.
+struct ScalingEntry {
+  std::unique_ptr<core::Session> session;
+  std::size_t result;  ///< index into the results
+};
+
+// Solves every entry once per round, the order reversed every round, and takes each
+// entry's median: the machine's speed drifts between seconds, and instances measured one
+// after the other would compare different minutes.
+void MeasureInterleaved(std::vector<ScalingEntry>& entries, int rounds, std::vector<InstanceResult>& results) {
+  std::vector<std::vector<double>> times(entries.size());
+  core::SolveLimits cold;
+  cold.warm_start = false;
+  for (int round = 0; round < rounds; ++round) {
+    for (std::size_t k = 0; k < entries.size(); ++k) {
+      const std::size_t e = round % 2 == 0 ? k : entries.size() - 1 - k;
+      const auto t0 = Clock::now();
+      const absl::StatusOr<core::SolveSummary> s = entries[e].session->Solve(cold, nullptr);
+      if (s.ok()) times[e].push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    }
+  }
+  for (std::size_t e = 0; e < entries.size(); ++e) {
+    if (times[e].empty()) continue;
+    InstanceResult& r = results[entries[e].result];
+    r.solve_ms = Median(times[e]);
+    r.gflops = r.flops_per_iteration * r.iterations / (r.solve_ms * 1e-3) * 1e-9;
+  }
+}
 
 struct ClosedLoopResult {
   int steps = 0;
@@ -151,6 +181,7 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
   std::map<std::string, std::map<std::string, Reference>> reference_files;
   int failures = 0;
   std::vector<InstanceResult> results;
+  std::vector<ScalingEntry> scaling;
   // The per-stage kernels work on M×M blocks: the machine's GEMM rate at the benchmarks'
   // state sizes (masses 12, random_outbox 40) is what their flop rate compares with.
   const double gemm12 = MeasureGemmGflops(12), gemm20 = MeasureGemmGflops(20), gemm40 = MeasureGemmGflops(40);
@@ -214,8 +245,12 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
     res.polished = summary.polished;
     res.N = inst->problem.horizon;
     if (ref != nullptr) res.rel_gap = (summary.objective - ref->J_star) / std::abs(ref->J_star);
-    res.gflops = FlopsPerIteration(inst->problem, summary.algorithm) * summary.iterations / (res.solve_ms * 1e-3) * 1e-9;
+    res.flops_per_iteration = FlopsPerIteration(inst->problem, summary.algorithm);
+    res.gflops = res.flops_per_iteration * summary.iterations / (res.solve_ms * 1e-3) * 1e-9;
     results.push_back(res);
+    if (options.scaling && res.name.rfind("masses_N", 0) == 0) {
+      scaling.push_back(ScalingEntry{std::move(*session), results.size() - 1});
+    }
 
     std::optional<ClosedLoopResult> cl;
     if (inst->closed_loop.has_value()) cl = RunClosedLoop(*inst, solver_options, ref);
@@ -252,24 +287,35 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
     std::fflush(stdout);
   }
   if (options.scaling) {
+    MeasureInterleaved(scaling, options.repeat, results);
     std::vector<const InstanceResult*> masses;
     for (const auto& r : results) {
       if (r.name.rfind("masses_N", 0) == 0) masses.push_back(&r);
     }
     std::sort(masses.begin(), masses.end(), [](auto* a, auto* b) { return a->N < b->N; });
-    if (!options.json) std::printf("\nscaling (time per horizon step and per iteration-step):\n");
+    // Issue 26's yardstick: the cost per stage relative to N = 300 (in cache there).
+    double base_us = NAN;
+    for (const InstanceResult* r : masses) {
+      if (r->N == 300) base_us = r->solve_ms * 1e3 / r->N;
+    }
+    if (!options.json) {
+      std::printf("\nscaling (time per horizon step and per iteration-step; instances solved interleaved, %d rounds):\n",
+                  options.repeat);
+    }
     for (const InstanceResult* r : masses) {
       const double per_step_us = r->solve_ms * 1e3 / r->N;
       const double per_it_step_ns = r->solve_ms * 1e6 / (static_cast<double>(r->N) * r->iterations);
       if (options.json) {
         std::printf("{\"scaling\":\"%s\",\"N\":%d,\"us_per_step\":%s,\"ns_per_iteration_step\":%s,"
-                    "\"gflops\":%s,\"gemm12_gflops\":%s,\"gemm20_gflops\":%s,\"gemm40_gflops\":%s}\n",
+                    "\"per_step_vs_N300\":%s,\"gflops\":%s,\"gemm12_gflops\":%s,\"gemm20_gflops\":%s,"
+                    "\"gemm40_gflops\":%s}\n",
                     r->name.c_str(), r->N, Num(per_step_us).c_str(), Num(per_it_step_ns).c_str(),
+                    Num(per_step_us / base_us).c_str(),
                     Num(r->gflops).c_str(), Num(gemm12).c_str(), Num(gemm20).c_str(), Num(gemm40).c_str());
       } else {
-        std::printf("  %-20s N=%6d  %9.3f us/step  %9.1f ns/(iteration*step)  (%d iterations)  %6.2f GFLOP/s "
-                    "(%.0f %% of GEMM n=12)\n",
-                    r->name.c_str(), r->N, per_step_us, per_it_step_ns, r->iterations, r->gflops,
+        std::printf("  %-20s N=%6d  %9.3f us/step (%4.2fx N=300)  %9.1f ns/(iteration*step)  (%d iterations)  "
+                    "%6.2f GFLOP/s (%.0f %% of GEMM n=12)\n",
+                    r->name.c_str(), r->N, per_step_us, per_step_us / base_us, per_it_step_ns, r->iterations, r->gflops,
                     100.0 * r->gflops / gemm12);
       }
     }
