@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/message_passing/fixed_size.h"
+#include "core/util/packed_symmetric.h"
 #include "core/util/symmetrize.h"
 
 namespace nupmpc::core {
@@ -14,6 +15,9 @@ constexpr double kInfluenceEpsilon = 1e-15;
 
 IbffdPolicy::IbffdPolicy(const Problem& problem, bool check_outputs) : check_outputs_(check_outputs) {
   graph_ = BuildFactorGraph(problem, /*augment_inputs=*/false);
+  row_term_.resize(graph_.num_rows());
+  row_bound_.resize(graph_.num_rows());
+  RefreshRowTerms();
   const int M = graph_.M, L = graph_.L, NL = graph_.N * L;
   factor_.resize(NL);
   policy_region_.assign(NL, Region::kInside);
@@ -25,14 +29,30 @@ IbffdPolicy::IbffdPolicy(const Problem& problem, bool check_outputs) : check_out
   z_.setZero(M);
   x_.setZero(M);
   rhs_.setZero(M);
-  D_.setZero(M, M * std::max(L, 1));
-  d_.setZero(M, std::max(L, 1));
   x0_lu_ = Eigen::PartialPivLU<Eigen::MatrixXd>(M);
+}
+
+void IbffdPolicy::Refresh(const Problem& problem) {
+  RefreshFactorGraph(problem, &graph_);
+  RefreshRowTerms();
+}
+
+void IbffdPolicy::RefreshRowTerms() {
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    const ScalarPrior& prior = graph_.row_prior[r];
+    const double w = 1.0 / prior.variance, xy = prior.mean / prior.variance;
+    row_term_[r] = prior.has_gaussian() ? RowTerm{w, xy - w * graph_.row_d[r]} : RowTerm{};
+    // Inputs' sub-problem: output kinds are none, half-spaces or boxes (the class comment).
+    const bool constrained = prior.kind != PriorKind::kNone;
+    row_bound_[r].lower = constrained && prior.kind != PriorKind::kAtMost ? prior.lower : -kInfinity;
+    row_bound_[r].upper = constrained && prior.kind != PriorKind::kAtLeast ? prior.upper : kInfinity;
+  }
 }
 
 void IbffdPolicy::ReleaseWorkspace() {
   W_step_.resize(0, 0);
   xi_step_.resize(0, 0);
+  input_gain_.resize(0, 0);
   x_pred_.resize(0, 0);
   policy_released_ = policy_released_ || has_policy_;
   has_policy_ = false;
@@ -40,8 +60,9 @@ void IbffdPolicy::ReleaseWorkspace() {
 
 void IbffdPolicy::AcquireWorkspace() {
   if (xi_step_.size() == 0) {
-    W_step_.setZero(graph_.M, graph_.M * (graph_.N + 1));
+    W_step_.setZero(PackedSymmetricSize(graph_.M), graph_.N + 1);
     xi_step_.setZero(graph_.M, graph_.N + 1);
+    input_gain_.setZero(graph_.M + 2, static_cast<Eigen::Index>(graph_.N) * graph_.L);
     x_pred_.setZero(graph_.M, graph_.N + 1);
   }
   if (policy_released_) RecomputePolicy();
@@ -81,11 +102,12 @@ void IbffdPolicy::ShiftPolicy(int steps) {
   // x[min(n + steps, N-1)] (the last step repeats its own, as its regions do); the
   // terminal message stays. Ascending n reads only entries not yet overwritten.
   if (steps <= 0) return;
-  const int M = graph_.M, N = graph_.N;
+  const int L = graph_.L, N = graph_.N;
   for (int n = 0; n + 1 < N; ++n) {
     const int source = std::min(n + steps, N - 1);
-    W_step_.middleCols(n * M, M) = W_step_.middleCols(source * M, M);
+    W_step_.col(n) = W_step_.col(source);
     xi_step_.col(n) = xi_step_.col(source);
+    input_gain_.middleCols(n * L, L) = input_gain_.middleCols(source * L, L);
   }
 }
 
@@ -117,6 +139,17 @@ void MarginalizeInput(const ScalarFactor& f, const BT& b, WT& W, XT& xi, ZT& z) 
   W.noalias() -= H * (z * z.transpose());
 }
 
+// What the forward pass needs of input u's message (§8.2) with the inputs after it in
+// its step integrated out, (W, ξ): z = W b, bᵀz and bᵀξ, written to `out` (M + 2 values).
+template <int MS, typename BT, typename WT, typename XT>
+void RecordInput(const BT& b, const WT& W, const XT& xi, double* out) {
+  const auto M = b.size();
+  Eigen::Map<StateVector<MS>> z(out, M);
+  StateProduct<MS>(z, W, b);
+  out[M] = b.dot(z);
+  out[M + 1] = b.dot(xi);
+}
+
 template <int MS>
 using MatrixView = Eigen::Map<Eigen::Matrix<double, MS, MS>>;
 template <int MS>
@@ -137,18 +170,22 @@ void IbffdPolicy::BackwardFilterImpl(Sweep sweep, const Targets& targets, const 
   for (int n = g.N; n >= 0; --n) {
     if (stop()) return;
     for (int r = g.row_begin[n]; r < g.row_begin[n + 1]; ++r) {
-      const ScalarPrior& prior = g.row_prior[r];
-      if (!prior.has_gaussian()) continue;
-      const double w = 1.0 / prior.variance, xy = prior.mean / prior.variance;
+      const RowTerm term = row_term_[r];
+      if (term.w == 0.0) continue;  // no Gaussian part
+      const int unit = g.row_unit[r];
+      if (unit >= 0) {  // c = e_unit: the rank-one terms touch one entry each
+        if (sweep != Sweep::kOffsets) W(unit, unit) += term.w;
+        xi(unit) += term.xi;
+        continue;
+      }
       const auto c = ConstView<MS, 1>(g.c_pool.data() + static_cast<Eigen::Index>(g.row_c[r]) * M, M, 1);
-      if (sweep != Sweep::kOffsets) W.noalias() += w * (c * c.transpose());
-      xi.noalias() += (xy - w * g.row_d[r]) * c;
+      if (sweep != Sweep::kOffsets) W.noalias() += term.w * (c * c.transpose());
+      xi.noalias() += term.xi * c;
     }
-    MatrixView<MS> stored_W(W_step_.data() + static_cast<Eigen::Index>(n) * M * M, M, M);
     if (sweep == Sweep::kOffsets) {
-      W = stored_W;  // the carried gains, exactly what the full filter held here
+      UnpackSymmetric(W_step_.col(n).data(), W);  // the carried gains, exactly what the full filter held here
     } else {
-      stored_W = W;
+      PackLower(W, W_step_.col(n).data());
     }
     VectorView<MS>(xi_step_.col(n).data(), M) = xi;
     if (n == 0) break;
@@ -172,10 +209,14 @@ void IbffdPolicy::BackwardFilterImpl(Sweep sweep, const Targets& targets, const 
           polish_region[i] = Decide(prior, prior.slope, Message{m_e, V_e}).region;
           input_factor[i] = PieceFactor(prior, prior.slope, polish_region[i]);
         }
+        RecordInput<MS>(B.col(l), W, xi, input_gain_.col(i).data());
         MarginalizeInput<MS>(input_factor[i], B.col(l), W, xi, z);
       }
     } else {
-      for (int l = L - 1; l >= 0; --l) MarginalizeInput<MS>(input_factor[j * L + l], B.col(l), W, xi, z);
+      for (int l = L - 1; l >= 0; --l) {
+        RecordInput<MS>(B.col(l), W, xi, input_gain_.col(j * L + l).data());
+        MarginalizeInput<MS>(input_factor[j * L + l], B.col(l), W, xi, z);
+      }
     }
     // ξ ← Aᵀ(ξ - W cx);  W ← Aᵀ W A
     const auto A = ConstView<MS, MS>(g.A(j).data(), M, M);
@@ -208,8 +249,9 @@ double IbffdPolicy::ForwardDecidingImpl(Pass pass, const Targets& targets, Prima
     x_ = g.m0;
   } else {
     // x̂0 = argmax of N(m0, V0)·μ_backward: (I + V0 W) x = m0 + V0 ξ (one M×M solve).
+    UnpackSymmetric(W_step_.col(0).data(), W);
     S_.setIdentity();
-    S_.noalias() += g.V0 * W_step_.leftCols(M);
+    S_.noalias() += g.V0 * W;
     rhs_ = g.m0;
     rhs_.noalias() += g.V0 * xi_step_.col(0);
     x0_lu_.compute(S_);
@@ -235,24 +277,14 @@ double IbffdPolicy::ForwardDecidingImpl(Pass pass, const Targets& targets, Prima
     x += ConstView<MS, 1>(g.cx.col(j).data(), M, 1);
     if (L == 0) continue;
     const auto B = ConstView<MS, Eigen::Dynamic>(g.B(j).data(), M, L);
-    // Messages with inputs l+1..L-1 of this step marginalised: D_l for l = L-1..0.
-    const auto D = [&](int l) { return MatrixView<MS>(D_.data() + static_cast<Eigen::Index>(l) * M * M, M, M); };
-    const auto d = [&](int l) { return VectorView<MS>(d_.col(l).data(), M); };
-    D(L - 1) = MatrixView<MS>(W_step_.data() + static_cast<Eigen::Index>(j + 1) * M * M, M, M);
-    d(L - 1) = VectorView<MS>(xi_step_.col(j + 1).data(), M);
-    for (int l = L - 1; l >= 1; --l) {
-      W = D(l);
-      xi = d(l);
-      MarginalizeInput<MS>(factor_[j * L + l], B.col(l), W, xi, z);
-      D(l - 1) = W;
-      d(l - 1) = xi;
-    }
     for (int l = 0; l < L; ++l) {
       const int i = j * L + l;
       const auto b = B.col(l);
-      StateProduct<MS>(z, D(l), b);
-      const double V_e = 1.0 / (b.dot(z) + kInfluenceEpsilon);
-      const double m_e = V_e * (b.dot(d(l)) - z.dot(x));
+      // The message of u from the later steps (W, ξ at the state it enters, the step's later
+      // inputs integrated out): V_e = 1/(bᵀWb), m_e = V_e (bᵀξ - bᵀW x) (§8.2).
+      const double* gain = input_gain_.col(i).data();
+      const double V_e = 1.0 / (gain[M] + kInfluenceEpsilon);
+      const double m_e = V_e * (gain[M + 1] - ConstView<MS, 1>(gain, M, 1).dot(x));
       const Message msg{m_e, V_e};
       const ScalarPrior& prior = g.input_prior[i];
       double u;
@@ -300,11 +332,11 @@ double IbffdPolicy::OutputsOutside(int n, const XT& x) const {
   const FactorGraph& g = graph_;
   double outside = 0.0;
   for (int r = g.row_begin[n]; r < g.row_begin[n + 1]; ++r) {
-    const ScalarPrior& prior = g.row_prior[r];
-    if (prior.kind == PriorKind::kNone) continue;
-    const double y = g.c(r).dot(x) + g.row_d[r];
-    if (prior.kind != PriorKind::kAtMost) outside = std::max(outside, prior.lower - y);
-    if (prior.kind != PriorKind::kAtLeast) outside = std::max(outside, y - prior.upper);
+    const RowBound bound = row_bound_[r];
+    if (bound.lower == -kInfinity && bound.upper == kInfinity) continue;
+    const int unit = g.row_unit[r];
+    const double y = (unit >= 0 ? x(unit) : g.c(r).dot(x)) + g.row_d[r];
+    outside = std::max({outside, bound.lower - y, y - bound.upper});
   }
   return outside;
 }

@@ -47,7 +47,7 @@ class IbffdPolicy {
   IbffdPolicy(const Problem& problem, bool check_outputs);
 
   const FactorGraph& graph() const { return graph_; }
-  void Refresh(const Problem& problem) { RefreshFactorGraph(problem, &graph_); }
+  void Refresh(const Problem& problem);
   void RefreshInitialState(const Problem& problem) { RefreshFactorGraphInitialState(problem, &graph_); }
   // Polled by every pass (null: none); not owned.
   void set_interrupt(Interrupt* interrupt) { interrupt_ = interrupt; }
@@ -131,6 +131,8 @@ class IbffdPolicy {
   void BackwardFilterImpl(Sweep sweep, const Targets& targets, const PrimalIterate* predicted);
   template <int MS>
   double ForwardDecidingImpl(Pass pass, const Targets& targets, PrimalIterate* out);
+  // row_term_ and row_bound_ from the graph's rows.
+  void RefreshRowTerms();
   // Largest distance of a constrained output row of step n outside its kinks at state x.
   template <typename XT>
   double OutputsOutside(int n, const XT& x) const;
@@ -143,10 +145,26 @@ class IbffdPolicy {
   bool outputs_outside_ = false;
   Interrupt* interrupt_ = nullptr;
   std::vector<ScalarFactor> factor_;  ///< what the backward filter sees
+  // What the sweeps read of each row's prior, packed (the priors themselves are several
+  // times larger and would be streamed through every pass of a long horizon).
+  struct RowTerm {
+    double w = 0.0;   ///< Gaussian part's precision (0: none)
+    double xi = 0.0;  ///< its precision-mean, less w·d (the row's offset)
+  };
+  struct RowBound {
+    double lower = -kInfinity;  ///< the kinks a polish candidate's output must lie within
+    double upper = kInfinity;
+  };
+  std::vector<RowTerm> row_term_;
+  std::vector<RowBound> row_bound_;
   // Scratch of every pass (released while idle); W_step_/xi_step_ double as the carried
-  // policy while has_policy_.
-  Eigen::MatrixXd W_step_;   ///< M × M(N+1): backward message at x[n] (before step n-1's inputs)
-  Eigen::MatrixXd xi_step_;  ///< M × (N+1)
+  // policy while has_policy_. The forward pass reads only input_gain_ (and W_step_ at
+  // x[0]): what it needs of each input's message, in the order it needs it.
+  Eigen::MatrixXd W_step_;      ///< M(M+1)/2 × (N+1): backward message W at x[n] (before step
+                                ///< n-1's inputs), its lower triangle (PackLower)
+  Eigen::MatrixXd xi_step_;     ///< M × (N+1)
+  Eigen::MatrixXd input_gain_;  ///< (M+2) × N·L: per input, with the step's later inputs
+                                ///< integrated out, z = W b, bᵀz and bᵀξ (RecordInput)
   Eigen::MatrixXd x_pred_;   ///< M × (N+1): states of the warm start's prediction sweep
   bool has_policy_ = false;
   // The regions the policy's backward filter integrated, and how often it was shifted
@@ -161,8 +179,6 @@ class IbffdPolicy {
   bool predict_next_ = false;
   Eigen::MatrixXd W_, AtW_, S_;
   Eigen::VectorXd xi_, z_, x_, rhs_;
-  Eigen::MatrixXd D_;  ///< M × M·L: per-input messages inside one step (forward pass)
-  Eigen::MatrixXd d_;  ///< M × L
   Eigen::PartialPivLU<Eigen::MatrixXd> x0_lu_;
 };
 

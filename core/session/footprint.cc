@@ -85,13 +85,14 @@ Parts Iake(const Dims& d) {
 }
 
 Parts Ibffd(const Dims& d) {
-  const i64 M = d.M, L = d.L, N = d.N, S = d.steps, L1 = std::max<i64>(L, 1);
+  const i64 M = d.M, L = d.L, N = d.N, S = d.steps;
   const i64 rows = S * d.K + (d.terminal ? M : 0);
   Parts p;
   p.carried = GraphBytes(d, M, false, rows) + 2 * Array<ScalarFactor>(N * L) + Array<double>(N * L) +
-              3 * Array<Region>(N * L) + Doubles(3, M * M) + Doubles(4, M) + Doubles(1, M * M * L1) +
-              Doubles(1, M * L1) + Doubles(1, M * M) + 2 * Array<int>(M);
-  p.workspace = Doubles(1, M * M * S) + Doubles(2, M * S);
+              3 * Array<Region>(N * L) + Doubles(3, M * M) + Doubles(4, M) + Doubles(1, M * M) +
+              2 * Array<int>(M);
+  // Per step: W's lower triangle, ξ, the prediction's state; per input: its gain record.
+  p.workspace = Doubles(1, M * (M + 1) / 2 * S) + Doubles(2, M * S) + Doubles(1, (M + 2) * N * L);
   p.transient = std::max(GraphTransient(rows), GemmScratch(M));
   const double m = static_cast<double>(M), rows_per_step = static_cast<double>(rows) / S;
   // Backward: 4M³ + 4M²L + 2M² per Gaussian row; forward deciding: ~7M²L + 2M².
