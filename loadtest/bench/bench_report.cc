@@ -374,7 +374,7 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
       if (r.name.rfind("masses_N", 0) == 0) masses.push_back(&r);
     }
     if (!options.json) {
-      std::printf("\nscaling (time per horizon step and per iteration-step; instances solved interleaved, %d rounds):\n",
+      std::printf("\nscaling (time per horizon step and per iteration-step; solved interleaved, %d rounds):\n",
                   options.repeat);
     }
     PrintScaling(masses, 12, gemm12, options.json);
