@@ -349,10 +349,16 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   double previous_objective = std::numeric_limits<double>::quiet_NaN();
   int stable = 0;
   int polish_wait = options_.polish_after_stable_iterations;
-  const auto settled_changes = [&]() {
-    return (algorithm_->NextPolishSolvesInputsOnly() ? options_.input_polish_settled_fraction
-                                                     : options_.polish_settled_fraction) *
-           algorithm_->decided_scalars();
+  // Whether `changed` region changes count as a settled active set. Which fraction applies
+  // depends on the next polish (NextPolishSolvesInputsOnly scans every row): asked only
+  // when the two fractions disagree about `changed`.
+  const auto settled = [&](int changed) {
+    const double scalars = algorithm_->decided_scalars();
+    const double inputs_only = options_.input_polish_settled_fraction * scalars;
+    const double whole = options_.polish_settled_fraction * scalars;
+    if (changed <= std::min(inputs_only, whole)) return true;
+    if (changed > std::max(inputs_only, whole)) return false;
+    return changed <= (algorithm_->NextPolishSolvesInputsOnly() ? inputs_only : whole);
   };
   while (summary.iterations < max_iterations) {
     if (stop_requested()) break;
@@ -401,7 +407,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     }
     previous_objective = r.objective;
 
-    stable = changed >= 0 && changed <= settled_changes() ? stable + 1 : 0;
+    stable = changed >= 0 && settled(changed) ? stable + 1 : 0;
     if (polish_enabled && changed >= 0 && stable >= polish_wait) {
       algorithm_->AdoptRegionsForPolish();
       if (try_polish()) break;
