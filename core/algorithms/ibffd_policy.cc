@@ -102,12 +102,11 @@ void IbffdPolicy::ShiftPolicy(int steps) {
   // x[min(n + steps, N-1)] (the last step repeats its own, as its regions do); the
   // terminal message stays. Ascending n reads only entries not yet overwritten.
   if (steps <= 0) return;
-  const int L = graph_.L, N = graph_.N;
+  const int N = graph_.N;
   for (int n = 0; n + 1 < N; ++n) {
     const int source = std::min(n + steps, N - 1);
     W_step_.col(n) = W_step_.col(source);
     xi_step_.col(n) = xi_step_.col(source);
-    input_gain_.middleCols(n * L, L) = input_gain_.middleCols(source * L, L);
   }
 }
 
@@ -243,15 +242,14 @@ template <int MS>
 double IbffdPolicy::ForwardDecidingImpl(Pass pass, const Targets& targets, PrimalIterate* out) {
   const FactorGraph& g = graph_;
   const int M = g.M, L = g.L;
-  VectorView<MS> x(x_.data(), M), z(z_.data(), M), xi(xi_.data(), M);
-  MatrixView<MS> W(W_.data(), M, M);
+  VectorView<MS> x(x_.data(), M), z(z_.data(), M);
   if (g.x0_fixed) {
     x_ = g.m0;
   } else {
     // x̂0 = argmax of N(m0, V0)·μ_backward: (I + V0 W) x = m0 + V0 ξ (one M×M solve).
-    UnpackSymmetric(W_step_.col(0).data(), W);
+    UnpackSymmetric(W_step_.col(0).data(), W_);
     S_.setIdentity();
-    S_.noalias() += g.V0 * W;
+    S_.noalias() += g.V0 * W_;
     rhs_ = g.m0;
     rhs_.noalias() += g.V0 * xi_step_.col(0);
     x0_lu_.compute(S_);

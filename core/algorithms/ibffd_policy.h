@@ -164,7 +164,9 @@ class IbffdPolicy {
                                 ///< n-1's inputs), its lower triangle (PackLower)
   Eigen::MatrixXd xi_step_;     ///< M × (N+1)
   Eigen::MatrixXd input_gain_;  ///< (M+2) × N·L: per input, with the step's later inputs
-                                ///< integrated out, z = W b, bᵀz and bᵀξ (RecordInput)
+                                ///< integrated out, z = W b, bᵀz and bᵀξ (RecordInput);
+                                ///< written by every backward sweep for the forward pass
+                                ///< after it, so not part of the carried policy
   Eigen::MatrixXd x_pred_;   ///< M × (N+1): states of the warm start's prediction sweep
   bool has_policy_ = false;
   // The regions the policy's backward filter integrated, and how often it was shifted
