@@ -2,6 +2,8 @@
 #define NUPMPC_CORE_OPTIONS_H_
 
 #include <atomic>
+#include <cmath>
+#include <functional>
 #include <string>
 
 #include "absl/status/status.h"
@@ -109,6 +111,17 @@ struct SolverOptions {
 absl::Status Validate(const SolverOptions& options);
 
 // Per-solve limits and control.
+// One pass of a solve, as SolveLimits.trace reports it.
+struct PassTrace {
+  enum class Kind { kIterate, kPolish };
+  Kind kind = Kind::kIterate;
+  int pass = 0;                 ///< passes of this solve so far, this one included
+  int changed = -1;             ///< kIterate: scalars whose region changed (-1: not tracked)
+  double objective = NAN;       ///< kIterate: the iterate's objective
+  double max_violation = NAN;   ///< kIterate: and its largest constraint violation
+  double residual = NAN;        ///< kPolish: the deciding residual (0: the candidate is optimal)
+};
+
 struct SolveLimits {
   int max_iterations = 0;                ///< 0: use SolverOptions.max_iterations
   // Both are polled between passes and inside them, every few time steps (a Session
@@ -116,6 +129,10 @@ struct SolveLimits {
   double time_limit_seconds = 0.0;       ///< 0: none; wall time for the whole solve (Solve() to return)
   const std::atomic<bool>* cancel = nullptr;  ///< may be null; a cancelled solve returns no plan
   bool warm_start = true;                ///< start from the session's carried state if any
+  // Called after every pass whose result was evaluated (null: none): how the active set
+  // and the objective converge, for studies of the pass counts (nupmpc-bench --trace).
+  // Not for the service.
+  std::function<void(const PassTrace&)> trace;
 };
 
 absl::Status Validate(const SolveLimits& limits);

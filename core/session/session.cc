@@ -305,6 +305,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
       const double residual = algorithm_->Polish(&candidate_);
       if (PassInterrupted(&summary)) return false;  // an incomplete pass: discarded
       ++summary.iterations;
+      if (limits.trace) limits.trace({.kind = PassTrace::Kind::kPolish, .pass = summary.iterations, .residual = residual});
       const bool progress = residual < best_residual;
       best_residual = std::min(best_residual, residual);
       if (residual <= violation_tolerance && AllFinite(candidate_)) {
@@ -381,6 +382,10 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     const bool iterate_settled =
         !has_nonconvex_priors_ ||
         (current_.u - best_.u).cwiseAbs().maxCoeff() <= kNonconvexStepTolerance * (1.0 + current_.u.cwiseAbs().maxCoeff());
+    if (limits.trace) {
+      limits.trace({.kind = PassTrace::Kind::kIterate, .pass = summary.iterations, .changed = changed,
+                    .objective = r.objective, .max_violation = r.max_violation});
+    }
     std::swap(best_, current_);
     have_finite = true;
     summary.objective = r.objective;

@@ -1,6 +1,6 @@
 // nupmpc-bench: the core's speed and accuracy on benchmark instance files.
 //
-//   nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] FILE...
+//   nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] [--trace] FILE...
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -21,6 +21,8 @@ ABSL_FLAG(std::string, reference, "", "reference.json (default: the one beside e
 ABSL_FLAG(std::string, algorithm, "auto", "auto, iake, ibffd or iffbdd");
 ABSL_FLAG(int, repeat, 5, "solves per instance; the median time is reported");
 ABSL_FLAG(bool, scaling, false, "also report time per horizon step across the masses_N* files given");
+ABSL_FLAG(bool, trace, false, "also print every pass of one cold solve per instance (region changes, objective, "
+          "violation; polish residuals)");
 ABSL_FLAG(int, max_iterations, 5000, "iteration cap per solve");
 ABSL_FLAG(int, polish_after, 1, "polish once the active set is unchanged for this many iterations (0: never)");
 ABSL_FLAG(int, polish_rounds, 4, "primal-dual active-set corrections after a failed polish");
@@ -32,7 +34,7 @@ const nupmpc::cli::ProgramInfo kProgram{
                "iterations, median cold solve time of --repeat solves, objective, relative gap to reference.json, "
                "max violation, status and GFLOP/s next to the machine's Eigen GEMM rate; instances with a "
                "closed loop also get warm and cold per-step times and iterations.",
-    .usage = "nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] FILE...",
+    .usage = "nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] [--trace] FILE...",
 };
 
 int main(int argc, char** argv) {
@@ -45,6 +47,7 @@ int main(int argc, char** argv) {
   options.repeat = std::max(1, absl::GetFlag(FLAGS_repeat));
   options.max_iterations = absl::GetFlag(FLAGS_max_iterations);
   options.scaling = absl::GetFlag(FLAGS_scaling);
+  options.trace = absl::GetFlag(FLAGS_trace);
   options.polish_after = absl::GetFlag(FLAGS_polish_after);
   options.polish_rounds = absl::GetFlag(FLAGS_polish_rounds);
   absl::StatusOr<nupmpc::core::Algorithm> algorithm = nupmpc::core::ParseAlgorithm(absl::GetFlag(FLAGS_algorithm));

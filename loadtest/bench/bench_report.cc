@@ -12,6 +12,7 @@
 #include "absl/strings/str_format.h"
 #include "core/session/session.h"
 #include "loadtest/bench/instance_result.h"
+#include "loadtest/bench/pass_trace.h"
 #include "loadtest/bench/scaling_report.h"
 #include "loadtest/instances/benchmark_instance.h"
 
@@ -197,9 +198,6 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
     res.flops_per_iteration = FlopsPerIteration(inst->problem, summary.algorithm);
     res.gflops = res.flops_per_iteration * summary.iterations / (res.solve_ms * 1e-3) * 1e-9;
     results.push_back(res);
-    if (options.scaling && res.name.rfind("masses_N", 0) == 0) {
-      scaling.push_back(ScalingEntry{std::move(*session), results.size() - 1});
-    }
 
     std::optional<ClosedLoopResult> cl;
     if (inst->closed_loop.has_value()) cl = RunClosedLoop(*inst, solver_options, ref);
@@ -233,7 +231,11 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
             cl->cold_median_ms, cl->cold_p99_ms, cl->cold_median_iterations, cl->max_abs_gap);
       }
     }
+    if (options.trace) PrintPassTrace(inst->name, **session, options.json);
     std::fflush(stdout);
+    if (options.scaling && res.name.rfind("masses_N", 0) == 0) {
+      scaling.push_back(ScalingEntry{std::move(*session), results.size() - 1});
+    }
   }
   if (options.scaling) {
     MeasureInterleaved(scaling, options.repeat, results);

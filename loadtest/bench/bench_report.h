@@ -16,6 +16,7 @@ struct BenchOptions {
   int repeat = 5;
   int max_iterations = 5000;
   bool scaling = false;
+  bool trace = false;
   int polish_after = 1;
   int polish_rounds = 4;
 };

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <atomic>
 #include <memory>
+#include <vector>
 
 #include "core/session/session.h"
 #include "gmock/gmock.h"
@@ -180,6 +181,41 @@ TEST(WarmStart, RestartFromTheOptimumTakesOneIteration) {
     EXPECT_EQ(again->iterations, 1) << name;
     EXPECT_TRUE(again->warm_started);
     EXPECT_NEAR(again->objective, first->objective, 1e-9 * std::abs(first->objective)) << name;
+  }
+}
+
+TEST(PassTrace, ReportsEveryPassOfASolve) {
+  // corridor_N175 cold: plain passes, a polish that fails, more plain passes, the
+  // accepted polish; masses_N30 warm from its optimum: one polish pass.
+  for (const char* name : {"corridor_N175", "masses_N30"}) {
+    const bench::BenchmarkInstance inst = LoadOrDie(name);
+    auto session = Session::Create(inst.problem);
+    ASSERT_TRUE(session.ok());
+    for (const bool warm : {false, true}) {
+      std::vector<PassTrace> passes;
+      SolveLimits limits;
+      limits.warm_start = warm;
+      limits.trace = [&](const PassTrace& t) { passes.push_back(t); };
+      auto solved = (*session)->Solve(limits, nullptr);
+      ASSERT_TRUE(solved.ok());
+      ASSERT_EQ(solved->status, SolveStatus::kConverged) << name;
+      ASSERT_EQ(static_cast<int>(passes.size()), solved->iterations) << name << (warm ? " warm" : " cold");
+      for (std::size_t i = 0; i < passes.size(); ++i) {
+        EXPECT_EQ(passes[i].pass, static_cast<int>(i) + 1);
+        if (passes[i].kind == PassTrace::Kind::kIterate) {
+          EXPECT_GE(passes[i].changed, 0);
+          EXPECT_TRUE(std::isfinite(passes[i].objective) && std::isfinite(passes[i].max_violation));
+        } else {
+          EXPECT_GE(passes[i].residual, 0.0);
+        }
+      }
+      // The solve ends with the accepted polish, whose candidate solves the problem.
+      EXPECT_EQ(passes.back().kind, PassTrace::Kind::kPolish);
+      EXPECT_LE(passes.back().residual, 1e-9);
+      if (warm) {
+        EXPECT_EQ(passes.size(), 1u) << name;
+      }
+    }
   }
 }
 
