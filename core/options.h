@@ -110,7 +110,6 @@ struct SolverOptions {
 
 absl::Status Validate(const SolverOptions& options);
 
-// Per-solve limits and control.
 // One pass of a solve, as SolveLimits.trace reports it.
 struct PassTrace {
   enum class Kind { kIterate, kPolish };
@@ -122,6 +121,7 @@ struct PassTrace {
   double residual = NAN;        ///< kPolish: the deciding residual (0: the candidate is optimal)
 };
 
+// Per-solve limits and control.
 struct SolveLimits {
   int max_iterations = 0;                ///< 0: use SolverOptions.max_iterations
   // Both are polled between passes and inside them, every few time steps (a Session

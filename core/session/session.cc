@@ -305,7 +305,9 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
       const double residual = algorithm_->Polish(&candidate_);
       if (PassInterrupted(&summary)) return false;  // an incomplete pass: discarded
       ++summary.iterations;
-      if (limits.trace) limits.trace({.kind = PassTrace::Kind::kPolish, .pass = summary.iterations, .residual = residual});
+      if (limits.trace) {
+        limits.trace({.kind = PassTrace::Kind::kPolish, .pass = summary.iterations, .residual = residual});
+      }
       const bool progress = residual < best_residual;
       best_residual = std::min(best_residual, residual);
       if (residual <= violation_tolerance && AllFinite(candidate_)) {

@@ -24,7 +24,9 @@ void PrintPassTrace(const std::string& name, core::Session& session, bool json) 
     }
   };
   const absl::StatusOr<core::SolveSummary> s = session.Solve(limits, nullptr);
-  if (!s.ok()) std::fprintf(stderr, "nupmpc-bench: %s: traced solve: %s\n", name.c_str(), s.status().ToString().c_str());
+  if (!s.ok()) {
+    std::fprintf(stderr, "nupmpc-bench: %s: traced solve: %s\n", name.c_str(), s.status().ToString().c_str());
+  }
 }
 
 }  // namespace nupmpc::bench
