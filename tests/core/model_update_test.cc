@@ -10,10 +10,14 @@
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/util/core_session.h"
 #include "tests/util/random_problem.h"
 
 namespace nupmpc::core {
 namespace {
+
+using nupmpc::testing::MakeSession;
+using nupmpc::testing::Plan;
 
 using ::testing::HasSubstr;
 
@@ -34,17 +38,6 @@ Problem BoxedProblem() {
   return p;
 }
 
-std::unique_ptr<Session> MakeSession(const Problem& problem) {
-  absl::StatusOr<std::unique_ptr<Session>> session = Session::Create(problem);
-  EXPECT_TRUE(session.ok()) << session.status();
-  return session.ok() ? *std::move(session) : nullptr;
-}
-
-struct Plan {
-  Eigen::MatrixXd inputs;
-  double objective = 0.0;
-  int iterations = 0;
-};
 Plan SolveOnce(Session& session, bool warm) {
   SolveLimits limits;
   limits.warm_start = warm;

@@ -11,10 +11,14 @@
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/util/core_session.h"
 #include "tests/util/random_problem.h"
 
 namespace nupmpc::core {
 namespace {
+
+using nupmpc::testing::MakeSession;
+using nupmpc::testing::Plan;
 
 using ::testing::HasSubstr;
 
@@ -30,18 +34,7 @@ Problem BoxedProblem() {
   return nupmpc::testing::WithBoxes(nupmpc::testing::RandomGaussianProblem(spec), 0.8, 0.0);
 }
 
-std::unique_ptr<Session> MakeSession(const Problem& problem) {
-  absl::StatusOr<std::unique_ptr<Session>> session = Session::Create(problem);
-  EXPECT_TRUE(session.ok()) << session.status();
-  return session.ok() ? *std::move(session) : nullptr;
-}
-
 // The plan of a warm solve after the receding-horizon shift: what a control period does.
-struct Plan {
-  Eigen::MatrixXd inputs;
-  double objective = 0.0;
-  int iterations = 0;
-};
 Plan SolvePeriod(MpcSession& session) {
   session.ShiftWarmStart();
   Solution solution;
