@@ -55,6 +55,11 @@ struct SolverOptions {
   // know what the corrections found).
   int polish_rounds = 4;
   int polish_max_rounds = 12;
+  // IFFBDD problems whose only constraints are hard output bounds are iterated with a
+  // primal-dual interior-point method on the same Kalman passes until the polish finds
+  // the active set (core/algorithms/interior_point_rows.h); false keeps IFFBDD's own dual
+  // NUP updates. Needs the polish (polish_after_stable_iterations > 0).
+  bool interior_point = true;
 
   // IAKE: slope used for hard constraints (IRLGE needs a finite penalty; it must exceed
   // the constraint's Lagrange multiplier to be exact, §6.2).

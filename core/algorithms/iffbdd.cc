@@ -79,6 +79,10 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(
 
 void Iffbdd::ReleaseWorkspace() {
   fw_ = ForwardFilterWorkspace();
+  interior_rows_ = InteriorPointRows();
+  newton_z_.resize(0);
+  interior_plan_ = newton_plan_ = PrimalIterate();
+  ForgetSolve();
   workspace_held_ = false;
   if (input_polish_) {
     released_policy_ = input_polish_->TakeMemory();
@@ -95,6 +99,14 @@ void Iffbdd::AcquireWorkspace(const Problem& problem) {
   }
   if (workspace_held_) return;
   fw_.Resize(graph_, /*keep_edges=*/false);
+  // The interior-point iteration's state, when the problem's shape admits it (its priors
+  // may still change: DecideInteriorPoint decides at each refresh).
+  if (MayUseInteriorPoint()) {
+    interior_rows_.Resize(graph_.num_rows());
+    newton_z_.setZero(graph_.num_rows());
+    interior_plan_.Resize(graph_.base_M, graph_.L, graph_.N);
+    newton_plan_.Resize(graph_.base_M, graph_.L, graph_.N);
+  }
   LoadInputMoments(graph_, input_factor_.data(), &fw_);
   workspace_held_ = true;
 }
@@ -105,7 +117,24 @@ void Iffbdd::Refresh(const Problem& problem) {
   RefreshDerived();
 }
 
+bool Iffbdd::MayUseInteriorPoint() const {
+  return options_.interior_point && options_.polish_after_stable_iterations > 0 && !graph_.augmented;
+}
+
+void Iffbdd::DecideInteriorPoint() {
+  const auto& rows = graph_.row_prior;
+  interior_point_ = MayUseInteriorPoint() && std::all_of(rows.begin(), rows.end(), InteriorPointHandles) &&
+                    std::any_of(rows.begin(), rows.end(), [](const ScalarPrior& p) { return p.is_constraint(); });
+  ForgetSolve();
+}
+
+void Iffbdd::RefreshOutputPriors(const Problem& problem) {
+  RefreshFactorGraphOutputPriors(problem, &graph_);
+  DecideInteriorPoint();
+}
+
 void Iffbdd::RefreshDerived() {
+  DecideInteriorPoint();
   for (std::size_t i = 0; i < input_factor_.size(); ++i) {
     input_factor_[i] = ScalarFactor::GaussianPart(graph_.input_prior[i]);
   }
@@ -125,6 +154,7 @@ void Iffbdd::ColdStart() {
   }
   has_regions_ = false;
   has_duals_ = false;
+  ForgetSolve();
   if (input_polish_) input_polish_->Forget();
   released_policy_.valid = false;
 }
@@ -139,6 +169,7 @@ void Iffbdd::ShiftWarmStart() {
     row_dual_(r) = row_dual_(src);
   }
   for (int n = 0; n < graph_.N; ++n) step_costate_.col(n) = step_costate_.col(n + 1);
+  ForgetSolve();
   if (input_polish_) input_polish_->Shift();
   if (released_policy_.valid) ++released_policy_.shifts;
   for (int r = 0; r < graph_.num_rows(); ++r) {
@@ -148,12 +179,106 @@ void Iffbdd::ShiftWarmStart() {
 }
 
 int Iffbdd::Iterate(PrimalIterate* out) {
+  if (interior_point_ && !warm_solve_) return IterateInteriorPoint(out);
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], nup_[r]);
   RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
   if (Interrupted()) return -1;  // incomplete: the carried state is untouched so far
   const int changed = static_cast<int>(Backward(Pass::kIterate, out));
   has_regions_ = true;
   return changed;
+}
+
+int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
+  const FactorGraph& g = graph_;
+  const int R = g.num_rows();
+  // Predictor (affine-scaling direction, target 0). The first pass of a solve starts each
+  // row when the filter reaches it, knowing the row's prior variance.
+  interior_rows_.AimPredictor();
+  if (!interior_point_started_) {
+    for (int r = 0; r < R; ++r) row_factor_[r] = ScalarFactor::GaussianPart(g.row_prior[r]);
+    RunForwardFilterDeciding(
+        g, row_factor_.data(),
+        [this](int r, double, double s, const double*) {
+          const ScalarPrior& prior = graph_.row_prior[r];
+          return row_factor_[r] = WithGaussianPart(prior, interior_rows_.Start(r, prior, s));
+        },
+        &fw_, interrupt_);
+    if (Interrupted()) return -1;
+    Backward(Pass::kNewton, out);
+    interior_plan_.u.setZero();
+    interior_plan_.x0 = g.m0.head(g.base_M);
+    interior_point_started_ = true;
+    TakeNewtonDirections();
+  } else if (!SolveNewtonDirection(/*full_filter=*/true, out)) {
+    return -1;
+  }
+  if (Interrupted()) return -1;
+  // The regions the polish would start from: where the predictor's full step would put
+  // each row (its limit as μ → 0, a better guess of the optimum's active set than the
+  // current iterate's, whose rows near their bounds still sit at a distance set by μ).
+  int changed = 0;
+  for (int r = 0; r < R; ++r) {
+    const Region region = interior_rows_.active(r) ? interior_rows_.RegionOf(r, fw_.s(r), 1.0) : Region::kInside;
+    if (region != region_[r]) ++changed;
+    region_[r] = region;
+  }
+  // Mehrotra's centring σ = (μ_aff / μ)³, from the complementarity the predictor would reach.
+  const double mu = interior_rows_.Complementarity();
+  const double mu_affine = interior_rows_.Complementarity(std::min(1.0, interior_rows_.MaxStep()));
+  const double sigma_mu = mu > 0.0 ? std::min(1.0, std::pow(mu_affine / mu, 3)) * mu : 0.0;
+  // Corrector, then Gondzio's centrality correctors while they lengthen the step (his
+  // paper's trial step 1.08 α + 0.08 and acceptance at 1.005 α, at most 3); each a means
+  // pass with the predictor's gains.
+  interior_rows_.AimCorrector(sigma_mu);
+  if (!SolveNewtonDirection(/*full_filter=*/false, out)) return -1;
+  double reach = interior_rows_.MaxStep();
+  for (int correction = 0; correction < 3 && reach < 1.0; ++correction) {
+    newton_plan_.u = out->u;
+    newton_plan_.x0 = out->x0;
+    interior_rows_.AimCentrality(std::min(1.0, 1.08 * reach + 0.08), sigma_mu);
+    if (!SolveNewtonDirection(/*full_filter=*/false, out)) return -1;
+    const double enhanced = interior_rows_.MaxStep();
+    if (enhanced < 1.005 * reach) {
+      interior_rows_.Reject();
+      out->u = newton_plan_.u;
+      out->x0 = newton_plan_.x0;
+      break;
+    }
+    reach = enhanced;
+  }
+  // A step to a fraction of the boundary (Wright 1997, ch. 10); the plan moves with it.
+  const double step = std::min(1.0, 0.995 * reach);
+  interior_rows_.Step(step);
+  interior_plan_.u += step * (out->u - interior_plan_.u);
+  interior_plan_.x0 += step * (out->x0 - interior_plan_.x0);
+  out->u = interior_plan_.u;
+  out->x0 = interior_plan_.x0;
+  has_regions_ = true;
+  largest_dual_ = interior_rows_.largest_multiplier();
+  return changed;
+}
+
+bool Iffbdd::SolveNewtonDirection(bool full_filter, PrimalIterate* out) {
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    const ScalarPrior& prior = graph_.row_prior[r];
+    if (prior.is_constraint()) row_factor_[r] = WithGaussianPart(prior, interior_rows_.Factor(r, prior));
+  }
+  if (full_filter) {
+    RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
+  } else {
+    RunForwardMeans(graph_, row_factor_.data(), &fw_, interrupt_);
+  }
+  if (Interrupted()) return false;
+  Backward(Pass::kNewton, out);
+  if (Interrupted()) return false;
+  TakeNewtonDirections();
+  return true;
+}
+
+void Iffbdd::TakeNewtonDirections() {
+  for (int r = 0; r < graph_.num_rows(); ++r) {
+    if (interior_rows_.active(r)) interior_rows_.Direction(r, graph_.row_prior[r], newton_z_(r));
+  }
 }
 
 void Iffbdd::AdoptRegionsForPolish() {
@@ -164,6 +289,7 @@ void Iffbdd::AdoptRegionsForPolish() {
 
 void Iffbdd::AdoptCarriedRegionsForPolish() {
   ActiveSetIteration::AdoptRegionsForPolish();
+  warm_solve_ = true;
   decide_forward_next_ = has_duals_;
   polishing_inputs_ = StartInputPolish(/*carried=*/true);
 }
@@ -290,6 +416,10 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
           const double nup_dual = prior.has_gaussian() ? y_dual - (d.z - prior.mean) / prior.variance : y_dual;
           nup_[r] = DualNupFactor(prior, nup_dual, gamma_[r]);
         }
+      } else if (pass == Pass::kNewton) {
+        const double z = CombineWithMessage(row_factor_[r], m_e, V_e);
+        y_dual = (m_e - z) / V_e;
+        newton_z_(r) = z;
       } else {
         const double z = CombineWithMessage(row_factor_[r], m_e, V_e);
         y_dual = (m_e - z) / V_e;

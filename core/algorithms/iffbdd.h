@@ -6,6 +6,7 @@
 
 #include "absl/status/status.h"
 #include "core/algorithms/ibffd_policy.h"
+#include "core/algorithms/interior_point_rows.h"
 #include "core/algorithms/outer_iteration.h"
 #include "core/message_passing/forward_filter.h"
 #include "core/model/factor_graph.h"
@@ -18,6 +19,14 @@ namespace nupmpc::core {
 // inputs recovered from the costate. Input constraints enter through state augmentation
 // (§9.6). Needs a Gaussian part on every input; rows may carry box, half-space (hard or
 // soft) and L1 priors.
+//
+// Problems whose only constrained rows are hard output bounds (no constrained input, no
+// soft or L1 row) are iterated instead with a primal-dual interior-point method on the
+// same passes (SolverOptions.interior_point, InteriorPointRows): IFFBDD's dual updates find
+// such an active set at a linear rate (tens of passes on random output boxes), Mehrotra's
+// predictor-corrector at a superlinear one. Its iterates feed the same active-set polish.
+// A warm solve still starts with the carried active set and, if that polish fails,
+// continues with IFFBDD's own iteration.
 class Iffbdd final : public ActiveSetIteration {
  public:
   // Why this problem cannot run IFFBDD (OkStatus if it can).
@@ -30,10 +39,11 @@ class Iffbdd final : public ActiveSetIteration {
     if (input_polish_) input_polish_->set_interrupt(interrupt);
   }
   void Refresh(const Problem& problem) override;
-  void RefreshOutputPriors(const Problem& problem) override { RefreshFactorGraphOutputPriors(problem, &graph_); }
+  void RefreshOutputPriors(const Problem& problem) override;
   void RefreshInitialState(const Problem& problem) override {
     RefreshFactorGraphInitialState(problem, &graph_);
     if (input_polish_) input_polish_->RefreshInitialState(problem);
+    ForgetSolve();
   }
   void ColdStart() override;
   void ShiftWarmStart() override;
@@ -61,7 +71,9 @@ class Iffbdd final : public ActiveSetIteration {
   void AcquireWorkspace(const Problem& problem) override;
 
  private:
-  enum class Pass { kIterate, kPolish };
+  // kNewton: the exact solution of the pass's Gaussian factors (rows' values into
+  // newton_z_), no deciding.
+  enum class Pass { kIterate, kPolish, kNewton };
   // The backward dual-deciding pass; returns the region changes (kIterate) or the
   // deciding residual (kPolish).
   double Backward(Pass pass, PrimalIterate* out);
@@ -71,6 +83,26 @@ class Iffbdd final : public ActiveSetIteration {
   // constraint inside in region_); if so, hands it region_'s input regions.
   bool StartInputPolish(bool carried);
   bool OutputConstraintsInside() const;  ///< in region_
+  // One interior-point iteration (a filter pass for the predictor, a means-only pass with
+  // the same gains for the corrector); returns the region changes like Iterate().
+  int IterateInteriorPoint(PrimalIterate* out);
+  // A Newton pass towards the interior-point rows' current targets (a full filter pass, or
+  // a means pass with the last one's gains): the rows' new values, their directions, and
+  // the plan into `out`. False when interrupted.
+  bool SolveNewtonDirection(bool full_filter, PrimalIterate* out);
+  void TakeNewtonDirections();  ///< from newton_z_
+  // Whether the options and the graph's shape admit the interior-point iteration.
+  bool MayUseInteriorPoint() const;
+  // A new solve begins (new values or a shifted horizon): the interior-point iteration
+  // starts afresh, and a solve that adopts carried regions (warm) iterates with IFFBDD's
+  // own carried dual state instead, which a solve near the last one's optimum needs few
+  // passes of (an interior point always starts from the middle).
+  void ForgetSolve() {
+    interior_point_started_ = false;
+    warm_solve_ = false;
+  }
+  // Whether the rows' priors admit it now (sets interior_point_; the next solve starts afresh).
+  void DecideInteriorPoint();
   // What Refresh() derives from the graph: the inputs' Gaussian factors (and moments), γ.
   void RefreshDerived();
   // The region (and polish factor) of constrained row r from its forward prediction and the
@@ -106,6 +138,16 @@ class Iffbdd final : public ActiveSetIteration {
   IbffdPolicy::Memory released_policy_;
   bool polishing_inputs_ = false;
   std::vector<int> input_row_;  ///< the augmented row of input scalar n·L + l
+  // The interior-point iteration (see the class comment): whether the problem gets it now,
+  // whether it has started in this solve, its per-row state, the rows' values of the last
+  // Newton pass, and its plan (moved by the primal steps).
+  bool interior_point_ = false;
+  bool interior_point_started_ = false;
+  bool warm_solve_ = false;
+  InteriorPointRows interior_rows_;
+  Eigen::VectorXd newton_z_;
+  PrimalIterate interior_plan_;
+  PrimalIterate newton_plan_;  ///< the direction's plan before a centrality correction
 };
 
 }  // namespace nupmpc::core

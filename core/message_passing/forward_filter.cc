@@ -124,7 +124,46 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, FactorOf&&
   }
 }
 
+template <int MS>
+void Means(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilterWorkspace* ws,
+           Interrupt* interrupt) {
+  const int M = graph.M, N = graph.N;
+  StopPoll stop(interrupt);
+  FilterScratch<MS> scratch(ws);
+  auto& m = scratch.m;
+  auto& t = scratch.t;
+  m = ConstView<MS, 1>(graph.m0.data(), M, 1);
+  for (int n = 0; n <= N; ++n) {
+    if (stop()) return;
+    for (int r = graph.row_begin[n]; r < graph.row_begin[n + 1]; ++r) {
+      const ScalarFactor& f = row_factor[r];
+      if (graph.row_prior[r].kind == PriorKind::kNone && f.empty()) continue;
+      const int unit = graph.row_unit[r];
+      const double yhat =
+          graph.row_d[r] +
+          (unit >= 0 ? m(unit)
+                     : ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1)
+                           .dot(m));
+      ws->yhat(r) = yhat;
+      if (f.empty()) continue;
+      const double g = (f.xi - f.w * yhat) / (1.0 + f.w * ws->s(r));
+      ws->g(r) = g;
+      m.noalias() += g * ConstView<MS, 1>(ws->v.col(r).data(), M, 1);
+    }
+    if (n == N) break;
+    StateProduct<MS>(t, ConstView<MS, MS>(graph.A(n).data(), M, M), m);
+    m.noalias() = t;
+    m.noalias() += ConstView<MS, Eigen::Dynamic>(graph.B(n).data(), M, graph.L) * ws->mU.col(n);
+    m += ConstView<MS, 1>(graph.cx.col(n).data(), M, 1);
+  }
+}
+
 }  // namespace
+
+void RunForwardMeans(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilterWorkspace* ws,
+                     Interrupt* interrupt) {
+  DispatchStateSize(graph.M, [&]<int MS>() { Means<MS>(graph, row_factor, ws, interrupt); });
+}
 
 void ForwardFilterWorkspace::Resize(const FactorGraph& graph, bool keep_edges) {
   const int M = graph.M, R = graph.num_rows(), N = graph.N, L = graph.L;

@@ -49,6 +49,15 @@ using RowDecider = absl::FunctionRef<ScalarFactor(int row, double yhat, double s
 void RunForwardFilterDeciding(const FactorGraph& graph, const ScalarFactor* row_factor, RowDecider decide,
                               ForwardFilterWorkspace* ws, Interrupt* interrupt = nullptr);
 
+// The means of RunForwardFilter again for new row factors with the same precisions: only
+// ξ of canonical factors may differ from the last full pass (whose v, s, G it reuses), so
+// the gains are the same and only the O(M) per row and O(M²) per step of the means
+// remain, against O(M²) and O(M³) of the full filter. Rewrites ŷ and g; an interior-point
+// method's corrector solves the same Newton system for a second right-hand side with it.
+// Row factors must be canonical (V = ∞) or empty, as in that full pass.
+void RunForwardMeans(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilterWorkspace* ws,
+                     Interrupt* interrupt = nullptr);
+
 // Writes the moment form of the input factors into ws->mU / ws->VU. Separate because
 // IFFBDD's inputs stay fixed across iterations.
 void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor,

@@ -26,6 +26,9 @@ ABSL_FLAG(bool, trace, false, "also print every pass of one cold solve per insta
 ABSL_FLAG(int, max_iterations, 5000, "iteration cap per solve");
 ABSL_FLAG(int, polish_after, 1, "polish once the active set is unchanged for this many iterations (0: never)");
 ABSL_FLAG(int, polish_rounds, 4, "primal-dual active-set corrections after a failed polish");
+ABSL_FLAG(bool, interior_point, true,
+          "iterate cold IFFBDD solves of problems with hard output bounds only with the interior-point method "
+          "(false: IFFBDD's dual NUP updates)");
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-bench",
@@ -50,6 +53,7 @@ int main(int argc, char** argv) {
   options.trace = absl::GetFlag(FLAGS_trace);
   options.polish_after = absl::GetFlag(FLAGS_polish_after);
   options.polish_rounds = absl::GetFlag(FLAGS_polish_rounds);
+  options.interior_point = absl::GetFlag(FLAGS_interior_point);
   absl::StatusOr<nupmpc::core::Algorithm> algorithm = nupmpc::core::ParseAlgorithm(absl::GetFlag(FLAGS_algorithm));
   if (!algorithm.ok()) return nupmpc::cli::ReportUsageError(kProgram, absl::StrCat("--", algorithm.status().message()));
   options.algorithm = *algorithm;

@@ -161,6 +161,7 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
     solver_options.algorithm = options.algorithm;
     solver_options.max_iterations = options.max_iterations;
     solver_options.polish_after_stable_iterations = options.polish_after;
+    solver_options.interior_point = options.interior_point;
     solver_options.polish_rounds = options.polish_rounds;
     absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(inst->problem, solver_options);
     if (!session.ok()) {

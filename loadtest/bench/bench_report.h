@@ -18,6 +18,7 @@ struct BenchOptions {
   bool scaling = false;
   bool trace = false;
   int polish_after = 1;
+  bool interior_point = true;
   int polish_rounds = 4;
 };
 

@@ -70,6 +70,7 @@ int RunGeneratedScaling(const BenchOptions& options, double gemm40) {
     core::SolverOptions solver_options;
     solver_options.algorithm = options.algorithm;
     solver_options.max_iterations = options.max_iterations;
+    solver_options.interior_point = options.interior_point;
     absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(problem, solver_options);
     core::SolveLimits cold;
     cold.warm_start = false;

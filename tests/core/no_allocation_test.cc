@@ -154,6 +154,25 @@ TEST(NoAllocation, TheElasticFallbackDoesNotAllocate) {
   EXPECT_EQ(allocated, 0);
 }
 
+// The interior-point iteration of a cold IFFBDD solve (hard output bounds only), its
+// corrector passes and the polish after it.
+TEST(NoAllocation, InteriorPointSolvesDoNotAllocate) {
+  auto inst = bench::LoadBenchmarkInstance(kDir + "/corridor_N175.json");
+  ASSERT_TRUE(inst.ok());
+  auto session = Session::Create(inst->problem);
+  ASSERT_TRUE(session.ok());
+  ASSERT_TRUE((*session)->Solve(nullptr).ok());  // warms up lazily built state
+  SolveLimits cold;
+  cold.warm_start = false;
+  const long before = g_allocations.load();
+  auto s = (*session)->Solve(cold, nullptr);
+  const long allocated = g_allocations.load() - before;
+  ASSERT_TRUE(s.ok());
+  EXPECT_TRUE(s->polished);
+  EXPECT_GT(s->iterations, 5) << "not the interior-point iteration";
+  EXPECT_EQ(allocated, 0);
+}
+
 INSTANTIATE_TEST_SUITE_P(Algorithms, NoAllocationInLoop,
                          ::testing::Values(std::pair{"masses_N30", Algorithm::kIffbdd},
                                            std::pair{"corridor_N175", Algorithm::kIffbdd},

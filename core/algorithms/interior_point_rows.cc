@@ -1,0 +1,158 @@
+#include "core/algorithms/interior_point_rows.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace nupmpc::core {
+namespace {
+
+constexpr unsigned char kLower = 1, kUpper = 2;
+
+// The largest α ≤ `limit` with value + α·delta ≥ 0.
+double Ratio(double value, double delta, double limit) { return delta < 0.0 ? std::min(limit, -value / delta) : limit; }
+
+}  // namespace
+
+bool InteriorPointHandles(const ScalarPrior& prior) {
+  return prior.kind == PriorKind::kNone || (prior.is_constraint() && prior.is_hard());
+}
+
+void InteriorPointRows::Resize(int rows) {
+  side_.assign(static_cast<std::size_t>(rows), 0);
+  lo_.assign(static_cast<std::size_t>(rows), Side{});
+  up_.assign(static_cast<std::size_t>(rows), Side{});
+}
+
+// Calls f(side, bound, sign) for each bound side of row r: sign +1 for the lower bound
+// (t = z - a), -1 for the upper (t = b - z).
+#define NUPMPC_FOR_SIDES(r, prior, f)                              \
+  do {                                                             \
+    if (side_[r] & kLower) f(lo_[r], (prior).lower, 1.0);          \
+    if (side_[r] & kUpper) f(up_[r], (prior).upper, -1.0);         \
+  } while (false)
+
+ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double V_e) {
+  side_[r] = 0;
+  if (!prior.is_constraint() || !(V_e > 0.0)) return {};
+  const bool lower = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtLeast;
+  const bool upper = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtMost;
+  side_[r] = (lower ? kLower : 0) | (upper ? kUpper : 0);
+  // A box starts as the Gaussian with the moments of the uniform density on it (mean in
+  // the middle, variance w²/12): slacks w/2 and barrier precisions h = λ/t = 6/w² per
+  // side, so t λ = 3/2 on every side whatever the row's scale (a centred start). A
+  // half-space has no width: it starts one prior standard deviation √V_e inside with the
+  // same product.
+  constexpr double kProduct = 1.5;
+  const double t = prior.kind == PriorKind::kBox ? 0.5 * (prior.upper - prior.lower) : std::sqrt(V_e);
+  const double lam = kProduct / t;
+  lo_[r] = lower ? Side{.t = t, .lam = lam} : Side{};
+  up_[r] = upper ? Side{.t = t, .lam = lam} : Side{};
+  return Factor(r, prior);
+}
+
+void InteriorPointRows::AimPredictor() {
+  for (std::size_t r = 0; r < side_.size(); ++r) lo_[r].target = up_[r].target = 0.0;
+}
+
+void InteriorPointRows::AimCorrector(double sigma_mu) {
+  for (std::size_t r = 0; r < side_.size(); ++r) {
+    for (Side* s : {&lo_[r], &up_[r]}) s->target = sigma_mu - s->dt * s->dlam;
+  }
+}
+
+void InteriorPointRows::AimCentrality(double trial, double sigma_mu) {
+  const double low = 0.1 * sigma_mu, high = 10.0 * sigma_mu;  // Gondzio's β_min, β_max
+  for (std::size_t r = 0; r < side_.size(); ++r) {
+    for (Side* s : {&lo_[r], &up_[r]}) {
+      s->kept_dt = s->dt;
+      s->kept_dlam = s->dlam;
+      s->kept_target = s->target;
+      const double v = (s->t + trial * s->dt) * (s->lam + trial * s->dlam);
+      // Products below the box are pulled up to it, those above pulled down (at most by
+      // `high`: a large product is a variable far from its bound, harmless to the step).
+      if (v < low) s->target += low - v;
+      else if (v > high) s->target += std::max(high - v, -high);
+    }
+  }
+}
+
+void InteriorPointRows::Reject() {
+  for (std::size_t r = 0; r < side_.size(); ++r) {
+    for (Side* s : {&lo_[r], &up_[r]}) {
+      s->dt = s->kept_dt;
+      s->dlam = s->kept_dlam;
+      s->target = s->kept_target;
+    }
+  }
+}
+
+ScalarFactor InteriorPointRows::Factor(int r, const ScalarPrior& prior) const {
+  if (side_[r] == 0) return {};
+  double h = 0.0, q = 0.0;
+  const auto add = [&](const Side& s, double bound, double sign) {
+    h += s.lam / s.t;
+    q += s.lam / s.t * (bound + sign * s.t) + sign * s.target / s.t;
+  };
+  NUPMPC_FOR_SIDES(r, prior, add);
+  return ScalarFactor::Canonical(q, h);
+}
+
+void InteriorPointRows::Direction(int r, const ScalarPrior& prior, double z_new) {
+  const auto direction = [&](Side& s, double bound, double sign) {
+    s.dt = sign * (z_new - bound) - s.t;
+    s.dlam = (s.target - s.t * s.lam - s.lam * s.dt) / s.t;
+  };
+  NUPMPC_FOR_SIDES(r, prior, direction);
+}
+
+double InteriorPointRows::MaxStep() const {
+  double step = kInfinity;
+  for (std::size_t r = 0; r < side_.size(); ++r) {
+    if (side_[r] == 0) continue;
+    for (const Side* s : {&lo_[r], &up_[r]}) {
+      step = Ratio(s->t, s->dt, step);
+      step = Ratio(s->lam, s->dlam, step);
+    }
+  }
+  return step;
+}
+
+double InteriorPointRows::Complementarity(double step) const {
+  double sum = 0.0;
+  int sides = 0;
+  const auto add = [&](const Side& s, double, double) {
+    sum += (s.t + step * s.dt) * (s.lam + step * s.dlam);
+    ++sides;
+  };
+  for (std::size_t r = 0; r < side_.size(); ++r) {
+    if (side_[r] & kLower) add(lo_[r], 0.0, 1.0);
+    if (side_[r] & kUpper) add(up_[r], 0.0, -1.0);
+  }
+  return sides > 0 ? sum / sides : 0.0;
+}
+
+void InteriorPointRows::Step(double step) {
+  for (std::size_t r = 0; r < side_.size(); ++r) {
+    for (Side* s : {&lo_[r], &up_[r]}) {
+      s->t += step * s->dt;
+      s->lam += step * s->dlam;
+    }
+  }
+}
+
+Region InteriorPointRows::RegionOf(int r, double V_e, double step) const {
+  const auto at_bound = [&](const Side& s) { return (s.lam + step * s.dlam) * V_e > s.t + step * s.dt; };
+  if ((side_[r] & kLower) && at_bound(lo_[r])) return Region::kAtLower;
+  if ((side_[r] & kUpper) && at_bound(up_[r])) return Region::kAtUpper;
+  return Region::kInside;
+}
+
+double InteriorPointRows::largest_multiplier() const {
+  double largest = 0.0;
+  for (std::size_t r = 0; r < side_.size(); ++r) largest = std::max({largest, lo_[r].lam, up_[r].lam});
+  return largest;
+}
+
+#undef NUPMPC_FOR_SIDES
+
+}  // namespace nupmpc::core
