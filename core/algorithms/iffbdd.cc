@@ -179,7 +179,7 @@ void Iffbdd::ShiftWarmStart() {
 }
 
 int Iffbdd::Iterate(PrimalIterate* out) {
-  if (interior_point_ && !warm_solve_) return IterateInteriorPoint(out);
+  if (interior_point_ && !dual_iteration_) return IterateInteriorPoint(out);
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], nup_[r]);
   RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
   if (Interrupted()) return -1;  // incomplete: the carried state is untouched so far
@@ -246,6 +246,13 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
     }
     reach = enhanced;
   }
+  if (std::isnan(reach) || !out->u.allFinite() || !out->x0.allFinite()) {
+    // A breakdown (a row whose slack or multiplier under- or overflowed): this solve goes
+    // on with IFFBDD's own iteration from its carried state, which the interior point
+    // never touched.
+    dual_iteration_ = true;
+    return Iterate(out);
+  }
   // A step to a fraction of the boundary (Wright 1997, ch. 10); the plan moves with it.
   const double step = std::min(1.0, 0.995 * reach);
   interior_rows_.Step(step);
@@ -289,7 +296,7 @@ void Iffbdd::AdoptRegionsForPolish() {
 
 void Iffbdd::AdoptCarriedRegionsForPolish() {
   ActiveSetIteration::AdoptRegionsForPolish();
-  warm_solve_ = true;
+  dual_iteration_ = true;
   decide_forward_next_ = has_duals_;
   polishing_inputs_ = StartInputPolish(/*carried=*/true);
 }

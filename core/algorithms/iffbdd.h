@@ -94,12 +94,13 @@ class Iffbdd final : public ActiveSetIteration {
   // Whether the options and the graph's shape admit the interior-point iteration.
   bool MayUseInteriorPoint() const;
   // A new solve begins (new values or a shifted horizon): the interior-point iteration
-  // starts afresh, and a solve that adopts carried regions (warm) iterates with IFFBDD's
-  // own carried dual state instead, which a solve near the last one's optimum needs few
-  // passes of (an interior point always starts from the middle).
+  // starts afresh. A solve that adopts carried regions (warm) iterates with IFFBDD's own
+  // carried dual state instead, which a solve near the last one's optimum needs few
+  // passes of (an interior point always starts from the middle); so does one whose
+  // interior point broke down.
   void ForgetSolve() {
     interior_point_started_ = false;
-    warm_solve_ = false;
+    dual_iteration_ = false;
   }
   // Whether the rows' priors admit it now (sets interior_point_; the next solve starts afresh).
   void DecideInteriorPoint();
@@ -143,7 +144,7 @@ class Iffbdd final : public ActiveSetIteration {
   // Newton pass, and its plan (moved by the primal steps).
   bool interior_point_ = false;
   bool interior_point_started_ = false;
-  bool warm_solve_ = false;
+  bool dual_iteration_ = false;  ///< this solve iterates with IFFBDD's updates (ForgetSolve)
   InteriorPointRows interior_rows_;
   Eigen::VectorXd newton_z_;
   PrimalIterate interior_plan_;

@@ -14,7 +14,11 @@ double Ratio(double value, double delta, double limit) { return delta < 0.0 ? st
 }  // namespace
 
 bool InteriorPointHandles(const ScalarPrior& prior) {
-  return prior.kind == PriorKind::kNone || (prior.is_constraint() && prior.is_hard());
+  if (prior.kind == PriorKind::kNone) return true;
+  if (!prior.is_constraint() || !prior.is_hard()) return false;
+  // A box's starting barrier precision 6/w² (Start) must be a normal number.
+  const double width = prior.upper - prior.lower;
+  return prior.kind != PriorKind::kBox || std::isnormal(6.0 / (width * width));
 }
 
 void InteriorPointRows::Resize(int rows) {

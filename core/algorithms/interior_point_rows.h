@@ -80,7 +80,7 @@ class InteriorPointRows {
 };
 
 // Whether a row's prior is one the interior-point rows handle: none (a Gaussian part at
-// most) or a hard bound (box, half-space).
+// most) or a hard bound (half-space, or a box whose width's square is a normal number).
 bool InteriorPointHandles(const ScalarPrior& prior);
 
 }  // namespace nupmpc::core

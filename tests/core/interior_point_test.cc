@@ -6,6 +6,7 @@
 #include <map>
 #include <string>
 
+#include "core/algorithms/interior_point_rows.h"
 #include "core/message_passing/forward_filter.h"
 #include "core/model/factor_graph.h"
 #include "core/session/session.h"
@@ -48,6 +49,18 @@ TEST(InteriorPoint, MeansPassMatchesTheFullFilterForNewLinearTerms) {
   old.Resize(graph, false);
   RunForwardFilter(graph, inputs.data(), first.data(), false, &old);
   EXPECT_GT((old.yhat - full.yhat).cwiseAbs().maxCoeff(), 1e-3 * scale);
+}
+
+TEST(InteriorPoint, HandlesHardBoundsWhoseStartIsRepresentable) {
+  EXPECT_TRUE(InteriorPointHandles(ScalarPrior::Free()));
+  EXPECT_TRUE(InteriorPointHandles(ScalarPrior::Gaussian(1.0, 2.0)));
+  EXPECT_TRUE(InteriorPointHandles(ScalarPrior::Box(-1.0, 1.0)));
+  EXPECT_TRUE(InteriorPointHandles(ScalarPrior::AtLeast(-1.0)));
+  EXPECT_TRUE(InteriorPointHandles(ScalarPrior::AtMost(1e300)));
+  EXPECT_FALSE(InteriorPointHandles(ScalarPrior::Box(-1.0, 1.0, /*slope=*/5.0)));  // soft: an exact penalty
+  EXPECT_FALSE(InteriorPointHandles(ScalarPrior::L1(0.0, 1.0)));
+  EXPECT_FALSE(InteriorPointHandles(ScalarPrior::Box(0.0, 1e-160)));  // 6/w² overflows
+  EXPECT_FALSE(InteriorPointHandles(ScalarPrior::Box(-1e160, 1e160)));  // 6/w² underflows
 }
 
 struct Solved {
