@@ -400,10 +400,31 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   // A step of this pass is cheap (Aᵀx̃ and one dot product per row): its own interval.
   const double rows_per_step = static_cast<double>(g.num_rows()) / (g.N + 1);
   StopPoll stop(interrupt_, interrupt_ != nullptr ? interrupt_->IntervalFor(2.0 * M * (M + rows_per_step + g.L)) : 1);
+  // x̃ += c ỹ for row r (a unit row adds to one entry).
+  const auto AddRow = [&](int r, double y_dual) {
+    if (g.row_unit[r] >= 0) {
+      xt(g.row_unit[r]) += y_dual;
+    } else {
+      xt.noalias() += y_dual * ConstView<MS, 1>(g.c_pool.data() + static_cast<Eigen::Index>(g.row_c[r]) * M, M, 1);
+    }
+  };
   for (int n = g.N; n >= 0; --n) {
     if (stop()) return pass == Pass::kIterate ? changed : kInfinity;  // incomplete: the driver discards it
-    View<MS, 1>(step_costate_.col(n).data(), M, 1) = xt;
+    if (pass != Pass::kNewton) View<MS, 1>(step_costate_.col(n).data(), M, 1) = xt;
     for (int r = g.row_begin[n + 1] - 1; r >= g.row_begin[n]; --r) {
+      if (pass == Pass::kNewton) {
+        // Only the pass's factors matter here (no deciding): the priors are not read and
+        // the kept duals not written, which long horizons would stream for nothing.
+        const ScalarFactor& f = row_factor_[r];
+        const double V_e = fw_.s(r);
+        if (f.empty() || !(V_e > 0.0)) continue;
+        const double m_e = fw_.yhat(r) - ConstView<MS, 1>(fw_.v.col(r).data(), M, 1).dot(xt);
+        const double z = CombineWithMessage(f, m_e, V_e);
+        newton_z_(r) = z;
+        const double y_dual = (m_e - z) / V_e;
+        if (y_dual != 0.0) AddRow(r, y_dual);
+        continue;
+      }
       row_dual_(r) = 0.0;
       const ScalarPrior& prior = g.row_prior[r];
       if (prior.kind == PriorKind::kNone && !prior.has_gaussian()) continue;
@@ -423,10 +444,6 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
           const double nup_dual = prior.has_gaussian() ? y_dual - (d.z - prior.mean) / prior.variance : y_dual;
           nup_[r] = DualNupFactor(prior, nup_dual, gamma_[r]);
         }
-      } else if (pass == Pass::kNewton) {
-        const double z = CombineWithMessage(row_factor_[r], m_e, V_e);
-        y_dual = (m_e - z) / V_e;
-        newton_z_(r) = z;
       } else {
         const double z = CombineWithMessage(row_factor_[r], m_e, V_e);
         y_dual = (m_e - z) / V_e;
@@ -437,12 +454,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
         }
       }
       row_dual_(r) = y_dual;
-      if (y_dual == 0.0) continue;
-      if (g.row_unit[r] >= 0) {
-        xt(g.row_unit[r]) += y_dual;
-      } else {
-        xt.noalias() += y_dual * ConstView<MS, 1>(g.c_pool.data() + static_cast<Eigen::Index>(g.row_c[r]) * M, M, 1);
-      }
+      if (y_dual != 0.0) AddRow(r, y_dual);
     }
     if (n == 0) break;
     const int j = n - 1;
@@ -459,7 +471,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
   scratch_.noalias() = g.m0;
   scratch_.noalias() -= g.V0 * xt;
   out->x0 = scratch_.head(g.base_M);
-  has_duals_ = true;
+  if (pass != Pass::kNewton) has_duals_ = true;
   if (pass == Pass::kIterate) largest_dual_ = largest_dual;
   return pass == Pass::kIterate ? changed : residual;
 }
