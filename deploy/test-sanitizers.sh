@@ -25,7 +25,7 @@ deploy/sanitizer-tree.sh asan
 core_tests=(message_passing_test scalar_rules_test nonconvex_priors_test discrete_plan_test input_differences_test
             multilevel_inputs_test keep_out_test keep_out_session_test gp_model_test nonlinear_model_test
             benchmark_reference_test session_test elastic_test infeasibility_test step_update_test
-            model_update_test)
+            model_update_test interior_point_test)
 # The server's suites; the client library's own tests (reconnection, routing, spec updates,
 # restarts, the load generator) run in the main suite only: the server code they drive
 # runs here through the service tests.
