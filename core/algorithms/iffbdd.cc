@@ -198,9 +198,9 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
     for (int r = 0; r < R; ++r) row_factor_[r] = ScalarFactor::GaussianPart(g.row_prior[r]);
     RunForwardFilterDeciding(
         g, row_factor_.data(),
-        [this](int r, double, double s, const double*) {
+        [this](int r, double yhat, double s, const double*) {
           const ScalarPrior& prior = graph_.row_prior[r];
-          return row_factor_[r] = WithGaussianPart(prior, interior_rows_.Start(r, prior, s));
+          return row_factor_[r] = WithGaussianPart(prior, interior_rows_.Start(r, prior, yhat, s));
         },
         &fw_, interrupt_);
     if (Interrupted()) return -1;
@@ -246,15 +246,17 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
     }
     reach = enhanced;
   }
-  if (std::isnan(reach) || !out->u.allFinite() || !out->x0.allFinite()) {
-    // A breakdown (a row whose slack or multiplier under- or overflowed): this solve goes
-    // on with IFFBDD's own iteration from its carried state, which the interior point
-    // never touched.
+  // A step to a fraction of the boundary (Wright 1997, ch. 10); the plan moves with it.
+  const double step = std::min(1.0, 0.995 * reach);
+  if (!(step > options_.objective_tolerance) || !out->u.allFinite() || !out->x0.allFinite()) {
+    // A breakdown (a slack or multiplier under- or overflowed: NaN), or a step too short
+    // to move the objective by the solve loop's tolerance, whose test would then take a
+    // stalled iterate for a converged one (an infeasible problem's interior point stalls
+    // so): this solve goes on with IFFBDD's own iteration from its carried state, which
+    // the interior point never touched, and its infeasibility watch.
     dual_iteration_ = true;
     return Iterate(out);
   }
-  // A step to a fraction of the boundary (Wright 1997, ch. 10); the plan moves with it.
-  const double step = std::min(1.0, 0.995 * reach);
   interior_rows_.Step(step);
   interior_plan_.u += step * (out->u - interior_plan_.u);
   interior_plan_.x0 += step * (out->x0 - interior_plan_.x0);
@@ -417,8 +419,15 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
         // the kept duals not written, which long horizons would stream for nothing.
         const ScalarFactor& f = row_factor_[r];
         const double V_e = fw_.s(r);
-        if (f.empty() || !(V_e > 0.0)) continue;
+        if (!(V_e > 0.0)) {  // fixed by data (or skipped by the filter: unconstrained, no factor)
+          newton_z_(r) = fw_.yhat(r);
+          continue;
+        }
         const double m_e = fw_.yhat(r) - ConstView<MS, 1>(fw_.v.col(r).data(), M, 1).dot(xt);
+        if (f.empty()) {  // a bound whose barrier underflowed: the row's value, no update
+          newton_z_(r) = m_e;
+          continue;
+        }
         const double z = CombineWithMessage(f, m_e, V_e);
         newton_z_(r) = z;
         const double y_dual = (m_e - z) / V_e;

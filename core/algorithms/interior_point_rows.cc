@@ -2,14 +2,19 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace nupmpc::core {
 namespace {
 
 constexpr unsigned char kLower = 1, kUpper = 2;
 
-// The largest α ≤ `limit` with value + α·delta ≥ 0.
-double Ratio(double value, double delta, double limit) { return delta < 0.0 ? std::min(limit, -value / delta) : limit; }
+// The largest α ≤ `limit` with value + α·delta ≥ 0; NaN once anything was NaN (a breakdown
+// the caller must see: std::min would drop it).
+double Ratio(double value, double delta, double limit) {
+  if (std::isnan(value) || std::isnan(delta) || std::isnan(limit)) return std::numeric_limits<double>::quiet_NaN();
+  return delta < 0.0 ? std::min(limit, -value / delta) : limit;
+}
 
 }  // namespace
 
@@ -35,8 +40,9 @@ void InteriorPointRows::Resize(int rows) {
     if (side_[r] & kUpper) f(up_[r], (prior).upper, -1.0);         \
   } while (false)
 
-ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double V_e) {
+ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double yhat, double V_e) {
   side_[r] = 0;
+  lo_[r] = up_[r] = Side{};  // nothing of an earlier solve's row stays
   if (!prior.is_constraint() || !(V_e > 0.0)) return {};
   const bool lower = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtLeast;
   const bool upper = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtMost;
@@ -45,9 +51,10 @@ ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double V_
   // the middle, variance w²/12): slacks w/2 and barrier precisions h = λ/t = 6/w² per
   // side, so t λ = 3/2 on every side whatever the row's scale (a centred start). A
   // half-space has no width: it starts one prior standard deviation √V_e inside with the
-  // same product.
+  // same product, or at its predicted value if that is further inside.
   constexpr double kProduct = 1.5;
-  const double t = prior.kind == PriorKind::kBox ? 0.5 * (prior.upper - prior.lower) : std::sqrt(V_e);
+  const double inside = lower ? yhat - prior.lower : prior.upper - yhat;
+  const double t = prior.kind == PriorKind::kBox ? 0.5 * (prior.upper - prior.lower) : std::max(inside, std::sqrt(V_e));
   const double lam = kProduct / t;
   lo_[r] = lower ? Side{.t = t, .lam = lam} : Side{};
   up_[r] = upper ? Side{.t = t, .lam = lam} : Side{};
@@ -137,6 +144,7 @@ double InteriorPointRows::Complementarity(double step) const {
 
 void InteriorPointRows::Step(double step) {
   for (std::size_t r = 0; r < side_.size(); ++r) {
+    if (side_[r] == 0) continue;
     for (Side* s : {&lo_[r], &up_[r]}) {
       s->t += step * s->dt;
       s->lam += step * s->dlam;
@@ -153,7 +161,9 @@ Region InteriorPointRows::RegionOf(int r, double V_e, double step) const {
 
 double InteriorPointRows::largest_multiplier() const {
   double largest = 0.0;
-  for (std::size_t r = 0; r < side_.size(); ++r) largest = std::max({largest, lo_[r].lam, up_[r].lam});
+  for (std::size_t r = 0; r < side_.size(); ++r) {
+    if (side_[r] != 0) largest = std::max({largest, lo_[r].lam, up_[r].lam});
+  }
   return largest;
 }
 

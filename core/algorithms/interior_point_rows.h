@@ -33,11 +33,11 @@ class InteriorPointRows {
  public:
   void Resize(int rows);
 
-  // Starts row r (prior `prior`, forward prior variance `V_e` of its value in the first
-  // pass) and aims it at the predictor's target. Rows whose value the data fix (V_e = 0,
+  // Starts row r (prior `prior`, forward prediction `yhat` and prior variance `V_e` of its
+  // value in the first pass) and aims it at the predictor's target. Rows whose value the data fix (V_e = 0,
   // e.g. outputs of a fixed x[0]) are left out: no factor, no slack. Returns the row's
   // factor for the first pass.
-  ScalarFactor Start(int r, const ScalarPrior& prior, double V_e);
+  ScalarFactor Start(int r, const ScalarPrior& prior, double yhat, double V_e);
   bool active(int r) const { return side_[r] != 0; }
 
   // Targets of the next direction: the predictor's (0), the corrector's after a predictor

@@ -137,7 +137,6 @@ void Means(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilt
     if (stop()) return;
     for (int r = graph.row_begin[n]; r < graph.row_begin[n + 1]; ++r) {
       const ScalarFactor& f = row_factor[r];
-      if (f.empty()) continue;
       const int unit = graph.row_unit[r];
       const double yhat =
           graph.row_d[r] +
@@ -145,6 +144,10 @@ void Means(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilt
                      : ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1)
                            .dot(m));
       ws->yhat(r) = yhat;
+      if (f.empty()) {
+        ws->g(r) = 0.0;
+        continue;
+      }
       const double g = (f.xi - f.w * yhat) / (1.0 + f.w * ws->s(r));
       ws->g(r) = g;
       m.noalias() += g * ConstView<MS, 1>(ws->v.col(r).data(), M, 1);

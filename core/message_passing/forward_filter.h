@@ -54,9 +54,9 @@ void RunForwardFilterDeciding(const FactorGraph& graph, const ScalarFactor* row_
 // the gains are the same and only the O(M) per row and O(M²) per step of the means
 // remain, against O(M²) and O(M³) of the full filter. Rewrites ŷ and g; an interior-point
 // method's corrector solves the same Newton system for a second right-hand side with it.
-// Row factors must be canonical (V = ∞) or empty, as in that full pass; rows with an
-// empty factor are skipped (their ŷ is left as it was: the priors are not read, which
-// long horizons would stream for nothing).
+// Row factors must be canonical (V = ∞) or empty, as in that full pass; a row with an
+// empty factor gets its ŷ and no update (g = 0) whatever its prior (the priors are not
+// read, which long horizons would stream for nothing).
 void RunForwardMeans(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilterWorkspace* ws,
                      Interrupt* interrupt = nullptr);
 

@@ -169,7 +169,7 @@ TEST(NoAllocation, InteriorPointSolvesDoNotAllocate) {
   const long allocated = g_allocations.load() - before;
   ASSERT_TRUE(s.ok());
   EXPECT_TRUE(s->polished);
-  EXPECT_GT(s->iterations, 5) << "not the interior-point iteration";
+  EXPECT_LT(s->iterations, 20) << "not the interior-point iteration (IFFBDD's own takes 41 passes)";
   EXPECT_EQ(allocated, 0);
 }
 
