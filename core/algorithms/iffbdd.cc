@@ -192,7 +192,7 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
   const FactorGraph& g = graph_;
   const int R = g.num_rows();
   // Predictor (affine-scaling direction, target 0). The first pass of a solve starts each
-  // row when the filter reaches it, knowing the row's prior variance.
+  // row when the filter reaches it, knowing the row's prediction and prior variance.
   interior_rows_.AimPredictor();
   if (!interior_point_started_) {
     for (int r = 0; r < R; ++r) row_factor_[r] = ScalarFactor::GaussianPart(g.row_prior[r]);

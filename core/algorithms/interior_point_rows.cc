@@ -7,8 +7,6 @@
 namespace nupmpc::core {
 namespace {
 
-constexpr unsigned char kLower = 1, kUpper = 2;
-
 // The largest α ≤ `limit` with value + α·delta ≥ 0; NaN once anything was NaN (a breakdown
 // the caller must see: std::min would drop it).
 double Ratio(double value, double delta, double limit) {
@@ -32,21 +30,13 @@ void InteriorPointRows::Resize(int rows) {
   up_.assign(static_cast<std::size_t>(rows), Side{});
 }
 
-// Calls f(side, bound, sign) for each bound side of row r: sign +1 for the lower bound
-// (t = z - a), -1 for the upper (t = b - z).
-#define NUPMPC_FOR_SIDES(r, prior, f)                              \
-  do {                                                             \
-    if (side_[r] & kLower) f(lo_[r], (prior).lower, 1.0);          \
-    if (side_[r] & kUpper) f(up_[r], (prior).upper, -1.0);         \
-  } while (false)
-
 ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double yhat, double V_e) {
   side_[r] = 0;
   lo_[r] = up_[r] = Side{};  // nothing of an earlier solve's row stays
   if (!prior.is_constraint() || !(V_e > 0.0)) return {};
   const bool lower = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtLeast;
   const bool upper = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtMost;
-  side_[r] = (lower ? kLower : 0) | (upper ? kUpper : 0);
+  side_[r] = static_cast<unsigned char>((lower ? kLower : 0) | (upper ? kUpper : 0));
   // A box starts as the Gaussian with the moments of the uniform density on it (mean in
   // the middle, variance w²/12): slacks w/2 and barrier precisions h = λ/t = 6/w² per
   // side, so t λ = 3/2 on every side whatever the row's scale (a centred start). A
@@ -104,7 +94,7 @@ ScalarFactor InteriorPointRows::Factor(int r, const ScalarPrior& prior) const {
     h += s.lam / s.t;
     q += s.lam / s.t * (bound + sign * s.t) + sign * s.target / s.t;
   };
-  NUPMPC_FOR_SIDES(r, prior, add);
+  ForSides(*this, r, prior, add);
   return ScalarFactor::Canonical(q, h);
 }
 
@@ -113,7 +103,7 @@ void InteriorPointRows::Direction(int r, const ScalarPrior& prior, double z_new)
     s.dt = sign * (z_new - bound) - s.t;
     s.dlam = (s.target - s.t * s.lam - s.lam * s.dt) / s.t;
   };
-  NUPMPC_FOR_SIDES(r, prior, direction);
+  ForSides(*this, r, prior, direction);
 }
 
 double InteriorPointRows::MaxStep() const {
@@ -131,13 +121,13 @@ double InteriorPointRows::MaxStep() const {
 double InteriorPointRows::Complementarity(double step) const {
   double sum = 0.0;
   int sides = 0;
-  const auto add = [&](const Side& s, double, double) {
+  const auto add = [&](const Side& s) {
     sum += (s.t + step * s.dt) * (s.lam + step * s.dlam);
     ++sides;
   };
   for (std::size_t r = 0; r < side_.size(); ++r) {
-    if (side_[r] & kLower) add(lo_[r], 0.0, 1.0);
-    if (side_[r] & kUpper) add(up_[r], 0.0, -1.0);
+    if (side_[r] & kLower) add(lo_[r]);
+    if (side_[r] & kUpper) add(up_[r]);
   }
   return sides > 0 ? sum / sides : 0.0;
 }
@@ -166,7 +156,5 @@ double InteriorPointRows::largest_multiplier() const {
   }
   return largest;
 }
-
-#undef NUPMPC_FOR_SIDES
 
 }  // namespace nupmpc::core

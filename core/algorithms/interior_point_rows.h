@@ -34,9 +34,9 @@ class InteriorPointRows {
   void Resize(int rows);
 
   // Starts row r (prior `prior`, forward prediction `yhat` and prior variance `V_e` of its
-  // value in the first pass) and aims it at the predictor's target. Rows whose value the data fix (V_e = 0,
-  // e.g. outputs of a fixed x[0]) are left out: no factor, no slack. Returns the row's
-  // factor for the first pass.
+  // value in the first pass) and aims it at the predictor's target. Rows whose value the
+  // data fix (V_e = 0, e.g. outputs of a fixed x[0]) are left out: no factor, no slack.
+  // Returns the row's factor for the first pass.
   ScalarFactor Start(int r, const ScalarPrior& prior, double yhat, double V_e);
   bool active(int r) const { return side_[r] != 0; }
 
@@ -61,9 +61,10 @@ class InteriorPointRows {
   // Moves the slacks and multipliers by the last Direction().
   void Step(double step);
 
-  // The row's region by its multipliers: at a bound when the barrier's precision h_j there
-  // outweighs the precision 1/V_e of everything else the pass knows about the row (the
-  // bound then determines the row's value), else inside.
+  // The row's region by its multipliers (after `step` along the last Direction()): at a
+  // bound when the barrier's precision h_j there outweighs the precision 1/V_e of
+  // everything else the pass knows about the row (the bound then determines the row's
+  // value), else inside.
   Region RegionOf(int r, double V_e, double step = 0.0) const;
   double largest_multiplier() const;
 
@@ -74,7 +75,16 @@ class InteriorPointRows {
     double target = 0.0;          ///< complementarity target of the next direction
     double kept_dt = 0.0, kept_dlam = 0.0, kept_target = 0.0;  ///< before AimCentrality
   };
-  // Bit 1: lower side present, bit 2: upper side; 0: the row is not in the method.
+  // Calls f(side, bound, sign) for each bound side of row r: sign +1 for the lower bound
+  // (t = z - a), -1 for the upper (t = b - z). `Self` is this class, const or not.
+  template <typename Self, typename F>
+  static void ForSides(Self& self, int r, const ScalarPrior& prior, F&& f) {
+    if (self.side_[r] & kLower) f(self.lo_[r], prior.lower, 1.0);
+    if (self.side_[r] & kUpper) f(self.up_[r], prior.upper, -1.0);
+  }
+
+  // side_[r]: kLower | kUpper for the bound sides present; 0: the row is not in the method.
+  static constexpr unsigned char kLower = 1, kUpper = 2;
   std::vector<unsigned char> side_;
   std::vector<Side> lo_, up_;
 };
