@@ -1,21 +1,15 @@
 #include "loadtest/echo_server.h"
 
 #include <chrono>
-#include <ctime>
 #include <deque>
 #include <mutex>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "server/thread_cpu_time.h"
 
 namespace nupmpc::loadtest {
 namespace {
-
-std::chrono::nanoseconds ThreadCpuTime() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return std::chrono::seconds(now.tv_sec) + std::chrono::nanoseconds(now.tv_nsec);
-}
 
 // One echoed Control stream. Reads and writes overlap (an open-loop client sends before
 // its previous answer is written), so answers wait in a queue and go out one at a time.
@@ -32,8 +26,8 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
       // that much of this thread's CPU time (not wall time: two reactions spinning at once
       // on one core would each count the other's time as their own, doing two "solves" in
       // the time of one).
-      const std::chrono::nanoseconds until = ThreadCpuTime() + (*busy_)[steps_++ % busy_->size()];
-      while (ThreadCpuTime() < until) {
+      const std::chrono::nanoseconds until = server::ThreadCpuTime() + (*busy_)[steps_++ % busy_->size()];
+      while (server::ThreadCpuTime() < until) {
       }
     }
     std::unique_lock<std::mutex> lock(mu_);

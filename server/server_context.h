@@ -1,6 +1,7 @@
 #ifndef NUPMPC_SERVER_SERVER_CONTEXT_H_
 #define NUPMPC_SERVER_SERVER_CONTEXT_H_
 
+#include <algorithm>
 #include <atomic>
 #include <optional>
 #include <string>
@@ -52,6 +53,20 @@ struct ServerOptions {
   SizeLimits size_limits;
 };
 
+// gRPC's callback API runs its reactions on at least two threads whatever the machine
+// (gRPC 1.51, src/cpp/common/completion_queue_cc.cc: max(2, CPUs / 2), at most 16).
+inline constexpr int kGrpcReactionThreadsAtLeast = 2;
+
+// Solves that may run at once: --threads, and with solves on gRPC's threads at least as many
+// as gRPC has threads taking requests. A server given one core (--threads 1) has two
+// reaction threads sharing it anyway; allowing a short step to be solved only on one of
+// them hands every step that arrives during a solve to the other (two thread switches per
+// step: more than the transport costs a masses_N30 step), where letting both solve costs
+// the scheduler a switch every time slice.
+inline int SolverCores(const ServerOptions& o) {
+  return o.inline_solve_max_ms > 0.0 ? std::max(o.worker_threads, kGrpcReactionThreadsAtLeast) : o.worker_threads;
+}
+
 // What every RPC handler shares: options, sessions, the solver pool, counters, and the
 // draining flag (set on SIGTERM: new work is refused with UNAVAILABLE).
 struct ServerState {
@@ -59,7 +74,7 @@ struct ServerState {
       : options(o),
         budget(o.memory_budget_bytes > 0 ? o.memory_budget_bytes : DefaultMemoryBudgetBytes()),
         registry(o.max_sessions, pool, o.max_sessions_per_principal),  // only kept: the pool is built next, and joined first
-        pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms),
+        pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms, SolverCores(o)),
         principal_streams(o.max_streams_per_principal) {}
   ServerOptions options;
   MemoryBudget budget;  ///< before the registry: sessions give their reservations back to it

@@ -6,6 +6,7 @@
 #include "server/result_conversion.h"
 #include "server/session_factory.h"
 #include "server/step_conversion.h"
+#include "server/thread_cpu_time.h"
 
 namespace nupmpc::server {
 
@@ -31,9 +32,14 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     case v1::WARM_START_COLD: limits.warm_start = false; break;
     default: break;
   }
+  const std::chrono::nanoseconds cpu_before = ThreadCpuTime();
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
   entry.compacted = false;  // Solve() took its scratch back
-  entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
+  // The thread's CPU time, not the wall time in summary: where the next step is solved
+  // (ControlStream::SolvesHere) depends on it, and a solve that shared its core with
+  // another would otherwise look long and send its session's next steps to a worker.
+  entry.last_solve_ms.store(std::chrono::duration<double, std::milli>(ThreadCpuTime() - cpu_before).count(),
+                            std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
   ResultToProto(summary, entry.solution, out);
   entry.Touch();

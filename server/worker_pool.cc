@@ -1,5 +1,6 @@
 #include "server/worker_pool.h"
 
+#include <algorithm>
 #include <chrono>
 #include <exception>
 
@@ -9,8 +10,11 @@
 
 namespace nupmpc::server {
 
-WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms)
-    : cores_(threads), capacity_(queue_capacity), max_queue_wait_ms_(max_queue_wait_ms) {
+WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms, int cores)
+    : threads_started_(threads),
+      cores_(std::max(cores, threads)),
+      capacity_(queue_capacity),
+      max_queue_wait_ms_(max_queue_wait_ms) {
   threads_.reserve(threads);
   for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { Run(); });
 }
@@ -26,7 +30,7 @@ absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_m
       return absl::ResourceExhaustedError(
           absl::StrCat("the solve queue is full (", capacity_, " waiting); retry later"));
     }
-    const double wait_ms = queued_ms_ / static_cast<double>(cores_);
+    const double wait_ms = queued_ms_ / static_cast<double>(threads_started_);
     if (max_queue_wait_ms_ > 0.0 && wait_ms > max_queue_wait_ms_) {
       return absl::ResourceExhaustedError(absl::StrFormat(
           "the solves queued ahead would take about %.3g ms, over the server's max_queue_wait_ms = %g; retry later",

@@ -25,11 +25,14 @@ namespace nupmpc::server {
 // The pool's size is a number of cores, not only of threads: a short task may run on the
 // thread that has it (TryRunHere, e.g. a gRPC reaction solving a 0.1 ms step where it
 // arrived, without the two thread switches of a hand-off), and it then holds one of the
-// pool's cores; workers start a queued task only while fewer than threads() tasks run in
-// all. So the solves running at once never exceed the cores the pool was sized for.
+// pool's cores() (the workers, or more: ServerState's SolverCores); workers start a queued
+// task only while fewer than cores() tasks run in all. So the solves running at once never
+// exceed the cores the pool was sized for.
 class WorkerPool {
  public:
-  WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms = 0.0);
+  // `cores` (at least `threads`; 0: `threads`): solves that may run at once, on workers and
+  // on TryRunHere callers together.
+  WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms = 0.0, int cores = 0);
   ~WorkerPool();  // Shutdown()
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;
@@ -56,7 +59,8 @@ class WorkerPool {
   // Stops accepting, runs what is queued, joins the threads. Idempotent.
   void Shutdown();
 
-  int threads() const { return cores_; }
+  int threads() const { return threads_started_; }
+  int cores() const { return cores_; }
   int queue_capacity() const { return capacity_; }
   int queued() const;
   // Tasks run on a caller's thread by TryRunHere since start, its own and queued ones.
@@ -86,7 +90,8 @@ class WorkerPool {
   // caller: `caller`): to a thread waiting in TryRunHere, else to a worker if work is
   // queued. Called without mu_.
   void ReleaseCore(bool long_task, bool caller);
-  const int cores_;  ///< threads started, and tasks that may run at once
+  const int threads_started_;  ///< worker threads
+  const int cores_;            ///< tasks that may run at once (workers' and callers')
   const int capacity_;
   const double max_queue_wait_ms_;
   mutable std::mutex mu_;

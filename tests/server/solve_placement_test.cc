@@ -7,11 +7,16 @@
 #include <chrono>
 #include <cstdio>
 #include <mutex>
+#include <pthread.h>
+#include <sched.h>
 #include <thread>
 #include <vector>
 
 #include "gmock/gmock.h"
 #include "loadtest/transport_floor.h"
+#include "server/session_factory.h"
+#include "server/session_registry.h"
+#include "server/step_solver.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {
@@ -156,6 +161,53 @@ TEST_F(SolvePlacementTest, LongSolvesOnEveryWorkerHoldBackHealthChecksAndShortSt
       << "health checks waited for solves: p50 " << health->p50_us << " µs, long solves from " << shortest_long_ms << " ms";
   EXPECT_LT(*std::max_element(short_ms.begin(), short_ms.end()), 2.0 * longest_long_ms)
       << "a short step waited longer than one long solve";
+}
+
+// Where a step is solved depends on its session's last solve time: that must be the CPU
+// time the solve took, or a solve slowed by sharing its core (gRPC's two reaction threads
+// on a one-core server do) would look long and send the session's next steps to a worker.
+TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N3000");  // solves spanning time slices
+  server::WorkerPool pool(1, 4);
+  server::SessionRegistry registry(4, pool);
+  absl::StatusOr<server::BuiltSession> built = server::BuildSession(SpecOrDie(inst.problem), {});
+  ASSERT_TRUE(built.ok()) << built.status();
+  absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry =
+      registry.Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
+  ASSERT_TRUE(entry.ok()) << entry.status();
+
+  // This thread and a spinning one on the same CPU: the scheduler gives each about half.
+  cpu_set_t allowed;
+  ASSERT_EQ(pthread_getaffinity_np(pthread_self(), sizeof(allowed), &allowed), 0);
+  int cpu = 0;
+  while (!CPU_ISSET(cpu, &allowed)) ++cpu;
+  cpu_set_t one;
+  CPU_ZERO(&one);
+  CPU_SET(cpu, &one);
+  ASSERT_EQ(pthread_setaffinity_np(pthread_self(), sizeof(one), &one), 0);
+  std::atomic<bool> stop{false};
+  std::thread spinner([&] {
+    pthread_setaffinity_np(pthread_self(), sizeof(one), &one);
+    while (!stop.load(std::memory_order_relaxed)) {
+    }
+  });
+  double wall_ms = 0.0, cpu_ms = 0.0;
+  for (int t = 0; t < 4; ++t) {
+    v1::Step step = StepAt((t % 2 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean);
+    step.set_warm_start(v1::WARM_START_COLD);
+    v1::SolveResult r;
+    const absl::Status solved = server::SolveStep(**entry, step, {}, &r);
+    EXPECT_TRUE(solved.ok()) << solved;
+    wall_ms += r.solve_ms();
+    cpu_ms += (*entry)->last_solve_ms.load();
+  }
+  stop.store(true);
+  spinner.join();
+  ASSERT_EQ(pthread_setaffinity_np(pthread_self(), sizeof(allowed), &allowed), 0);
+  std::printf("4 solves sharing one CPU with a spinning thread: %.1f ms wall, %.1f ms CPU recorded\n", wall_ms,
+              cpu_ms);
+  EXPECT_GT(cpu_ms, 0.0);
+  EXPECT_LT(cpu_ms, 0.8 * wall_ms) << "the recorded solve time follows the wall clock, not the solve's CPU time";
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "server/server_context.h"
 
 namespace nupmpc::server {
 namespace {
@@ -102,6 +103,40 @@ TEST(WorkerPool, RunsNothingHereWhileEveryCoreIsBusyOrWorkIsQueued) {
       [&] { overtook = queued_done.wait_for(std::chrono::seconds(0)) != std::future_status::ready; });
   EXPECT_FALSE(overtook);
   EXPECT_EQ(queued_done.wait_for(std::chrono::seconds(30)), std::future_status::ready);
+}
+
+TEST(WorkerPool, CoresBeyondItsWorkersAreForCallersAndStillBoundWhatRunsAtOnce) {
+  // One worker, two cores (a server whose gRPC has two reaction threads on one core).
+  WorkerPool pool(1, 4, /*max_queue_wait_ms=*/0.0, /*cores=*/2);
+  EXPECT_EQ(pool.threads(), 1);
+  EXPECT_EQ(pool.cores(), 2);
+  Blocker blocker(pool);  // the worker's task holds one core
+  bool second_ran = false;
+  bool third_ran = false;
+  EXPECT_TRUE(pool.TryRunHere([&] {
+    second_ran = true;
+    // Worker and this caller hold both cores: a third solve may not start anywhere.
+    std::thread other([&] { EXPECT_FALSE(pool.TryRunHere([&] { third_ran = true; })); });
+    other.join();
+  }));
+  EXPECT_TRUE(second_ran);
+  EXPECT_FALSE(third_ran);
+  blocker.Release();
+  pool.Shutdown();
+  EXPECT_EQ(pool.busy(), 0);
+  EXPECT_EQ(WorkerPool(2, 4, 0.0, /*cores=*/1).cores(), 2);  // never fewer cores than workers
+}
+
+TEST(SolverCores, AtLeastGrpcsReactionThreadsWhenStepsAreSolvedOnThem) {
+  ServerOptions o;
+  o.worker_threads = 1;
+  o.inline_solve_max_ms = 0.5;
+  EXPECT_EQ(SolverCores(o), kGrpcReactionThreadsAtLeast);
+  o.inline_solve_max_ms = 0.0;  // every solve on a worker: the workers are the bound
+  EXPECT_EQ(SolverCores(o), 1);
+  o.worker_threads = 4;
+  o.inline_solve_max_ms = 0.5;
+  EXPECT_EQ(SolverCores(o), 4);
 }
 
 TEST(WorkerPool, WorkersWaitForTheCoreATaskRunningHereHolds) {
