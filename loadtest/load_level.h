@@ -32,6 +32,7 @@ struct LevelConfig {
 struct LevelCore {
   double median_ms = 0.0;
   double mean_ms = 0.0;
+  double busy_mean_ms = 0.0;  ///< what the inline peer spins per step on average (per-state medians)
   int sessions = 0;  ///< 0: not measured
 };
 

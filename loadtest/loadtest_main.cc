@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <numeric>
 #include <optional>
 #include <string>
 #include <tuple>
@@ -376,9 +377,12 @@ int main(int argc, char** argv) {
     if (!runs.ok()) return Fail(absl::StrCat("concurrency ", c), runs.status());
     lt::LevelReport& report = runs->server;
     if (inline_solve.has_value()) {
-      report.inline_core = lt::LevelCore{.median_ms = inline_solve->core.median_ms,
-                                         .mean_ms = inline_solve->core.mean_ms,
-                                         .sessions = c};
+      const std::vector<double>& busy = inline_solve->core.state_ms;
+      report.inline_core = lt::LevelCore{
+          .median_ms = inline_solve->core.median_ms,
+          .mean_ms = inline_solve->core.mean_ms,
+          .busy_mean_ms = busy.empty() ? 0.0 : std::accumulate(busy.begin(), busy.end(), 0.0) / busy.size(),
+          .sessions = c};
     }
     if (!json) lt::PrintLevel(header, report);
     for (const auto& [peer, slot, label, busy_ms] :
