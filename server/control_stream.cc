@@ -266,7 +266,7 @@ std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
 bool ControlStream::SolvesHere() const {
   // A session's first solve (no time known) and long ones go to the pool: a reaction
   // thread is held at most about inline_solve_max_ms by a solve.
-  const double expected_ms = entry_->last_solve_ms.load(std::memory_order_relaxed);
+  const double expected_ms = entry_->last_solve_cpu_ms.load(std::memory_order_relaxed);
   return state_->options.inline_solve_max_ms > 0.0 && expected_ms >= 0.0 &&
          expected_ms <= state_->options.inline_solve_max_ms;
 }

@@ -56,9 +56,10 @@ struct SessionEntry {
   // count when it was accepted) is below the count when it starts has been overtaken by a
   // newer one and is answered SUPERSEDED (server/fleet_call.h).
   std::atomic<std::uint64_t> fleet_steps_accepted{0};
-  // CPU time of its last solve (ThreadCpuTime: not inflated by a shared core): the pool's wait
-  // estimate, and where its next Control step is solved; -1: not solved yet.
-  std::atomic<double> last_solve_ms{-1.0};
+  std::atomic<double> last_solve_ms{-1.0};  ///< the pool's wait estimate; -1: not solved yet
+  // Its thread's CPU time (ThreadCpuTime), which a shared core does not inflate: where its
+  // next Control step is solved (ControlStream::SolvesHere); -1: not solved yet.
+  std::atomic<double> last_solve_cpu_ms{-1.0};
   std::atomic<Clock::rep> last_used{0};
 
   void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }

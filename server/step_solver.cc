@@ -35,11 +35,12 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   const std::chrono::nanoseconds cpu_before = ThreadCpuTime();
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
   entry.compacted = false;  // Solve() took its scratch back
-  // The thread's CPU time, not the wall time in summary: where the next step is solved
-  // (ControlStream::SolvesHere) depends on it, and a solve that shared its core with
-  // another would otherwise look long and send its session's next steps to a worker.
-  entry.last_solve_ms.store(std::chrono::duration<double, std::milli>(ThreadCpuTime() - cpu_before).count(),
-                            std::memory_order_relaxed);
+  // Wall time for the pool's admission (a wait it promises in wall time), CPU time for where
+  // the next step is solved: judged by wall time, a solve that shared its core with another
+  // would look long and send its session's next steps to a worker.
+  entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
+  entry.last_solve_cpu_ms.store(std::chrono::duration<double, std::milli>(ThreadCpuTime() - cpu_before).count(),
+                                std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
   ResultToProto(summary, entry.solution, out);
   entry.Touch();

@@ -265,8 +265,14 @@ TEST_F(ServiceAdmissionTest, ASolveFarLongerThanItsDeadlineFreesItsWorkerSoonAft
   const double deadline_s = full_s / 10.0;
   Client impatient(target_, std::chrono::milliseconds(static_cast<int>(deadline_s * 1000.0) + 1));
   start = std::chrono::steady_clock::now();
-  const absl::Status abandoned = impatient.SolveOnce(dense).status();
-  EXPECT_EQ(abandoned.code(), absl::StatusCode::kDeadlineExceeded) << abandoned;
+  const absl::StatusOr<v1::SolveResult> abandoned = impatient.SolveOnce(dense);
+  // The client's deadline ends the call; the server stops the solve at the same deadline,
+  // and on a loaded machine its answer (cut short, a time limit) may arrive first.
+  if (abandoned.ok()) {
+    EXPECT_EQ(abandoned->status(), v1::SOLVE_STATUS_TIME_LIMIT);
+  } else {
+    EXPECT_EQ(abandoned.status().code(), absl::StatusCode::kDeadlineExceeded) << abandoned.status();
+  }
   absl::StatusOr<v1::SolveResult> next = client_->SolveOnce(bystander_spec_);  // waits for the only worker
   const double free_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   ASSERT_TRUE(next.ok()) << next.status();

@@ -9,6 +9,9 @@
 #include <vector>
 
 #include "gmock/gmock.h"
+#include "grpcpp/create_channel.h"
+#include "grpcpp/security/credentials.h"
+#include "grpcpp/support/channel_arguments.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {
@@ -60,8 +63,17 @@ v1::ControlRequest StepRequest(std::uint64_t sequence, double position) {
 class ServiceStreamBoundsTest : public ServiceTest {};
 
 TEST_F(ServiceStreamBoundsTest, AClientThatDoesNotReadMakesTheStreamStopReadingAndEveryStepIsAnsweredOnce) {
+  // A client that does not read takes at most its flow-control window of answers. Without
+  // BDP probing that window stays at gRPC's initial size, far below the answers to the
+  // steps below; with it, a fast server can grow it until it holds them all, and the
+  // server's writes never wait (so it never has a reason to stop reading).
+  grpc::ChannelArguments no_window_growth;
+  no_window_growth.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  const std::shared_ptr<grpc::Channel> channel =
+      grpc::CreateCustomChannel(target_, grpc::InsecureChannelCredentials(), no_window_growth);
+  const std::unique_ptr<v1::MpcService::Stub> stub = v1::MpcService::NewStub(channel);
   grpc::ClientContext context;
-  std::unique_ptr<Stream> stream = client_->stub().Control(&context);
+  std::unique_ptr<Stream> stream = stub->Control(&context);
   v1::ControlRequest first = StepRequest(0, 1.0);
   *first.mutable_spec() = DoubleIntegrator();
   ASSERT_TRUE(stream->Write(first));

@@ -199,7 +199,8 @@ TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
     const absl::Status solved = server::SolveStep(**entry, step, {}, &r);
     EXPECT_TRUE(solved.ok()) << solved;
     wall_ms += r.solve_ms();
-    cpu_ms += (*entry)->last_solve_ms.load();
+    cpu_ms += (*entry)->last_solve_cpu_ms.load();
+    EXPECT_EQ((*entry)->last_solve_ms.load(), r.solve_ms()) << "the pool's wait estimate stays wall time";
   }
   stop.store(true);
   spinner.join();
