@@ -312,7 +312,10 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
       best_residual = std::min(best_residual, residual);
       if (residual <= violation_tolerance && AllFinite(candidate_)) {
         const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
-        if (interrupt_->fired()) return false;  // not evaluated: not accepted
+        if (interrupt_->fired()) {  // not evaluated: not accepted, nor counted (as above)
+          --summary.iterations;
+          return false;
+        }
         if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
           std::swap(best_, candidate_);
           algorithm_->AcceptPolishRegions();
@@ -328,7 +331,10 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
         // Not verified, but a complete pass of this solve for this x[0]: until a plain
         // iterate exists, the solve's plan (a warm solve capped at one pass returns it).
         const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
-        if (interrupt_->fired()) return false;
+        if (interrupt_->fired()) {
+          --summary.iterations;
+          return false;
+        }
         if (std::isfinite(r.objective) && std::isfinite(r.max_violation)) {
           std::swap(best_, candidate_);
           have_finite = true;
@@ -371,6 +377,8 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     const ObjectiveEvaluator::Result r =
         AllFinite(current_) ? evaluator_.Evaluate(problem_, current_, interrupt_) : ObjectiveEvaluator::Result{NAN, NAN};
     if (interrupt_->fired()) {  // a complete pass, not evaluated: not returned either
+      // nor counted: the plan returned is the previous pass's, as a solve capped there returns.
+      --summary.iterations;
       summary.status = *interrupt_->reason();
       break;
     }
