@@ -108,9 +108,11 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
   const WorkerPool& pool = state.pool;
   Gauge(out, "nupmpc_queue_depth", "Solves and other work waiting for a worker.", pool.queued());
   Gauge(out, "nupmpc_workers", "Solver worker threads.", pool.threads());
+  Gauge(out, "nupmpc_solver_cores", "Solves that may run at once (workers and gRPC threads solving in place).",
+        pool.cores());
   Gauge(out, "nupmpc_workers_busy", "Cores running a task now (on a worker or solved where it arrived).", pool.busy());
   Counter(out, "nupmpc_worker_busy_seconds_total",
-          "Seconds the cores spent running tasks; its rate over nupmpc_workers is the pool's utilisation.",
+          "Seconds the cores spent running tasks; its rate over nupmpc_solver_cores is the pool's utilisation.",
           pool.busy_seconds());
   Counter(out, "nupmpc_solves_in_place_total",
           "Control steps solved on the gRPC thread that received them (short solves, a core free: no hand-off).",

@@ -47,11 +47,12 @@ class WorkerPool {
   absl::Status TrySubmit(std::function<void()> task, double expected_ms = -1.0,
                          Placement placement = Placement::kWorker);
   // Runs `task` now on the calling thread and returns true if a core is free for it (fewer
-  // than threads() tasks run) and nothing is queued (queued tasks go first); else returns
+  // than cores() tasks run) and nothing is queued (queued tasks go first); else returns
   // false without running it. With `drain_ms` > 0, the thread that holds a core also
   // runs the queued tasks submitted as kAnyCoreHolder, oldest first, while they are at
   // the front of the queue, for up to `drain_ms` (before `task` those queued before it,
-  // after it those queued meanwhile); and when every core runs such short work on a
+  // after it those queued meanwhile; past `drain_ms` only while no worker is free to take
+  // them over, as with more cores than workers); and when every core runs such short work on a
   // worker, it waits up to `drain_ms` for one (workers step aside for it). Steps that
   // arrive while a core is busy are then taken by the thread that has it instead of
   // handed to a worker one by one. Counted in busy() and busy_seconds() like the workers' tasks.
@@ -65,8 +66,8 @@ class WorkerPool {
   int queued() const;
   // Tasks run on a caller's thread by TryRunHere since start, its own and queued ones.
   std::uint64_t run_here() const { return run_here_.load(std::memory_order_relaxed); }
-  // For the metrics: workers running a task now, and the seconds all of them spent running
-  // tasks since start (its rate over the worker count is the pool's utilisation).
+  // For the metrics: tasks running now (on workers and callers), and the seconds all of them
+  // spent running since start (its rate over cores() is the pool's utilisation).
   int busy() const { return busy_.load(std::memory_order_relaxed); }
   double busy_seconds() const { return busy_seconds_.load(std::memory_order_relaxed); }
 
@@ -101,7 +102,7 @@ class WorkerPool {
   double queued_ms_ = 0.0;         ///< sum of the queued tasks' expected_ms
   double average_task_ms_ = 0.0;   ///< exponentially weighted, of finished tasks
   bool stopping_ = false;
-  int running_ = 0;  ///< tasks running, on workers or through TryRunHere (at most threads())
+  int running_ = 0;  ///< tasks running, on workers or through TryRunHere (at most cores())
   int running_long_ = 0;  ///< of them, kWorker tasks (a caller does not wait for those)
   int running_here_ = 0;  ///< of them, held by TryRunHere callers
   int here_waiting_ = 0;  ///< callers of TryRunHere waiting for a core

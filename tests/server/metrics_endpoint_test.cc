@@ -141,6 +141,7 @@ TEST_F(MetricsEndpointTest, CountersAndHistogramsAreWhatWasDone) {
   EXPECT_EQ(m.at("nupmpc_sessions_closed_total"), 1);   // the stream's, with the stream
   EXPECT_EQ(m.at("nupmpc_active_sessions"), 1);
   EXPECT_EQ(m.at("nupmpc_workers"), 2);
+  EXPECT_EQ(m.at("nupmpc_solver_cores"), 2);
   EXPECT_GT(m.at("nupmpc_worker_busy_seconds_total"), 0);
   EXPECT_GT(m.at("nupmpc_process_resident_memory_bytes"), 0);
   EXPECT_GT(m.at("nupmpc_process_open_fds"), 0);

@@ -187,7 +187,7 @@ TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
   ASSERT_EQ(pthread_setaffinity_np(pthread_self(), sizeof(one), &one), 0);
   std::atomic<bool> stop{false};
   std::thread spinner([&] {
-    pthread_setaffinity_np(pthread_self(), sizeof(one), &one);
+    EXPECT_EQ(pthread_setaffinity_np(pthread_self(), sizeof(one), &one), 0);
     while (!stop.load(std::memory_order_relaxed)) {
     }
   });

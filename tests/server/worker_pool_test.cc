@@ -61,6 +61,15 @@ TEST(WorkerPool, RefusesWorkTheQueuedSolvesWouldDelayTooLong) {
   EXPECT_EQ(pool.TrySubmit([] {}).code(), absl::StatusCode::kUnavailable);
 }
 
+TEST(WorkerPool, TheWaitEstimateSharesTheQueueAmongTheWorkersNotTheCores) {
+  // Queued work waits for the workers; cores beyond them belong to callers that come and go.
+  WorkerPool pool(1, 100, /*max_queue_wait_ms=*/25.0, /*cores=*/2);
+  Blocker blocker(pool);
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(pool.TrySubmit([] {}, 10.0).ok()) << i;
+  EXPECT_EQ(pool.TrySubmit([] {}, 10.0).code(), absl::StatusCode::kResourceExhausted);
+  blocker.Release();
+}
+
 TEST(WorkerPool, WithoutAWaitBoundOnlyTheCapacityCounts) {
   WorkerPool pool(1, 100);
   Blocker blocker(pool);
@@ -125,6 +134,30 @@ TEST(WorkerPool, CoresBeyondItsWorkersAreForCallersAndStillBoundWhatRunsAtOnce) 
   pool.Shutdown();
   EXPECT_EQ(pool.busy(), 0);
   EXPECT_EQ(WorkerPool(2, 4, 0.0, /*cores=*/1).cores(), 2);  // never fewer cores than workers
+}
+
+TEST(WorkerPool, ACoreHolderDrainsPastItsBudgetWhileNoWorkerIsFreeToTakeOver) {
+  // One worker busy with long work, a second core held here: short steps queued behind
+  // this one would otherwise wait for the long task while this core stood idle.
+  WorkerPool pool(1, 8, /*max_queue_wait_ms=*/0.0, /*cores=*/2);
+  Blocker blocker(pool);
+  std::atomic<int> ran{0};
+  EXPECT_TRUE(pool.TryRunHere(
+      [&] {
+        for (int i = 0; i < 3; ++i) {
+          ASSERT_TRUE(pool.TrySubmit(
+                              [&] {
+                                std::this_thread::sleep_for(std::chrono::milliseconds(2));  // past the budget
+                                ++ran;
+                              },
+                              0.1, WorkerPool::Placement::kAnyCoreHolder)
+                          .ok());
+        }
+      },
+      /*drain_ms=*/1.0));
+  EXPECT_EQ(ran.load(), 3);
+  EXPECT_EQ(pool.queued(), 0);
+  blocker.Release();
 }
 
 TEST(SolverCores, AtLeastGrpcsReactionThreadsWhenStepsAreSolvedOnThem) {
