@@ -295,6 +295,13 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
   infeasibility_.Start();
 
   const auto stop_requested = [&]() { return StopNow(interrupt_, &summary); };
+  // After an evaluation: a pass the interrupt cut short there is neither returned nor
+  // counted (the plan returned is the previous pass's, as a solve capped there returns it).
+  const auto evaluation_cut_short = [&]() {
+    if (!interrupt_->fired()) return false;
+    --summary.iterations;
+    return true;
+  };
 
   // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
   // while the deciding residual keeps falling); true if it was accepted.
@@ -312,10 +319,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
       best_residual = std::min(best_residual, residual);
       if (residual <= violation_tolerance && AllFinite(candidate_)) {
         const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
-        if (interrupt_->fired()) {  // not evaluated: not accepted, nor counted (as above)
-          --summary.iterations;
-          return false;
-        }
+        if (evaluation_cut_short()) return false;  // not evaluated: not accepted
         if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
           std::swap(best_, candidate_);
           algorithm_->AcceptPolishRegions();
@@ -331,10 +335,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
         // Not verified, but a complete pass of this solve for this x[0]: until a plain
         // iterate exists, the solve's plan (a warm solve capped at one pass returns it).
         const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
-        if (interrupt_->fired()) {
-          --summary.iterations;
-          return false;
-        }
+        if (evaluation_cut_short()) return false;
         if (std::isfinite(r.objective) && std::isfinite(r.max_violation)) {
           std::swap(best_, candidate_);
           have_finite = true;
@@ -376,9 +377,7 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     ++summary.iterations;
     const ObjectiveEvaluator::Result r =
         AllFinite(current_) ? evaluator_.Evaluate(problem_, current_, interrupt_) : ObjectiveEvaluator::Result{NAN, NAN};
-    if (interrupt_->fired()) {  // a complete pass, not evaluated: not returned either
-      // nor counted: the plan returned is the previous pass's, as a solve capped there returns.
-      --summary.iterations;
+    if (evaluation_cut_short()) {  // a complete pass, not evaluated: not returned either
       summary.status = *interrupt_->reason();
       break;
     }
