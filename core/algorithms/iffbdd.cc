@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/message_passing/fixed_size.h"
+#include "core/util/prefetch.h"
 
 namespace nupmpc::core {
 namespace {
@@ -414,6 +415,7 @@ double Iffbdd::BackwardImpl(Pass pass, PrimalIterate* out) {
     if (stop()) return pass == Pass::kIterate ? changed : kInfinity;  // incomplete: the driver discards it
     if (pass != Pass::kNewton) View<MS, 1>(step_costate_.col(n).data(), M, 1) = xt;
     for (int r = g.row_begin[n + 1] - 1; r >= g.row_begin[n]; --r) {
+      if (r >= kPrefetchRows) PrefetchForRead(fw_.v.col(r - kPrefetchRows).data(), M);
       if (pass == Pass::kNewton) {
         // Only the pass's factors matter here (no deciding): the priors are not read and
         // the kept duals not written, which long horizons would stream for nothing.

@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "core/message_passing/fixed_size.h"
+#include "core/util/prefetch.h"
 #include "core/util/symmetrize.h"
 
 namespace nupmpc::core {
@@ -144,6 +145,7 @@ void Means(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilt
                      : ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1)
                            .dot(m));
       ws->yhat(r) = yhat;
+      if (r + kPrefetchRows < ws->v.cols()) PrefetchForRead(ws->v.col(r + kPrefetchRows).data(), M);
       if (f.empty()) {
         ws->g(r) = 0.0;
         continue;
