@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/message_passing/fixed_size.h"
+#include "core/util/prefetch.h"
 #include "core/util/packed_symmetric.h"
 #include "core/util/symmetrize.h"
 
@@ -168,6 +169,11 @@ void IbffdPolicy::BackwardFilterImpl(Sweep sweep, const Targets& targets, const 
   StopPoll stop(interrupt_);
   for (int n = g.N; n >= 0; --n) {
     if (stop()) return;
+    if (const int ahead = n - kPrefetchSteps; ahead >= 0) {
+      if (sweep != Sweep::kOffsets) PrefetchForWrite(W_step_.col(ahead).data(), static_cast<int>(W_step_.rows()));
+      PrefetchForWrite(xi_step_.col(ahead).data(), M);
+      if (ahead < g.N) PrefetchForWrite(input_gain_.col(ahead * L).data(), static_cast<int>(input_gain_.rows()) * L);
+    }
     for (int r = g.row_begin[n]; r < g.row_begin[n + 1]; ++r) {
       const RowTerm term = row_term_[r];
       if (term.w == 0.0) continue;  // no Gaussian part

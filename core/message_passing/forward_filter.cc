@@ -49,6 +49,7 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, FactorOf&&
         ws->G(r) = ws->g(r) = 0.0;
         continue;
       }
+      if (r + kPrefetchRows < ws->v.cols()) PrefetchForWrite(ws->v.col(r + kPrefetchRows).data(), M);
       const auto c = ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1);
       Eigen::Map<StateVector<MS>> v(ws->v.col(r).data(), M);
       const int unit = graph.row_unit[r];  // c = e_unit: no product needed (C = I, augmented inputs)

@@ -13,6 +13,8 @@ namespace nupmpc::core {
 
 // How many rows ahead a sweep asks for the stored vector it will read.
 inline constexpr int kPrefetchRows = 16;
+// How many time steps ahead a sweep asks for what it will store for a step.
+inline constexpr int kPrefetchSteps = 2;
 
 // Starts loading the cache lines of data[0, count) for reading. A hint only: it never
 // faults and changes no value.
@@ -20,6 +22,14 @@ inline void PrefetchForRead(const double* data, int count) {
   constexpr int kDoublesPerLine = 64 / static_cast<int>(sizeof(double));
   for (int i = 0; i < count; i += kDoublesPerLine) __builtin_prefetch(data + i, /*rw=*/0, /*locality=*/3);
   if (count > 0) __builtin_prefetch(data + count - 1, 0, 3);  // the last line when data is not line-aligned
+}
+
+// The same for lines a sweep is about to write (it then need not wait for them to be read in
+// before its stores can retire).
+inline void PrefetchForWrite(double* data, int count) {
+  constexpr int kDoublesPerLine = 64 / static_cast<int>(sizeof(double));
+  for (int i = 0; i < count; i += kDoublesPerLine) __builtin_prefetch(data + i, /*rw=*/1, /*locality=*/3);
+  if (count > 0) __builtin_prefetch(data + count - 1, 1, 3);
 }
 
 }  // namespace nupmpc::core
