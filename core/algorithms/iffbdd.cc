@@ -194,14 +194,12 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
   const int R = g.num_rows();
   // Predictor (affine-scaling direction, target 0). The first pass of a solve starts each
   // row when the filter reaches it, knowing the row's prediction and prior variance.
-  interior_rows_.AimPredictor();
   if (!interior_point_started_) {
     for (int r = 0; r < R; ++r) row_factor_[r] = ScalarFactor::GaussianPart(g.row_prior[r]);
     RunForwardFilterDeciding(
         g, row_factor_.data(),
         [this](int r, double yhat, double s, const double*) {
-          const ScalarPrior& prior = graph_.row_prior[r];
-          return row_factor_[r] = WithGaussianPart(prior, interior_rows_.Start(r, prior, yhat, s));
+          return row_factor_[r] = interior_rows_.Start(r, graph_.row_prior[r], yhat, s);
         },
         &fw_, interrupt_);
     if (Interrupted()) return -1;
@@ -209,9 +207,10 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
     interior_plan_.u.setZero();
     interior_plan_.x0 = g.m0.head(g.base_M);
     interior_point_started_ = true;
-    TakeNewtonDirections();
-  } else if (!SolveNewtonDirection(/*full_filter=*/true, out)) {
-    return -1;
+    interior_rows_.TakeDirections(newton_z_);
+  } else {
+    interior_rows_.AimPredictor(row_factor_.data());
+    if (!SolveNewtonDirection(/*full_filter=*/true, out)) return -1;
   }
   if (Interrupted()) return -1;
   // The regions the polish would start from: where the predictor's full step would put
@@ -230,13 +229,13 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
   // Corrector, then Gondzio's centrality correctors while they lengthen the step (his
   // paper's trial step 1.08 α + 0.08 and acceptance at 1.005 α, at most 3); each a means
   // pass with the predictor's gains.
-  interior_rows_.AimCorrector(sigma_mu);
+  interior_rows_.AimCorrector(sigma_mu, row_factor_.data());
   if (!SolveNewtonDirection(/*full_filter=*/false, out)) return -1;
   double reach = interior_rows_.MaxStep();
   for (int correction = 0; correction < 3 && reach < 1.0; ++correction) {
     newton_plan_.u = out->u;
     newton_plan_.x0 = out->x0;
-    interior_rows_.AimCentrality(std::min(1.0, 1.08 * reach + 0.08), sigma_mu);
+    interior_rows_.AimCentrality(std::min(1.0, 1.08 * reach + 0.08), sigma_mu, row_factor_.data());
     if (!SolveNewtonDirection(/*full_filter=*/false, out)) return -1;
     const double enhanced = interior_rows_.MaxStep();
     if (enhanced < 1.005 * reach) {
@@ -269,10 +268,6 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
 }
 
 bool Iffbdd::SolveNewtonDirection(bool full_filter, PrimalIterate* out) {
-  for (int r = 0; r < graph_.num_rows(); ++r) {
-    const ScalarPrior& prior = graph_.row_prior[r];
-    if (prior.is_constraint()) row_factor_[r] = WithGaussianPart(prior, interior_rows_.Factor(r, prior));
-  }
   if (full_filter) {
     RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
   } else {
@@ -281,14 +276,8 @@ bool Iffbdd::SolveNewtonDirection(bool full_filter, PrimalIterate* out) {
   if (Interrupted()) return false;
   Backward(Pass::kNewton, out);
   if (Interrupted()) return false;
-  TakeNewtonDirections();
+  interior_rows_.TakeDirections(newton_z_);
   return true;
-}
-
-void Iffbdd::TakeNewtonDirections() {
-  for (int r = 0; r < graph_.num_rows(); ++r) {
-    if (interior_rows_.active(r)) interior_rows_.Direction(r, graph_.row_prior[r], newton_z_(r));
-  }
 }
 
 void Iffbdd::AdoptRegionsForPolish() {

@@ -86,11 +86,10 @@ class Iffbdd final : public ActiveSetIteration {
   // One interior-point iteration (a filter pass for the predictor, a means-only pass with
   // the same gains for the corrector); returns the region changes like Iterate().
   int IterateInteriorPoint(PrimalIterate* out);
-  // A Newton pass towards the interior-point rows' current targets (a full filter pass, or
-  // a means pass with the last one's gains): the rows' new values, their directions, and
-  // the plan into `out`. False when interrupted.
+  // A Newton pass with the factors of the interior-point rows' last Aim (a full filter
+  // pass, or a means pass with the last one's gains): the rows' new values, their
+  // directions, and the plan into `out`. False when interrupted.
   bool SolveNewtonDirection(bool full_filter, PrimalIterate* out);
-  void TakeNewtonDirections();  ///< from newton_z_
   // Whether the options and the graph's shape admit the interior-point iteration.
   bool MayUseInteriorPoint() const;
   // A new solve begins (new values or a shifted horizon): the interior-point iteration

@@ -25,18 +25,26 @@ bool InteriorPointHandles(const ScalarPrior& prior) {
 }
 
 void InteriorPointRows::Resize(int rows) {
-  side_.assign(static_cast<std::size_t>(rows), 0);
-  lo_.assign(static_cast<std::size_t>(rows), Side{});
-  up_.assign(static_cast<std::size_t>(rows), Side{});
+  const auto n = static_cast<std::size_t>(rows);
+  side_.assign(n, 0);
+  lo_.assign(n, Side{});
+  up_.assign(n, Side{});
+  kept_lo_.assign(n, Kept{});
+  kept_up_.assign(n, Kept{});
+  gaussian_.assign(n, GaussianPart{});
+  max_step_ = kept_max_step_ = kInfinity;
 }
 
 ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double yhat, double V_e) {
-  side_[r] = 0;
+  side_[r] = kStarted;
   lo_[r] = up_[r] = Side{};  // nothing of an earlier solve's row stays
-  if (!prior.is_constraint() || !(V_e > 0.0)) return {};
+  kept_lo_[r] = kept_up_[r] = Kept{};
+  const ScalarFactor gaussian = ScalarFactor::GaussianPart(prior);
+  gaussian_[r] = {.xi = gaussian.xi, .w = gaussian.w};
+  if (!prior.is_constraint() || !(V_e > 0.0)) return Factor(r);
   const bool lower = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtLeast;
   const bool upper = prior.kind == PriorKind::kBox || prior.kind == PriorKind::kAtMost;
-  side_[r] = static_cast<unsigned char>((lower ? kLower : 0) | (upper ? kUpper : 0));
+  side_[r] = static_cast<unsigned char>(kStarted | (lower ? kLower : 0) | (upper ? kUpper : 0));
   // A box starts as the Gaussian with the moments of the uniform density on it (mean in
   // the middle, variance w²/12): slacks w/2 and barrier precisions h = λ/t = 6/w² per
   // side, so t λ = 3/2 on every side whatever the row's scale (a centred start). A
@@ -46,99 +54,95 @@ ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double yh
   const double inside = lower ? yhat - prior.lower : prior.upper - yhat;
   const double t = prior.kind == PriorKind::kBox ? 0.5 * (prior.upper - prior.lower) : std::max(inside, std::sqrt(V_e));
   const double lam = kProduct / t;
-  lo_[r] = lower ? Side{.t = t, .lam = lam} : Side{};
-  up_[r] = upper ? Side{.t = t, .lam = lam} : Side{};
-  return Factor(r, prior);
+  if (lower) lo_[r] = Side{.t = t, .lam = lam, .bound = prior.lower};
+  if (upper) up_[r] = Side{.t = t, .lam = lam, .bound = prior.upper};
+  return Factor(r);
 }
 
-void InteriorPointRows::AimPredictor() {
-  for (std::size_t r = 0; r < side_.size(); ++r) lo_[r].target = up_[r].target = 0.0;
-}
-
-void InteriorPointRows::AimCorrector(double sigma_mu) {
-  for (std::size_t r = 0; r < side_.size(); ++r) {
-    for (Side* s : {&lo_[r], &up_[r]}) s->target = sigma_mu - s->dt * s->dlam;
+void InteriorPointRows::AimPredictor(ScalarFactor* row_factor) {
+  for (int r = 0; r < static_cast<int>(side_.size()); ++r) {
+    if (side_[r] == 0) continue;
+    ForSides(*this, r, [](Side& s, Kept&, double) { s.target = 0.0; });
+    row_factor[r] = Factor(r);
   }
 }
 
-void InteriorPointRows::AimCentrality(double trial, double sigma_mu) {
+void InteriorPointRows::AimCorrector(double sigma_mu, ScalarFactor* row_factor) {
+  for (int r = 0; r < static_cast<int>(side_.size()); ++r) {
+    if (side_[r] == 0) continue;
+    ForSides(*this, r, [&](Side& s, Kept&, double) { s.target = sigma_mu - s.dt * s.dlam; });
+    row_factor[r] = Factor(r);
+  }
+}
+
+void InteriorPointRows::AimCentrality(double trial, double sigma_mu, ScalarFactor* row_factor) {
   const double low = 0.1 * sigma_mu, high = 10.0 * sigma_mu;  // Gondzio's β_min, β_max
-  for (std::size_t r = 0; r < side_.size(); ++r) {
-    for (Side* s : {&lo_[r], &up_[r]}) {
-      s->kept_dt = s->dt;
-      s->kept_dlam = s->dlam;
-      s->kept_target = s->target;
-      const double v = (s->t + trial * s->dt) * (s->lam + trial * s->dlam);
+  kept_max_step_ = max_step_;
+  for (int r = 0; r < static_cast<int>(side_.size()); ++r) {
+    if (side_[r] == 0) continue;
+    ForSides(*this, r, [&](Side& s, Kept& kept, double) {
+      kept = {.dt = s.dt, .dlam = s.dlam, .target = s.target};
+      const double v = (s.t + trial * s.dt) * (s.lam + trial * s.dlam);
       // Products below the box are pulled up to it, those above pulled down (at most by
       // `high`: a large product is a variable far from its bound, harmless to the step).
-      if (v < low) s->target += low - v;
-      else if (v > high) s->target += std::max(high - v, -high);
-    }
+      if (v < low) s.target += low - v;
+      else if (v > high) s.target += std::max(high - v, -high);
+    });
+    row_factor[r] = Factor(r);
   }
 }
 
 void InteriorPointRows::Reject() {
-  for (std::size_t r = 0; r < side_.size(); ++r) {
-    for (Side* s : {&lo_[r], &up_[r]}) {
-      s->dt = s->kept_dt;
-      s->dlam = s->kept_dlam;
-      s->target = s->kept_target;
-    }
+  for (int r = 0; r < static_cast<int>(side_.size()); ++r) {
+    ForSides(*this, r, [](Side& s, Kept& kept, double) {
+      s.dt = kept.dt;
+      s.dlam = kept.dlam;
+      s.target = kept.target;
+    });
   }
+  max_step_ = kept_max_step_;
 }
 
-ScalarFactor InteriorPointRows::Factor(int r, const ScalarPrior& prior) const {
-  if (side_[r] == 0) return {};
+ScalarFactor InteriorPointRows::Factor(int r) const {
   double h = 0.0, q = 0.0;
-  const auto add = [&](const Side& s, double bound, double sign) {
+  ForSides(*this, r, [&](const Side& s, const Kept&, double sign) {
     h += s.lam / s.t;
-    q += s.lam / s.t * (bound + sign * s.t) + sign * s.target / s.t;
-  };
-  ForSides(*this, r, prior, add);
-  return ScalarFactor::Canonical(q, h);
+    q += s.lam / s.t * (s.bound + sign * s.t) + sign * s.target / s.t;
+  });
+  return ScalarFactor::Canonical(q + gaussian_[r].xi, h + gaussian_[r].w);
 }
 
-void InteriorPointRows::Direction(int r, const ScalarPrior& prior, double z_new) {
-  const auto direction = [&](Side& s, double bound, double sign) {
-    s.dt = sign * (z_new - bound) - s.t;
-    s.dlam = (s.target - s.t * s.lam - s.lam * s.dt) / s.t;
-  };
-  ForSides(*this, r, prior, direction);
-}
-
-double InteriorPointRows::MaxStep() const {
+void InteriorPointRows::TakeDirections(const Eigen::VectorXd& z_new) {
   double step = kInfinity;
-  for (std::size_t r = 0; r < side_.size(); ++r) {
-    if (side_[r] == 0) continue;
-    for (const Side* s : {&lo_[r], &up_[r]}) {
-      step = Ratio(s->t, s->dt, step);
-      step = Ratio(s->lam, s->dlam, step);
-    }
+  for (int r = 0; r < static_cast<int>(side_.size()); ++r) {
+    ForSides(*this, r, [&](Side& s, Kept&, double sign) {
+      s.dt = sign * (z_new(r) - s.bound) - s.t;
+      s.dlam = (s.target - s.t * s.lam - s.lam * s.dt) / s.t;
+      step = Ratio(s.t, s.dt, step);
+      step = Ratio(s.lam, s.dlam, step);
+    });
   }
-  return step;
+  max_step_ = step;
 }
 
 double InteriorPointRows::Complementarity(double step) const {
   double sum = 0.0;
   int sides = 0;
-  const auto add = [&](const Side& s) {
-    sum += (s.t + step * s.dt) * (s.lam + step * s.dlam);
-    ++sides;
-  };
-  for (std::size_t r = 0; r < side_.size(); ++r) {
-    if (side_[r] & kLower) add(lo_[r]);
-    if (side_[r] & kUpper) add(up_[r]);
+  for (int r = 0; r < static_cast<int>(side_.size()); ++r) {
+    ForSides(*this, r, [&](const Side& s, const Kept&, double) {
+      sum += (s.t + step * s.dt) * (s.lam + step * s.dlam);
+      ++sides;
+    });
   }
   return sides > 0 ? sum / sides : 0.0;
 }
 
 void InteriorPointRows::Step(double step) {
-  for (std::size_t r = 0; r < side_.size(); ++r) {
-    if (side_[r] == 0) continue;
-    for (Side* s : {&lo_[r], &up_[r]}) {
-      s->t += step * s->dt;
-      s->lam += step * s->dlam;
-    }
+  for (int r = 0; r < static_cast<int>(side_.size()); ++r) {
+    ForSides(*this, r, [&](Side& s, Kept&, double) {
+      s.t += step * s.dt;
+      s.lam += step * s.dlam;
+    });
   }
 }
 
@@ -152,7 +156,7 @@ Region InteriorPointRows::RegionOf(int r, double V_e, double step) const {
 double InteriorPointRows::largest_multiplier() const {
   double largest = 0.0;
   for (std::size_t r = 0; r < side_.size(); ++r) {
-    if (side_[r] != 0) largest = std::max({largest, lo_[r].lam, up_[r].lam});
+    if (active(static_cast<int>(r))) largest = std::max({largest, lo_[r].lam, up_[r].lam});
   }
   return largest;
 }

@@ -3,6 +3,8 @@
 
 #include <vector>
 
+#include "Eigen/Core"
+
 #include "core/priors/scalar_factor.h"
 #include "core/priors/scalar_prior.h"
 #include "core/priors/scalar_rules.h"
@@ -36,32 +38,39 @@ class InteriorPointRows {
   // Starts row r (prior `prior`, forward prediction `yhat` and prior variance `V_e` of its
   // value in the first pass) and aims it at the predictor's target. Rows whose value the
   // data fix (V_e = 0, e.g. outputs of a fixed x[0]) are left out: no factor, no slack.
-  // Returns the row's factor for the first pass.
+  // Keeps the prior's bounds and Gaussian part for the rest of the solve. Returns the
+  // row's factor for the first pass, Gaussian part included.
   ScalarFactor Start(int r, const ScalarPrior& prior, double yhat, double V_e);
-  bool active(int r) const { return side_[r] != 0; }
+  bool active(int r) const { return (side_[r] & (kLower | kUpper)) != 0; }
 
   // Targets of the next direction: the predictor's (0), the corrector's after a predictor
-  // Direction() (σμ - Δt_aff Δλ_aff), or a centrality correction of the current direction
+  // direction (σμ - Δt_aff Δλ_aff), or a centrality correction of the current direction
   // at the trial step `trial` (Gondzio), which Reject() takes back with its direction.
-  void AimPredictor();
-  void AimCorrector(double sigma_mu);
-  void AimCentrality(double trial, double sigma_mu);
+  // Each also writes the factor of every started row for the Newton pass towards the new
+  // targets into row_factor[r] (Gaussian part included; only that for a row left out):
+  // one sweep over the rows' state, which long horizons stream from memory. Rows never
+  // started (no constraint) keep their factor.
+  void AimPredictor(ScalarFactor* row_factor);
+  void AimCorrector(double sigma_mu, ScalarFactor* row_factor);
+  void AimCentrality(double trial, double sigma_mu, ScalarFactor* row_factor);
+  // Takes back the last AimCentrality and the direction it led to (the factors it wrote
+  // stay: the next Aim writes them all).
   void Reject();
 
-  // The row's factor for a Newton pass towards the current targets.
-  ScalarFactor Factor(int r, const ScalarPrior& prior) const;
-  // The direction of row r from its new value z⁺ of a pass with Factor(r, ·).
-  void Direction(int r, const ScalarPrior& prior, double z_new);
-  // The largest step along the rows' last Direction() that keeps every slack and
-  // multiplier nonnegative (∞ if none falls; one length for both: the dual residual of a
-  // quadratic objective falls with the primal step only if the duals move alike).
-  double MaxStep() const;
+  // The direction of every row in the method from its new value z_new(r) of a pass with the
+  // factors of the last Aim, and the largest step along it (MaxStep) in the same sweep.
+  void TakeDirections(const Eigen::VectorXd& z_new);
+  // The largest step along the last directions that keeps every slack and multiplier
+  // nonnegative (∞ if none falls; one length for both: the dual residual of a quadratic
+  // objective falls with the primal step only if the duals move alike); NaN after a
+  // breakdown.
+  double MaxStep() const { return max_step_; }
   // Average complementarity t λ over the bound sides, now or after a step.
   double Complementarity(double step = 0.0) const;
-  // Moves the slacks and multipliers by the last Direction().
+  // Moves the slacks and multipliers by the last directions.
   void Step(double step);
 
-  // The row's region by its multipliers (after `step` along the last Direction()): at a
+  // The row's region by its multipliers (after `step` along the last direction): at a
   // bound when the barrier's precision h_j there outweighs the precision 1/V_e of
   // everything else the pass knows about the row (the bound then determines the row's
   // value), else inside.
@@ -69,24 +78,39 @@ class InteriorPointRows {
   double largest_multiplier() const;
 
  private:
+  // What every sweep reads of a bound side. The backup of AimCentrality lives apart
+  // (Kept): only it and Reject touch it.
   struct Side {
     double t = 0.0, lam = 0.0;    ///< slack and multiplier
-    double dt = 0.0, dlam = 0.0;  ///< the last Direction()
+    double dt = 0.0, dlam = 0.0;  ///< the last direction
     double target = 0.0;          ///< complementarity target of the next direction
-    double kept_dt = 0.0, kept_dlam = 0.0, kept_target = 0.0;  ///< before AimCentrality
+    double bound = 0.0;           ///< a (lower side) or b (upper side)
   };
-  // Calls f(side, bound, sign) for each bound side of row r: sign +1 for the lower bound
-  // (t = z - a), -1 for the upper (t = b - z). `Self` is this class, const or not.
+  struct Kept {
+    double dt = 0.0, dlam = 0.0, target = 0.0;
+  };
+  // The prior's Gaussian part in canonical form (0, 0 when it has none).
+  struct GaussianPart {
+    double xi = 0.0, w = 0.0;
+  };
+  // Calls f(side, r's kept backup, sign) for each bound side of row r: sign +1 for the
+  // lower bound (t = z - a), -1 for the upper (t = b - z). `Self` is this class, const or not.
   template <typename Self, typename F>
-  static void ForSides(Self& self, int r, const ScalarPrior& prior, F&& f) {
-    if (self.side_[r] & kLower) f(self.lo_[r], prior.lower, 1.0);
-    if (self.side_[r] & kUpper) f(self.up_[r], prior.upper, -1.0);
+  static void ForSides(Self& self, int r, F&& f) {
+    if (self.side_[r] & kLower) f(self.lo_[r], self.kept_lo_[r], 1.0);
+    if (self.side_[r] & kUpper) f(self.up_[r], self.kept_up_[r], -1.0);
   }
+  // The factor of row r towards its sides' targets, Gaussian part included.
+  ScalarFactor Factor(int r) const;
 
-  // side_[r]: kLower | kUpper for the bound sides present; 0: the row is not in the method.
-  static constexpr unsigned char kLower = 1, kUpper = 2;
+  // side_[r]: kLower | kUpper for the bound sides present, kStarted for every row Start saw
+  // (a row left out has only that); 0: never started.
+  static constexpr unsigned char kLower = 1, kUpper = 2, kStarted = 4;
   std::vector<unsigned char> side_;
   std::vector<Side> lo_, up_;
+  std::vector<Kept> kept_lo_, kept_up_;
+  std::vector<GaussianPart> gaussian_;
+  double max_step_ = kInfinity, kept_max_step_ = kInfinity;
 };
 
 // Whether a row's prior is one the interior-point rows handle: none (a Gaussian part at

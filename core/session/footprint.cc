@@ -111,9 +111,13 @@ Parts Iffbdd(const Dims& d, bool inputs_constrained) {
               Doubles(1, rows) + Array<int>(rows) + (augmented ? Array<int>(N * L) : 0);
   p.workspace = Doubles(1, Mg * rows) + Doubles(4, rows) + Doubles(2, L * N) + Doubles(2, Mg) +
                 Doubles(2, Mg * Mg) + Doubles(1, Mg * L);
-  // The interior-point iteration (no constrained input): per row its sides (two of eight
-  // doubles), its flag and its Newton value; two plans.
-  if (!augmented) p.workspace += Array<unsigned char>(rows) + Doubles(17, rows) + Doubles(2, d.M + L * N);
+  // The interior-point iteration (no constrained input): per row its sides (two of six
+  // doubles), their backups (two of three), its Gaussian part (two), its flag and its
+  // Newton value; two plans.
+  if (!augmented) {
+    p.workspace += Array<unsigned char>(rows) + Doubles(2, 6 * rows) + Doubles(2, 3 * rows) + Doubles(1, 2 * rows) +
+                   Doubles(1, rows) + Doubles(2, d.M + L * N);
+  }
   const double m = static_cast<double>(Mg), rows_per_step = static_cast<double>(rows) / S;
   // Forward: time update 4M³ + 2M²L, rows 4M² each; backward: 2M² + 2M per row.
   p.flops_per_step = 4.0 * m * m * m + 2.0 * m * m * L + 4.0 * m * m * rows_per_step + 2.0 * m * m +
