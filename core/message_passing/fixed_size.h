@@ -20,7 +20,7 @@ namespace nupmpc::core {
 #if defined(NUPMPC_DYNAMIC_KERNELS_ONLY)
 #define NUPMPC_FIXED_STATE_SIZES(X)
 #else
-#define NUPMPC_FIXED_STATE_SIZES(X) X(2) X(3) X(4) X(5) X(6) X(8) X(12) X(16)
+#define NUPMPC_FIXED_STATE_SIZES(X) X(2) X(3) X(4) X(5) X(6) X(8) X(12) X(16) X(20)
 #endif
 
 template <int MS>
@@ -71,7 +71,7 @@ Eigen::Map<Eigen::Matrix<double, Rows, Cols>> View(double* data, int rows, int c
 // registers and L1). Dynamic sizes (large M) keep GEMM.
 template <int MS, typename Dst, typename Lhs, typename Rhs>
 void StateProduct(Dst&& dst, const Lhs& lhs, const Rhs& rhs) {
-  if constexpr (MS == Eigen::Dynamic) {
+  if constexpr (MS == Eigen::Dynamic || MS >= 20) {
     dst.noalias() = lhs * rhs;
   } else {
     dst.noalias() = lhs.lazyProduct(rhs);

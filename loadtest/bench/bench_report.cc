@@ -250,6 +250,7 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
     }
     PrintScaling(masses, 12, gemm12, options.json);
     failures += RunGeneratedScaling(options, gemm40);
+    failures += RunKernelRates(options, gemm20, gemm40);
   }
   return failures == 0 ? 0 : 1;
 }

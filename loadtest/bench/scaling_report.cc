@@ -59,6 +59,60 @@ void PrintScaling(std::vector<const InstanceResult*> rows, int gemm_n, double ge
   }
 }
 
+int RunKernelRates(const BenchOptions& options, double gemm20, double gemm40) {
+  struct Shape {
+    int M, K, L;
+    double gemm;
+  };
+  const Shape shapes[] = {{20, 10, 10, gemm20}, {40, 20, 20, gemm40}};
+  constexpr int kN = 300;
+  std::vector<InstanceResult> results;
+  std::vector<const Shape*> result_shape;  ///< parallel to results
+  std::vector<ScalingEntry> entries;
+  int failures = 0;
+  for (const Shape& shape : shapes) {
+    const core::Problem problem = MakeRandomOutputBox(shape.M, shape.K, shape.L, kN, /*seed=*/1);
+    core::SolverOptions solver_options;
+    solver_options.algorithm = core::Algorithm::kIffbdd;
+    solver_options.max_iterations = options.max_iterations;
+    solver_options.interior_point = false;  // every pass a full filter pass and a costate sweep
+    absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(problem, solver_options);
+    core::SolveLimits cold;
+    cold.warm_start = false;
+    absl::StatusOr<core::SolveSummary> s =
+        session.ok() ? (*session)->Solve(cold, nullptr) : absl::StatusOr<core::SolveSummary>(session.status());
+    if (!s.ok()) {
+      std::fprintf(stderr, "nupmpc-bench: kernel rate, generated M=%d: %s\n", shape.M,
+                   std::string(s.status().message()).c_str());
+      ++failures;
+      continue;
+    }
+    InstanceResult r;
+    r.name = absl::StrFormat("random_output_box_M%d_K%d_L%d (gen.)", shape.M, shape.K, shape.L);
+    r.algorithm = core::AlgorithmName(s->algorithm);
+    r.iterations = s->iterations;
+    r.N = kN;
+    r.flops_per_iteration = FlopsPerIteration(problem, s->algorithm);
+    results.push_back(r);
+    result_shape.push_back(&shape);
+    entries.push_back(ScalingEntry{std::move(*session), results.size() - 1});
+  }
+  MeasureInterleaved(entries, options.repeat, results);
+  for (std::size_t i = 0; i < results.size(); ++i) {
+    const InstanceResult& r = results[i];
+    const int M = result_shape[i]->M;
+    const double gemm = result_shape[i]->gemm;
+    if (options.json) {
+      std::printf("{\"kernel_rate\":\"%s\",\"N\":%d,\"iterations\":%d,\"gflops\":%s,\"gemm_n\":%d,\"gemm_gflops\":%s}\n",
+                  r.name.c_str(), r.N, r.iterations, Num(r.gflops).c_str(), M, Num(gemm).c_str());
+    } else {
+      std::printf("  per-stage kernels, %s N=%d, IFFBDD's passes (%d): %.2f GFLOP/s = %.0f %% of GEMM n=%d\n",
+                  r.name.c_str(), r.N, r.iterations, r.gflops, 100.0 * r.gflops / gemm, M);
+    }
+  }
+  return failures;
+}
+
 int RunGeneratedScaling(const BenchOptions& options, double gemm40) {
   constexpr int kM = 40, kK = 20, kL = 20;
   std::vector<InstanceResult> results;

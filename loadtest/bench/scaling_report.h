@@ -34,6 +34,14 @@ void PrintScaling(std::vector<const InstanceResult*> rows, int gemm_n, double ge
 // spends most of its passes in the input polish). Returns the number of failed instances.
 int RunGeneratedScaling(const BenchOptions& options, double gemm40);
 
+// The rate of the per-stage kernels at M = 20 and 40 next to GEMM at that n: generated
+// random output boxes (M = 20, K = L = 10; M = 40, K = L = 20) at N = 300, solved with
+// IFFBDD's own passes (interior_point = false), each a full filter pass (the M³ time
+// updates, a rank-one update per row) and a costate sweep. The interior point's solves add
+// means-only corrector sweeps of O(M) per row, which the flop model does not count.
+// Returns the number of failed instances.
+int RunKernelRates(const BenchOptions& options, double gemm20, double gemm40);
+
 }  // namespace nupmpc::bench
 
 #endif  // NUPMPC_LOADTEST_BENCH_SCALING_REPORT_H_

@@ -3,6 +3,7 @@
 #include <string>
 #include <tuple>
 
+#include "absl/strings/str_cat.h"
 #include "core/algorithms/ibffd.h"
 #include "core/algorithms/iffbdd.h"
 #include "core/message_passing/forward_filter.h"
@@ -44,8 +45,7 @@ class GaussianRecursions : public ::testing::TestWithParam<std::tuple<bool, bool
   }
 };
 
-TEST_P(GaussianRecursions, SmootherEqualsDensePosterior) {
-  const Problem p = MakeProblem();
+void ExpectSmootherEqualsDensePosterior(const Problem& p) {
   ASSERT_TRUE(Validate(p).ok());
   const DensePosterior dense = testing::SolveDense(p);
   const FactorGraph g = BuildFactorGraph(p, /*augment_inputs=*/false);
@@ -74,27 +74,20 @@ TEST_P(GaussianRecursions, SmootherEqualsDensePosterior) {
   EXPECT_LE(RelError(VY, dense.y_var), kTolerance);
 }
 
-TEST_P(GaussianRecursions, OneIffbddPassEqualsDenseMean) {
-  const Problem p = MakeProblem();
+template <typename Algorithm>
+void ExpectOnePassEqualsDenseMean(const Problem& p) {
   const DensePosterior dense = testing::SolveDense(p);
-  Iffbdd iffbdd(p, SolverOptions{});
+  Algorithm algorithm(p, SolverOptions{});
   PrimalIterate it;
   it.Resize(p.num_states, p.num_inputs, p.horizon);
-  iffbdd.Iterate(&it);
+  algorithm.Iterate(&it);
   EXPECT_LE(RelError(it.u, dense.u_mean), kTolerance);
   EXPECT_LE(RelError(it.x0, dense.x0_mean), kTolerance);
 }
 
-TEST_P(GaussianRecursions, OneIbffdPassEqualsDenseMean) {
-  const Problem p = MakeProblem();
-  const DensePosterior dense = testing::SolveDense(p);
-  Ibffd ibffd(p, SolverOptions{});
-  PrimalIterate it;
-  it.Resize(p.num_states, p.num_inputs, p.horizon);
-  ibffd.Iterate(&it);
-  EXPECT_LE(RelError(it.u, dense.u_mean), kTolerance);
-  EXPECT_LE(RelError(it.x0, dense.x0_mean), kTolerance);
-}
+TEST_P(GaussianRecursions, SmootherEqualsDensePosterior) { ExpectSmootherEqualsDensePosterior(MakeProblem()); }
+TEST_P(GaussianRecursions, OneIffbddPassEqualsDenseMean) { ExpectOnePassEqualsDenseMean<Iffbdd>(MakeProblem()); }
+TEST_P(GaussianRecursions, OneIbffdPassEqualsDenseMean) { ExpectOnePassEqualsDenseMean<Ibffd>(MakeProblem()); }
 
 INSTANTIATE_TEST_SUITE_P(RandomModels, GaussianRecursions,
                          ::testing::Combine(::testing::Bool(), ::testing::Bool(), ::testing::Bool(),
@@ -105,6 +98,31 @@ INSTANTIATE_TEST_SUITE_P(RandomModels, GaussianRecursions,
                                   (std::get<2>(info.param) ? "_TimeVarying" : "_TimeInvariant") + "_" +
                                   std::to_string(std::get<3>(info.param));
                          });
+
+// Every compiled state size (fixed_size.h) and dynamic sizes on either side of the largest,
+// each against the dense posterior: a fixed-size kernel is its own code path.
+class StateSizeKernels : public ::testing::TestWithParam<int> {
+ protected:
+  Problem MakeProblem() const {
+    RandomProblemSpec spec;
+    spec.seed = static_cast<unsigned>(100 + GetParam());
+    spec.M = GetParam();
+    spec.L = 3;
+    spec.K = 4;
+    spec.N = 12;
+    spec.free_x0 = true;
+    spec.terminal = true;
+    spec.offsets = true;
+    return testing::RandomGaussianProblem(spec);
+  }
+};
+
+TEST_P(StateSizeKernels, SmootherEqualsDensePosterior) { ExpectSmootherEqualsDensePosterior(MakeProblem()); }
+TEST_P(StateSizeKernels, OneIffbddPassEqualsDenseMean) { ExpectOnePassEqualsDenseMean<Iffbdd>(MakeProblem()); }
+TEST_P(StateSizeKernels, OneIbffdPassEqualsDenseMean) { ExpectOnePassEqualsDenseMean<Ibffd>(MakeProblem()); }
+
+INSTANTIATE_TEST_SUITE_P(CompiledAndDynamic, StateSizeKernels, ::testing::Values(8, 12, 16, 19, 20, 21, 40),
+                         [](const auto& info) { return absl::StrCat("M", info.param); });
 
 // A pinned (σ² = 0) input and a zero-variance output factor must be handled without 1/V.
 TEST(ForwardFilter, PinnedFactorsAreExactAndFinite) {
