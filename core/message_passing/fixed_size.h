@@ -16,7 +16,7 @@ namespace nupmpc::core {
 // State sizes with a compiled kernel (the rest use Eigen::Dynamic). The ThreadSanitizer
 // build compiles only the dynamic kernel (CMake option NUPMPC_FIXED_SIZE_KERNELS): it checks
 // the server's threading, and a kernel's size changes only the arithmetic of one solve on
-// one worker; the eight fixed-size copies would double its compile time in CI.
+// one worker; the nine fixed-size copies would double its compile time in CI.
 #if defined(NUPMPC_DYNAMIC_KERNELS_ONLY)
 #define NUPMPC_FIXED_STATE_SIZES(X)
 #else
@@ -68,7 +68,8 @@ Eigen::Map<Eigen::Matrix<double, Rows, Cols>> View(double* data, int rows, int c
 // dst = lhs · rhs for state-sized matrices. Even for fixed sizes Eigen takes its blocked
 // GEMM path (packing, made for large matrices) once rows + cols + depth ≥ 20; for 8..16
 // the coefficient-based product is faster (no packing for matrices that fit in
-// registers and L1). Dynamic sizes (large M) keep GEMM.
+// registers and L1); from 20 on GEMM's packing pays off (`nupmpc-bench --scaling` prints
+// the kernels' rate at M = 20). Dynamic sizes (large M) keep GEMM.
 template <int MS, typename Dst, typename Lhs, typename Rhs>
 void StateProduct(Dst&& dst, const Lhs& lhs, const Rhs& rhs) {
   if constexpr (MS == Eigen::Dynamic || MS >= 20) {
