@@ -47,7 +47,9 @@ ABSL_FLAG(int, concurrency, 1, "concurrent streams (sessions)");
 ABSL_FLAG(std::string, sweep, "", "comma-separated concurrency levels, run one after another (overrides --concurrency)");
 ABSL_FLAG(std::string, mode, "closed", "closed: next state when the answer arrives; open: Poisson arrivals");
 ABSL_FLAG(double, rate, 0.0, "open loop: total arrivals per second");
-ABSL_FLAG(double, rate_x, 0.0, "open loop: arrivals as a multiple of the capacity workers / core median solve time");
+ABSL_FLAG(double, rate_x, 0.0,
+          "open loop: arrivals as a multiple of the capacity (solver cores on the server's CPUs) / core median solve "
+          "time");
 ABSL_FLAG(double, duration_s, 5.0, "measured seconds per level");
 ABSL_FLAG(double, warmup_s, 0.5, "unmeasured seconds before each level");
 ABSL_FLAG(int, rounds, 3,
@@ -277,7 +279,12 @@ int main(int argc, char** argv) {
                                    absl::GetFlag(FLAGS_new_references));
   });
   if (!baseline.ok()) return Fail("core baseline", baseline.status());
-  const double capacity_per_s = info->limits().worker_threads() / (baseline->median_ms * 1e-3);
+  // A server without ServerLimits.solver_cores runs at most its workers' solves at once.
+  const int solver_cores = static_cast<int>(
+      info->limits().solver_cores() > 0 ? info->limits().solver_cores() : info->limits().worker_threads());
+  const int solve_cores = lt::UsableCores(solver_cores, info->cpus());
+  const int fleet_cores = lt::UsableCores(static_cast<int>(info->limits().worker_threads()), info->cpus());
+  const double capacity_per_s = solve_cores / (baseline->median_ms * 1e-3);
 
   absl::StatusOr<lt::TransportFloor> transport = lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls), *security);
   if (!transport.ok()) return Fail("transport floor", transport.status());
@@ -327,6 +334,8 @@ int main(int argc, char** argv) {
                              .server = *info,
                              .baseline = *baseline,
                              .transport = *transport,
+                             .solve_cores = solve_cores,
+                             .fleet_cores = fleet_cores,
                              .capacity_per_s = capacity_per_s,
                              .echo = echo != nullptr,
                              .inline_solve = absl::GetFlag(FLAGS_inline_solve),

@@ -1,11 +1,13 @@
 #include "loadtest/loadtest_report.h"
 
+#include <algorithm>
 #include <cstdio>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "nlohmann/json.hpp"
+#include "server/cpu_affinity.h"
 
 namespace nupmpc::loadtest {
 namespace {
@@ -40,14 +42,21 @@ double MiB(std::uint64_t bytes) { return static_cast<double>(bytes) / (1024.0 * 
 
 }  // namespace
 
+int UsableCores(int cores, const std::string& cpus) {
+  if (cpus.empty()) return cores;
+  const absl::StatusOr<cpu_set_t> set = server::ParseCpuList(cpus);
+  if (!set.ok()) return cores;
+  return std::max(1, std::min(cores, CPU_COUNT(&*set)));
+}
+
 void PrintHeader(const RunHeader& h) {
-  std::printf("nupmpc-loadtest: %s against %s (nupmpc-server %s, %u workers, queue %u)\n", h.instance.c_str(),
-              h.target.c_str(), h.server.version().c_str(), h.server.limits().worker_threads(),
-              h.server.limits().queue_capacity());
+  std::printf("nupmpc-loadtest: %s against %s (nupmpc-server %s, %u workers, %u solver cores, queue %u)\n",
+              h.instance.c_str(), h.target.c_str(), h.server.version().c_str(), h.server.limits().worker_threads(),
+              h.server.limits().solver_cores(), h.server.limits().queue_capacity());
   std::printf("core alone, same steps: median %.4f ms, mean %.4f ms, p99 %.4f ms, %.2f iterations/step over %d "
-              "solves; capacity %u workers / median = %.0f solves/s\n",
+              "solves; capacity %d cores / median = %.0f solves/s (solver cores on the server's CPUs)\n",
               h.baseline.median_ms, h.baseline.mean_ms, h.baseline.p99_ms, h.baseline.mean_iterations, h.baseline.solves,
-              h.server.limits().worker_threads(), h.capacity_per_s);
+              h.solve_cores, h.capacity_per_s);
   std::printf("transport alone (grpc.health.v1 Check, answered inside gRPC): p50 %.0f \xc2\xb5s, p99 %.0f \xc2\xb5s "
               "over %d calls\n",
               h.transport.p50_us, h.transport.p99_us, h.transport.calls);
@@ -109,6 +118,7 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
   out["server"] = {{"target", h.target},
                    {"version", h.server.version()},
                    {"worker_threads", h.server.limits().worker_threads()},
+                   {"solver_cores", h.server.limits().solver_cores()},
                    {"queue_capacity", h.server.limits().queue_capacity()},
                    {"cpus", h.server.cpus()},
                    {"inline_solve_max_ms", h.server.limits().inline_solve_max_ms()}};
@@ -119,6 +129,7 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                           {"p99_ms", h.baseline.p99_ms},
                           {"mean_iterations", h.baseline.mean_iterations},
                           {"solves", h.baseline.solves},
+                          {"capacity_cores", h.solve_cores},
                           {"capacity_per_s", h.capacity_per_s}};
   out["transport"] = {{"p50_us", h.transport.p50_us}, {"p99_us", h.transport.p99_us}, {"calls", h.transport.calls}};
   out["levels"] = nlohmann::json::array();
@@ -164,8 +175,10 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
 
 void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& separate, double fleet_core_mean_ms,
                 bool json) {
-  const double of_capacity = f.steps_per_s / h.capacity_per_s;
-  const double fleet_capacity = h.server.limits().worker_threads() / (fleet_core_mean_ms * 1e-3);
+  // A fleet call runs on the workers only: its capacities count them, not the solver cores.
+  const double worker_capacity = h.fleet_cores / (h.baseline.median_ms * 1e-3);
+  const double of_capacity = f.steps_per_s / worker_capacity;
+  const double fleet_capacity = h.fleet_cores / (fleet_core_mean_ms * 1e-3);
   const double of_fleet_capacity = f.steps_per_s / fleet_capacity;
   const double vs_streams = separate.solves_per_s > 0.0 ? f.steps_per_s / separate.solves_per_s : 0.0;
   if (json) {
@@ -177,7 +190,8 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
                                 {"call_p99_ms", f.call_p99_ms},
                                 {"step_errors", f.step_errors},
                                 {"separate_streams_solves_per_s", separate.solves_per_s},
-                                {"capacity_per_s", h.capacity_per_s},
+                                {"worker_cores", h.fleet_cores},
+                                {"capacity_per_s", worker_capacity},
                                 {"fraction_of_capacity", of_capacity},
                                 {"core_in_turn_mean_ms", fleet_core_mean_ms},
                                 {"core_in_turn_capacity_per_s", fleet_capacity},
@@ -186,14 +200,13 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
     std::printf("%s\n", out.dump(2).c_str());
     return;
   }
-  std::printf("fleet: %d sessions per SolveFleet call: %.0f steps/s (%.0f%% of capacity %.0f/s), call p50 %.3f ms, "
-              "p99 %.3f ms, %llu step errors\n",
-              f.sessions, f.steps_per_s, 100.0 * of_capacity, h.capacity_per_s, f.call_p50_ms, f.call_p99_ms,
-              static_cast<unsigned long long>(f.step_errors));
-  std::printf("       the core alone stepping the %d sessions in turn: mean %.4f ms per step, capacity %u workers / "
+  std::printf("fleet: %d sessions per SolveFleet call: %.0f steps/s (%.0f%% of capacity %d workers / median = "
+              "%.0f/s), call p50 %.3f ms, p99 %.3f ms, %llu step errors\n",
+              f.sessions, f.steps_per_s, 100.0 * of_capacity, h.fleet_cores, worker_capacity, f.call_p50_ms,
+              f.call_p99_ms, static_cast<unsigned long long>(f.step_errors));
+  std::printf("       the core alone stepping the %d sessions in turn: mean %.4f ms per step, capacity %d workers / "
               "mean = %.0f steps/s; the fleet call reaches %.0f%% of it\n",
-              f.sessions, fleet_core_mean_ms, h.server.limits().worker_threads(), fleet_capacity,
-              100.0 * of_fleet_capacity);
+              f.sessions, fleet_core_mean_ms, h.fleet_cores, fleet_capacity, 100.0 * of_fleet_capacity);
   std::printf("       %d separate Control streams: %.0f solves/s, p50 %.3f ms; fleet / streams = %.2fx\n",
               separate.config.concurrency, separate.solves_per_s, separate.p50_ms, vs_streams);
   std::fflush(stdout);

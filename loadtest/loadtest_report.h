@@ -23,13 +23,20 @@ struct RunHeader {
   v1::GetServerInfoResponse server;
   CoreBaseline baseline;
   TransportFloor transport;
-  double capacity_per_s = 0.0;  ///< worker threads / core median solve time
+  int solve_cores = 1;          ///< solves the server runs at once on its CPUs (UsableCores)
+  int fleet_cores = 1;          ///< its workers on its CPUs (a SolveFleet call runs on the workers)
+  double capacity_per_s = 0.0;  ///< solve_cores / core median solve time
   bool echo = false;            ///< every level is also run against the zero-work echo server
   bool inline_solve = false;    ///< and against the echo busy for the core median in its reaction
   std::string peer_cpus;        ///< CPUs the echo peers and the core baseline ran on ("": not pinned)
   std::string generator_cpus;   ///< CPUs the load generator ran on
   int rounds = 1;               ///< runs of each level against each server, interleaved
 };
+
+// How many solves a server runs at once on the CPUs it has: `cores` (its solver cores or
+// its workers), at most the CPUs of its affinity list `cpus` (GetServerInfoResponse.cpus;
+// `cores` when the list is empty or unreadable).
+int UsableCores(int cores, const std::string& cpus);
 
 void PrintHeader(const RunHeader& header);
 void PrintLevel(const RunHeader& header, const LevelReport& level);

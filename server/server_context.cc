@@ -55,6 +55,7 @@ void ServerState::FillLimits(v1::ServerLimits* out) const {
   out->set_connection_idle_timeout_s(options.connection_idle_timeout_s);
   out->set_inline_solve_max_ms(options.inline_solve_max_ms);
   out->set_max_fleet_steps(static_cast<std::uint32_t>(options.max_fleet_steps));
+  out->set_solver_cores(static_cast<std::uint32_t>(pool.cores()));
 }
 
 std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context) {

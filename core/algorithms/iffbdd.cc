@@ -195,6 +195,7 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
   // Predictor (affine-scaling direction, target 0). The first pass of a solve starts each
   // row when the filter reaches it, knowing the row's prediction and prior variance.
   if (!interior_point_started_) {
+    interior_rows_.Forget();
     for (int r = 0; r < R; ++r) row_factor_[r] = ScalarFactor::GaussianPart(g.row_prior[r]);
     RunForwardFilterDeciding(
         g, row_factor_.data(),
@@ -247,7 +248,7 @@ int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
     reach = enhanced;
   }
   // A step to a fraction of the boundary (Wright 1997, ch. 10); the plan moves with it.
-  const double step = std::min(1.0, 0.995 * reach);
+  const double step = std::isnan(reach) ? reach : std::min(1.0, 0.995 * reach);  // a NaN must reach the test below
   if (!(step > options_.objective_tolerance) || !out->u.allFinite() || !out->x0.allFinite()) {
     // A breakdown (a slack or multiplier under- or overflowed: NaN), or a step too short
     // to move the objective by the solve loop's tolerance, whose test would then take a

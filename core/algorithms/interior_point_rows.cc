@@ -35,6 +35,8 @@ void InteriorPointRows::Resize(int rows) {
   max_step_ = kept_max_step_ = kInfinity;
 }
 
+void InteriorPointRows::Forget() { std::fill(side_.begin(), side_.end(), 0); }
+
 ScalarFactor InteriorPointRows::Start(int r, const ScalarPrior& prior, double yhat, double V_e) {
   side_[r] = kStarted;
   lo_[r] = up_[r] = Side{};  // nothing of an earlier solve's row stays

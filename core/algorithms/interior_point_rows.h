@@ -34,10 +34,13 @@ namespace nupmpc::core {
 class InteriorPointRows {
  public:
   void Resize(int rows);
+  // Takes every row out of the method, for a new solve: Start takes back the rows that
+  // still have a constraint (a row whose bound an update removed is never started again).
+  void Forget();
 
   // Starts row r (prior `prior`, forward prediction `yhat` and prior variance `V_e` of its
   // value in the first pass) and aims it at the predictor's target. Rows whose value the
-  // data fix (V_e = 0, e.g. outputs of a fixed x[0]) are left out: no factor, no slack.
+  // data fix (V_e = 0, e.g. outputs of a fixed x[0]) are left out: no barrier, no slack.
   // Keeps the prior's bounds and Gaussian part for the rest of the solve. Returns the
   // row's factor for the first pass, Gaussian part included.
   ScalarFactor Start(int r, const ScalarPrior& prior, double yhat, double V_e);
@@ -48,8 +51,8 @@ class InteriorPointRows {
   // at the trial step `trial` (Gondzio), which Reject() takes back with its direction.
   // Each also writes the factor of every started row for the Newton pass towards the new
   // targets into row_factor[r] (Gaussian part included; only that for a row left out):
-  // one sweep over the rows' state, which long horizons stream from memory. Rows never
-  // started (no constraint) keep their factor.
+  // one sweep over the rows' state, which long horizons stream from memory. Rows not
+  // started since Forget (no constraint) keep their factor.
   void AimPredictor(ScalarFactor* row_factor);
   void AimCorrector(double sigma_mu, ScalarFactor* row_factor);
   void AimCentrality(double trial, double sigma_mu, ScalarFactor* row_factor);
@@ -104,7 +107,7 @@ class InteriorPointRows {
   ScalarFactor Factor(int r) const;
 
   // side_[r]: kLower | kUpper for the bound sides present, kStarted for every row Start saw
-  // (a row left out has only that); 0: never started.
+  // since Forget (a row left out has only that); 0: not started.
   static constexpr unsigned char kLower = 1, kUpper = 2, kStarted = 4;
   std::vector<unsigned char> side_;
   std::vector<Side> lo_, up_;

@@ -116,7 +116,7 @@ Parts Iffbdd(const Dims& d, bool inputs_constrained) {
   // Newton value; two plans.
   if (!augmented) {
     p.workspace += Array<unsigned char>(rows) + Doubles(2, 6 * rows) + Doubles(2, 3 * rows) + Doubles(1, 2 * rows) +
-                   Doubles(1, rows) + Doubles(2, d.M + L * N);
+                   Doubles(1, rows) + Doubles(2, d.M) + Doubles(2, L * N);
   }
   const double m = static_cast<double>(Mg), rows_per_step = static_cast<double>(rows) / S;
   // Forward: time update 4M³ + 2M²L, rows 4M² each; backward: 2M² + 2M per row.

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "core/algorithms/interior_point_rows.h"
 #include "core/message_passing/forward_filter.h"
@@ -12,6 +13,7 @@
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/instances/benchmark_instance.h"
+#include "tests/util/random_problem.h"
 
 namespace nupmpc::core {
 namespace {
@@ -188,6 +190,59 @@ TEST(InteriorPoint, HalfSpacesAndBoundsWithACostMatchIffbdd) {
   EXPECT_LT(ipm.summary.iterations, dual.summary.iterations);
   EXPECT_LE(std::abs(ipm.summary.objective - dual.summary.objective), 1e-9 * std::abs(dual.summary.objective));
   EXPECT_LE(ipm.summary.max_violation, 1e-9);
+}
+
+// The objectives of every pass of a cold solve.
+std::vector<double> PassObjectives(Session& session) {
+  std::vector<double> objectives;
+  SolveLimits cold;
+  cold.warm_start = false;
+  cold.trace = [&](const PassTrace& t) {
+    if (t.kind == PassTrace::Kind::kIterate) objectives.push_back(t.objective);
+  };
+  const absl::StatusOr<SolveSummary> solved = session.Solve(cold, nullptr);
+  EXPECT_TRUE(solved.ok()) << solved.status();
+  return objectives;
+}
+
+// A row whose bound an update removed is never started again: nothing of its earlier
+// solve's barrier may enter the next solve's Newton passes.
+TEST(InteriorPoint, ARowWhoseBoundAnUpdateRemovedLeavesTheMethod) {
+  testing::RandomProblemSpec spec;
+  spec.M = 4;
+  spec.L = 2;
+  spec.K = 3;
+  spec.N = 20;
+  spec.seed = 3;
+  spec.terminal = false;
+  const Problem bounded = testing::WithBoxes(testing::RandomGaussianProblem(spec), 0.0, 2.0);
+  Problem unbounded_from_3 = bounded;
+  int removed = 0;
+  for (int n = 3; n <= spec.N; ++n) {
+    for (int k = 0; k < spec.K; ++k) {
+      ScalarPrior& prior = unbounded_from_3.mutable_output_prior(n, k);
+      if (!prior.is_constraint()) continue;
+      prior = ScalarPrior::Gaussian(prior.mean, prior.variance);
+      ++removed;
+    }
+  }
+  ASSERT_GT(removed, 0);
+  SolverOptions options;
+  options.algorithm = Algorithm::kIffbdd;
+  auto updated = Session::Create(bounded, options);
+  ASSERT_TRUE(updated.ok()) << updated.status();
+  const std::vector<double> before = PassObjectives(**updated);
+  ASSERT_TRUE((*updated)->Update(unbounded_from_3).ok());
+  auto fresh = Session::Create(unbounded_from_3, options);
+  ASSERT_TRUE(fresh.ok()) << fresh.status();
+  const std::vector<double> want = PassObjectives(**fresh);
+  const std::vector<double> got = PassObjectives(**updated);
+  ASSERT_FALSE(want.empty());
+  ASSERT_EQ(got.size(), want.size());
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    EXPECT_NEAR(got[i], want[i], 1e-12 * std::abs(want[i])) << "pass " << i + 1;
+  }
+  EXPECT_NE(before, want);  // the update changed the problem's iterates
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "loadtest/instances/benchmark_instance.h"
+#include "tests/util/dense_reference.h"
 #include "tests/util/random_problem.h"
 #include "tests/util/status_matchers.h"
 
@@ -476,6 +477,37 @@ TEST(IdleSessions, ReleasingTheWorkspaceChangesNoResult) {
       EXPECT_TRUE(a_plan.inputs == b_plan.inputs) << "step " << step;
       (*released)->ReleaseWorkspace();
     }
+  }
+}
+
+// A model without inputs (L = 0: only x[0] and the outputs' costs) is a problem of its own:
+// both algorithms solve it to the dense posterior's mean of x[0] without touching input
+// storage (the IBFFD sweeps have no input records then).
+TEST(NoInputs, EveryAlgorithmSolvesAModelWithoutInputs) {
+  testing::RandomProblemSpec spec;
+  spec.M = 3;
+  spec.L = 1;
+  spec.K = 2;
+  spec.N = 6;
+  spec.free_x0 = true;
+  Problem p = testing::RandomGaussianProblem(spec);
+  p.num_inputs = 0;
+  for (Eigen::MatrixXd& B : p.B) B.resize(p.num_states, 0);
+  p.input_priors.clear();
+  ASSERT_TRUE(Validate(p).ok()) << Validate(p);
+  const Eigen::VectorXd want = testing::SolveDense(p).x0_mean;
+  for (const Algorithm algorithm : {Algorithm::kIbffd, Algorithm::kIffbdd}) {
+    SolverOptions options;
+    options.algorithm = algorithm;
+    auto session = Session::Create(p, options);
+    ASSERT_TRUE(session.ok()) << session.status();
+    Solution plan;
+    const absl::StatusOr<SolveSummary> solved = (*session)->Solve(SolveLimits{}, &plan);
+    ASSERT_TRUE(solved.ok()) << solved.status();
+    EXPECT_EQ(solved->status, SolveStatus::kConverged) << solved->Describe();
+    EXPECT_EQ(plan.inputs.size(), 0);
+    EXPECT_LE((plan.states.row(0).transpose() - want).cwiseAbs().maxCoeff(), 1e-9 * std::max(1.0, want.cwiseAbs().maxCoeff()))
+        << AlgorithmName(algorithm);
   }
 }
 

@@ -13,6 +13,7 @@
 #include "loadtest/echo_server.h"
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
+#include "loadtest/loadtest_report.h"
 #include "loadtest/transport_floor.h"
 #include "server/session_factory.h"
 #include "server/session_registry.h"
@@ -304,6 +305,14 @@ TEST(CoreBaseline, SteppingAFleetInTurnTimesEveryStepAndRefusesAWrongState) {
   EXPECT_TRUE(std::isfinite(*mean_ms));
   const std::vector<std::vector<double>> wrong = {std::vector<double>(w.states[0].size() + 1, 0.0)};
   EXPECT_FALSE(loadtest::MeasureFleetCoreMeanMs(w.spec, wrong, 3, 1).ok());
+}
+
+TEST(UsableCores, TheServersCoresAtMostTheCpusItMayRunOn) {
+  EXPECT_EQ(loadtest::UsableCores(2, "0"), 1);    // --threads 1 pinned to one CPU: two gRPC threads share it
+  EXPECT_EQ(loadtest::UsableCores(2, "0-3"), 2);  // more CPUs than solver cores
+  EXPECT_EQ(loadtest::UsableCores(4, "0,2-3"), 3);
+  EXPECT_EQ(loadtest::UsableCores(2, ""), 2);     // a server that does not report its CPUs
+  EXPECT_EQ(loadtest::UsableCores(2, "x"), 2);    // nor readably
 }
 
 TEST(Quantile, NearestRank) {

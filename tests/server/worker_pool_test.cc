@@ -172,6 +172,20 @@ TEST(SolverCores, AtLeastGrpcsReactionThreadsWhenStepsAreSolvedOnThem) {
   EXPECT_EQ(SolverCores(o), 4);
 }
 
+TEST(SolverCores, TheServerReportsThemInItsLimits) {
+  for (const double inline_ms : {0.5, 0.0}) {
+    ServerOptions o;
+    o.worker_threads = 1;
+    o.inline_solve_max_ms = inline_ms;
+    const ServerState state(o);
+    v1::ServerLimits limits;
+    state.FillLimits(&limits);
+    EXPECT_EQ(limits.worker_threads(), 1u);
+    EXPECT_EQ(limits.solver_cores(), static_cast<std::uint32_t>(SolverCores(o))) << "inline_solve_max_ms " << inline_ms;
+    EXPECT_EQ(static_cast<int>(limits.solver_cores()), state.pool.cores());
+  }
+}
+
 TEST(WorkerPool, WorkersWaitForTheCoreATaskRunningHereHolds) {
   // One core: while a task runs on this thread, a submitted task must not start on the
   // worker (two solves would share one core); it starts once this one is done.
