@@ -81,6 +81,7 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
                                        info.control_stream_read_pauses(), " read pauses")},
       {"draining", info.draining() ? "yes" : "no"},
       {"worker threads", absl::StrCat(l.worker_threads())},
+      {"solver cores", absl::StrCat(l.solver_cores(), " (solves at once)")},
       {"queue capacity", absl::StrCat(l.queue_capacity())},
       {"max queue wait", l.max_queue_wait_ms() > 0 ? absl::StrFormat("%g ms", l.max_queue_wait_ms()) : "off"},
       {"solved where received",
