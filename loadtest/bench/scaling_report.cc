@@ -59,6 +59,37 @@ void PrintScaling(std::vector<const InstanceResult*> rows, int gemm_n, double ge
   }
 }
 
+namespace {
+
+// A generated random output box (M, K, L, N; seed 1) solved cold once with `solver_options`:
+// its description in `r` (the pass count the timed solves divide by) and its session, kept
+// to be solved again. Null, after a message on stderr, when it fails.
+std::unique_ptr<core::Session> SolveGeneratedOnce(int M, int K, int L, int N, const core::SolverOptions& solver_options,
+                                                  InstanceResult* r) {
+  const core::Problem problem = MakeRandomOutputBox(M, K, L, N, /*seed=*/1);
+  absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(problem, solver_options);
+  core::SolveLimits cold;
+  cold.warm_start = false;
+  absl::StatusOr<core::SolveSummary> s =
+      session.ok() ? (*session)->Solve(cold, nullptr) : absl::StatusOr<core::SolveSummary>(session.status());
+  if (!s.ok()) {
+    std::fprintf(stderr, "nupmpc-bench: generated random output box M=%d N=%d: %s\n", M, N,
+                 std::string(s.status().message()).c_str());
+    return nullptr;
+  }
+  r->name = absl::StrFormat("random_output_box_M%d_K%d_L%d (gen.)", M, K, L);
+  r->algorithm = core::AlgorithmName(s->algorithm);
+  r->iterations = s->iterations;
+  r->objective = s->objective;
+  r->max_violation = s->max_violation;
+  r->status = core::SolveStatusName(s->status);
+  r->N = N;
+  r->flops_per_iteration = FlopsPerIteration(problem, s->algorithm);
+  return *std::move(session);
+}
+
+}  // namespace
+
 int RunKernelRates(const BenchOptions& options, double gemm20, double gemm40) {
   struct Shape {
     int M, K, L;
@@ -71,31 +102,19 @@ int RunKernelRates(const BenchOptions& options, double gemm20, double gemm40) {
   std::vector<ScalingEntry> entries;
   int failures = 0;
   for (const Shape& shape : shapes) {
-    const core::Problem problem = MakeRandomOutputBox(shape.M, shape.K, shape.L, kN, /*seed=*/1);
     core::SolverOptions solver_options;
     solver_options.algorithm = core::Algorithm::kIffbdd;
     solver_options.max_iterations = options.max_iterations;
     solver_options.interior_point = false;  // every pass a full filter pass and a costate sweep
-    absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(problem, solver_options);
-    core::SolveLimits cold;
-    cold.warm_start = false;
-    absl::StatusOr<core::SolveSummary> s =
-        session.ok() ? (*session)->Solve(cold, nullptr) : absl::StatusOr<core::SolveSummary>(session.status());
-    if (!s.ok()) {
-      std::fprintf(stderr, "nupmpc-bench: kernel rate, generated M=%d: %s\n", shape.M,
-                   std::string(s.status().message()).c_str());
+    InstanceResult r;
+    std::unique_ptr<core::Session> session = SolveGeneratedOnce(shape.M, shape.K, shape.L, kN, solver_options, &r);
+    if (session == nullptr) {
       ++failures;
       continue;
     }
-    InstanceResult r;
-    r.name = absl::StrFormat("random_output_box_M%d_K%d_L%d (gen.)", shape.M, shape.K, shape.L);
-    r.algorithm = core::AlgorithmName(s->algorithm);
-    r.iterations = s->iterations;
-    r.N = kN;
-    r.flops_per_iteration = FlopsPerIteration(problem, s->algorithm);
     results.push_back(r);
     result_shape.push_back(&shape);
-    entries.push_back(ScalingEntry{std::move(*session), results.size() - 1});
+    entries.push_back(ScalingEntry{std::move(session), results.size() - 1});
   }
   MeasureInterleaved(entries, options.repeat, results);
   for (std::size_t i = 0; i < results.size(); ++i) {
@@ -120,33 +139,18 @@ int RunGeneratedScaling(const BenchOptions& options, double gemm40) {
   results.reserve(3);
   int failures = 0;
   for (const int N : {300, 3000, 30000}) {
-    const core::Problem problem = MakeRandomOutputBox(kM, kK, kL, N, /*seed=*/1);
     core::SolverOptions solver_options;
     solver_options.algorithm = options.algorithm;
     solver_options.max_iterations = options.max_iterations;
     solver_options.interior_point = options.interior_point;
-    absl::StatusOr<std::unique_ptr<core::Session>> session = core::Session::Create(problem, solver_options);
-    core::SolveLimits cold;
-    cold.warm_start = false;
-    absl::StatusOr<core::SolveSummary> s =
-        session.ok() ? (*session)->Solve(cold, nullptr) : absl::StatusOr<core::SolveSummary>(session.status());
-    if (!s.ok()) {
-      std::fprintf(stderr, "nupmpc-bench: generated random output box N=%d: %s\n", N,
-                   std::string(s.status().message()).c_str());
+    InstanceResult r;
+    std::unique_ptr<core::Session> session = SolveGeneratedOnce(kM, kK, kL, N, solver_options, &r);
+    if (session == nullptr) {
       ++failures;
       continue;
     }
-    InstanceResult r;
-    r.name = absl::StrFormat("random_output_box_M%d_K%d_L%d (gen.)", kM, kK, kL);
-    r.algorithm = core::AlgorithmName(s->algorithm);
-    r.iterations = s->iterations;
-    r.objective = s->objective;
-    r.max_violation = s->max_violation;
-    r.status = core::SolveStatusName(s->status);
-    r.N = N;
-    r.flops_per_iteration = FlopsPerIteration(problem, s->algorithm);
     results.push_back(r);
-    entries.push_back(ScalingEntry{std::move(*session), results.size() - 1});
+    entries.push_back(ScalingEntry{std::move(session), results.size() - 1});
     if (!options.json) {
       std::printf("  (generated N=%d: %s, %d iterations, status %s, max violation %.2e)\n", N, r.algorithm.c_str(),
                   r.iterations, r.status.c_str(), r.max_violation);

@@ -208,13 +208,7 @@ std::vector<double> PassObjectives(Session& session) {
 // A row whose bound an update removed is never started again: nothing of its earlier
 // solve's barrier may enter the next solve's Newton passes.
 TEST(InteriorPoint, ARowWhoseBoundAnUpdateRemovedLeavesTheMethod) {
-  testing::RandomProblemSpec spec;
-  spec.M = 4;
-  spec.L = 2;
-  spec.K = 3;
-  spec.N = 20;
-  spec.seed = 3;
-  spec.terminal = false;
+  const testing::RandomProblemSpec spec{.M = 4, .L = 2, .K = 3, .N = 20, .terminal = false, .seed = 3};
   const Problem bounded = testing::WithBoxes(testing::RandomGaussianProblem(spec), 0.0, 2.0);
   Problem unbounded_from_3 = bounded;
   int removed = 0;

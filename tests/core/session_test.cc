@@ -484,13 +484,7 @@ TEST(IdleSessions, ReleasingTheWorkspaceChangesNoResult) {
 // both algorithms solve it to the dense posterior's mean of x[0] without touching input
 // storage (the IBFFD sweeps have no input records then).
 TEST(NoInputs, EveryAlgorithmSolvesAModelWithoutInputs) {
-  testing::RandomProblemSpec spec;
-  spec.M = 3;
-  spec.L = 1;
-  spec.K = 2;
-  spec.N = 6;
-  spec.free_x0 = true;
-  Problem p = testing::RandomGaussianProblem(spec);
+  Problem p = testing::RandomGaussianProblem({.M = 3, .L = 1, .K = 2, .N = 6, .free_x0 = true});
   p.num_inputs = 0;
   for (Eigen::MatrixXd& B : p.B) B.resize(p.num_states, 0);
   p.input_priors.clear();
