@@ -263,13 +263,14 @@ std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
   return step;
 }
 
-bool ControlStream::SolvesHere() const {
+bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms) {
   // A session's first solve (no time known) and long ones go to the pool: a reaction
   // thread is held at most about inline_solve_max_ms by a solve.
-  const double expected_ms = entry_->last_solve_cpu_ms.load(std::memory_order_relaxed);
-  return state_->options.inline_solve_max_ms > 0.0 && expected_ms >= 0.0 &&
-         expected_ms <= state_->options.inline_solve_max_ms;
+  const double expected_ms = session.last_solve_cpu_ms.load(std::memory_order_relaxed);
+  return inline_solve_max_ms > 0.0 && expected_ms >= 0.0 && expected_ms <= inline_solve_max_ms;
 }
+
+bool ControlStream::SolvesHere() const { return SolvesInPlace(*entry_, state_->options.inline_solve_max_ms); }
 
 void ControlStream::StartSolve(v1::ControlRequest request) {
   for (;;) {

@@ -15,6 +15,12 @@
 
 namespace nupmpc::server {
 
+// Whether a Control step of `session` is short enough to solve on the gRPC thread that has
+// it (ServerLimits.inline_solve_max_ms, 0: never): by its last solve's CPU time, which a
+// core shared with other threads does not inflate; a session's first step (no time known)
+// goes to the pool.
+bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms);
+
 // One Control stream (the main path). The first message attaches to a session or creates
 // one owned by the stream; every message with a step is answered once, in order.
 //

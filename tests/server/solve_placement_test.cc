@@ -14,6 +14,7 @@
 
 #include "gmock/gmock.h"
 #include "loadtest/transport_floor.h"
+#include "server/control_stream.h"
 #include "server/session_factory.h"
 #include "server/session_registry.h"
 #include "server/step_solver.h"
@@ -166,6 +167,21 @@ TEST_F(SolvePlacementTest, LongSolvesOnEveryWorkerHoldBackHealthChecksAndShortSt
 // Where a step is solved depends on its session's last solve time: that must be the CPU
 // time the solve took, or a solve slowed by sharing its core (gRPC's two reaction threads
 // on a one-core server do) would look long and send the session's next steps to a worker.
+// Placement reads the CPU time of the session's last solve: a short solve that took a time
+// slice of wall time on a shared core stays in place, and the wall time (the pool's wait
+// estimate) plays no part.
+TEST(SolvesInPlace, ByTheLastSolvesCpuTimeNotItsWallTime) {
+  server::SessionEntry session;
+  EXPECT_FALSE(server::SolvesInPlace(session, 0.5)) << "first step: no time known";
+  session.last_solve_cpu_ms.store(0.05);
+  session.last_solve_ms.store(8.0);  // preempted for a time slice
+  EXPECT_TRUE(server::SolvesInPlace(session, 0.5));
+  EXPECT_FALSE(server::SolvesInPlace(session, 0.0)) << "0: every step on a worker";
+  session.last_solve_cpu_ms.store(2.0);
+  session.last_solve_ms.store(0.05);
+  EXPECT_FALSE(server::SolvesInPlace(session, 0.5));
+}
+
 TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
   const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N3000");  // solves spanning time slices
   server::WorkerPool pool(1, 4);
