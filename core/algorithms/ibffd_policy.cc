@@ -4,8 +4,8 @@
 #include <cmath>
 
 #include "core/message_passing/fixed_size.h"
-#include "core/util/prefetch.h"
 #include "core/util/packed_symmetric.h"
+#include "core/util/prefetch.h"
 #include "core/util/symmetrize.h"
 
 namespace nupmpc::core {
@@ -172,7 +172,9 @@ void IbffdPolicy::BackwardFilterImpl(Sweep sweep, const Targets& targets, const 
     if (const int ahead = n - kPrefetchSteps; ahead >= 0) {
       if (sweep != Sweep::kOffsets) PrefetchForWrite(W_step_.col(ahead).data(), static_cast<int>(W_step_.rows()));
       PrefetchForWrite(xi_step_.col(ahead).data(), M);
-      if (L > 0 && ahead < g.N) PrefetchForWrite(input_gain_.col(ahead * L).data(), static_cast<int>(input_gain_.rows()) * L);
+      if (L > 0 && ahead < g.N) {
+        PrefetchForWrite(input_gain_.col(ahead * L).data(), static_cast<int>(input_gain_.rows()) * L);
+      }
     }
     for (int r = g.row_begin[n]; r < g.row_begin[n + 1]; ++r) {
       const RowTerm term = row_term_[r];

@@ -4,7 +4,6 @@
 #include <vector>
 
 #include "Eigen/Core"
-
 #include "core/priors/scalar_factor.h"
 #include "core/priors/scalar_prior.h"
 #include "core/priors/scalar_rules.h"
