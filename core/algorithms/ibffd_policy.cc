@@ -170,7 +170,12 @@ void IbffdPolicy::BackwardFilterImpl(Sweep sweep, const Targets& targets, const 
   for (int n = g.N; n >= 0; --n) {
     if (stop()) return;
     if (const int ahead = n - kPrefetchSteps; ahead >= 0) {
-      if (sweep != Sweep::kOffsets) PrefetchForWrite(W_step_.col(ahead).data(), static_cast<int>(W_step_.rows()));
+      const int packed = static_cast<int>(W_step_.rows());
+      if (sweep == Sweep::kOffsets) {
+        PrefetchForRead(W_step_.col(ahead).data(), packed);  // the carried gains it loads
+      } else {
+        PrefetchForWrite(W_step_.col(ahead).data(), packed);
+      }
       PrefetchForWrite(xi_step_.col(ahead).data(), M);
       if (L > 0 && ahead < g.N) {
         PrefetchForWrite(input_gain_.col(ahead * L).data(), static_cast<int>(input_gain_.rows()) * L);
