@@ -117,12 +117,14 @@ bool WorkerPool::RunQueuedHere(double drain_ms, bool release_when_empty) {
     Task task;
     {
       std::lock_guard<std::mutex> lock(mu_);
-      // Past the budget the rest is left to a worker, if one is free to take it: with more
-      // cores than workers all of them may run long tasks, and short steps left queued
-      // would wait for one of those to end while this core stood idle.
-      const bool worker_free = running_ - running_here_ < threads_started_;
+      // Past the budget the rest is left to the workers, unless every one of them runs a
+      // long task: with more cores than workers, short steps left queued would wait for one
+      // of those to end while this core stood idle. Workers busy with short tasks take
+      // over soon, and draining on past the budget then would hold this thread (and the
+      // stream whose reaction it is) for as long as steps keep arriving.
+      const bool workers_can_take_over = running_long_ < threads_started_;
       if (stopping_ || queue_.empty() || queue_.front().placement != Placement::kAnyCoreHolder ||
-          (worker_free && std::chrono::steady_clock::now() >= until)) {
+          (workers_can_take_over && std::chrono::steady_clock::now() >= until)) {
         if (release_when_empty && !stopping_ && queue_.empty()) {
           // Given back under the same lock that saw the queue empty: a task queued after
           // this point finds the core free and runs where it arrives; one queued before is

@@ -160,6 +160,36 @@ TEST(WorkerPool, ACoreHolderDrainsPastItsBudgetWhileNoWorkerIsFreeToTakeOver) {
   blocker.Release();
 }
 
+TEST(WorkerPool, ACoreHolderStopsAtItsBudgetWhileTheWorkerRunsShortTasks) {
+  // One worker and two cores, short steps arriving without pause: the worker takes them as
+  // well, so the thread holding the second core must go back (to gRPC, to serve its own
+  // stream) at its budget, not drain for as long as steps keep coming (a Control stream
+  // whose reaction drained went unanswered for seconds at 64 streams).
+  WorkerPool pool(1, 64, /*max_queue_wait_ms=*/0.0, /*cores=*/2);
+  std::atomic<bool> holder_returned{false};
+  std::atomic<bool> feeding{true};
+  std::thread feeder;
+  const auto short_step = [] { std::this_thread::sleep_for(std::chrono::microseconds(200)); };
+  EXPECT_TRUE(pool.TryRunHere(
+      [&] {
+        feeder = std::thread([&] {
+          const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+          while (!holder_returned.load() && std::chrono::steady_clock::now() < give_up) {
+            // The queue kept full (the rest refused): the worker never waits for work.
+            (void)pool.TrySubmit(short_step, 0.2, WorkerPool::Placement::kAnyCoreHolder);
+          }
+          feeding.store(false);
+        });
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));  // a queue behind this step
+      },
+      /*drain_ms=*/1.0));
+  const bool fed_throughout = feeding.load();
+  holder_returned.store(true);
+  feeder.join();
+  EXPECT_TRUE(fed_throughout) << "the holder drained until the steps stopped coming";
+  pool.Shutdown();
+}
+
 TEST(SolverCores, AtLeastGrpcsReactionThreadsWhenStepsAreSolvedOnThem) {
   ServerOptions o;
   o.worker_threads = 1;
