@@ -51,8 +51,8 @@ class WorkerPool {
   // false without running it. With `drain_ms` > 0, the thread that holds a core also
   // runs the queued tasks submitted as kAnyCoreHolder, oldest first, while they are at
   // the front of the queue, for up to `drain_ms` (before `task` those queued before it,
-  // after it those queued meanwhile; past `drain_ms` only while no worker is free to take
-  // them over, as with more cores than workers); and when every core runs such short work on a
+  // after it those queued meanwhile; past `drain_ms` only while every worker runs a long
+  // task, as can happen with more cores than workers); and when every core runs such short work on a
   // worker, it waits up to `drain_ms` for one (workers step aside for it). Steps that
   // arrive while a core is busy are then taken by the thread that has it instead of
   // handed to a worker one by one. Counted in busy() and busy_seconds() like the workers' tasks.
