@@ -18,12 +18,16 @@ namespace {
 using i64 = std::int64_t;
 constexpr i64 kDouble = sizeof(double);
 
+// Eigen pads each of its heap blocks to its alignment, which this build's vector width
+// sets (32 bytes with AVX2, 64 with AVX-512): the model counts what this binary allocates.
+constexpr i64 kEigenAlignment = EIGEN_MAX_ALIGN_BYTES > 16 ? EIGEN_MAX_ALIGN_BYTES : 16;
+
 // Heap bytes of one block of `bytes`: glibc's chunk header and rounding, Eigen's alignment
-// padding (32-byte alignment over malloc's 16), and for blocks glibc maps (≥ 128 KiB) the
+// padding (kEigenAlignment over malloc's 16), and for blocks glibc maps (≥ 128 KiB) the
 // page rounding.
 i64 Block(i64 bytes) {
   if (bytes <= 0) return 0;
-  return bytes >= 128 * 1024 ? (bytes + 32 + 4095) / 4096 * 4096 + 4096 : bytes + 64;
+  return bytes >= 128 * 1024 ? (bytes + kEigenAlignment + 4095) / 4096 * 4096 + 4096 : bytes + kEigenAlignment + 32;
 }
 // `count` blocks of `doubles` doubles each.
 i64 Doubles(i64 count, i64 doubles) { return count * Block(doubles * kDouble); }

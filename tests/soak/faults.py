@@ -143,6 +143,7 @@ def sigterm(quick):
     long_spec = nupmpc.load_instance(LONG_SOLVE).spec
     one_offs, stream_outcomes = [], Counter()
     signalled_at = [float("inf")]
+    waiting_since = [None] * 8  # per stream: when its unanswered step was sent
 
     def one_off():
         with nupmpc.connect(server.target) as client:
@@ -158,8 +159,10 @@ def sigterm(quick):
             t = index
             while True:
                 sent_at = time.monotonic()
+                waiting_since[index] = sent_at
                 try:
                     plan = session.step(states[t % len(states)])
+                    waiting_since[index] = None
                     in_flight = sent_at < signalled_at[0] < time.monotonic()
                     stream_outcomes["plans" if not in_flight else "in flight at the signal: plan"] += plan.has_plan
                 except nupmpc.NupmpcError as error:
@@ -182,8 +185,15 @@ def sigterm(quick):
         workers += [threading.Thread(target=one_off) for _ in range(3)]
         for w in workers[8:]:
             w.start()
-        r.check(wait_for(lambda: server.metric_sum("nupmpc_workers_busy") + server.metric_sum("nupmpc_queue_depth") == 11,
-                         30), "the solves and steps never all reached the server")
+        # The metrics can add up to 11 a moment before the last stream's step is held too (a
+        # stream still stepping would send its next step at the signal, which the server may
+        # receive after it and rightly refuse): also wait until every stream's step has been
+        # unanswered for far longer than a step takes.
+        def all_held():
+            now = time.monotonic()
+            return (server.metric_sum("nupmpc_workers_busy") + server.metric_sum("nupmpc_queue_depth") == 11 and
+                    all(since is not None and now - since > 0.05 for since in waiting_since))
+        r.check(wait_for(all_held, 30), "the solves and steps never all reached the server")
         signalled_at[0] = time.monotonic()
         exit_code = server.terminate(timeout_s=60)
         r.figures["drain_s"] = round(time.monotonic() - signalled_at[0], 2)
