@@ -35,4 +35,16 @@ else()
   # -mtune=generic: the same code whatever machine builds it.
   set(NUPMPC_CPU_FLAGS -march=${NUPMPC_CPU_BASELINE} -mtune=generic)
 endif()
-message(STATUS "CPU baseline: ${NUPMPC_CPU_BASELINE} (${NUPMPC_CPU_FLAGS})")
+# Whether the baseline's instructions include AVX-512 (x86-64-v4, or native on such a CPU):
+# compiler workarounds below depend on it. Cached per baseline, as the baseline may change.
+include(CheckCXXSourceCompiles)
+string(REPLACE ";" " " CMAKE_REQUIRED_FLAGS "${NUPMPC_CPU_FLAGS}")
+string(MAKE_C_IDENTIFIER "NUPMPC_AVX512_${NUPMPC_CPU_BASELINE}" _avx512_result)
+check_cxx_source_compiles("#ifndef __AVX512F__\n#error no AVX-512\n#endif\nint main() {}" ${_avx512_result})
+unset(CMAKE_REQUIRED_FLAGS)
+if(${_avx512_result})
+  set(NUPMPC_CPU_BASELINE_AVX512 ON)
+else()
+  set(NUPMPC_CPU_BASELINE_AVX512 OFF)
+endif()
+message(STATUS "CPU baseline: ${NUPMPC_CPU_BASELINE} (${NUPMPC_CPU_FLAGS}), AVX-512: ${NUPMPC_CPU_BASELINE_AVX512}")

@@ -16,6 +16,8 @@
 # the generator CPU 1; on 1 CPU, nothing is pinned. NUPMPC_SERVER_CPUS / NUPMPC_CLIENT_CPUS
 # / NUPMPC_THREADS override.
 # Extra arguments go to every nupmpc-loadtest call (e.g. --json, --duration_s 10).
+# Exit status 3 (after everything ran): a closed-loop level starved a stream, one served
+# under half or over twice the mean.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 deploy/build.sh
@@ -52,22 +54,34 @@ stop_server() {
 }
 
 loadtest=(build/bin/nupmpc-loadtest --server "$address" --server_cpus "$server_cpus" --client_cpus "$client_cpus" "$@")
+# A level that starved a stream (nupmpc-loadtest's exit status 3) fails the script at the
+# end, after every figure is printed; any other failure stops it at once.
+starved=0
+run_loadtest() {
+  local rc=0
+  "${loadtest[@]}" "$@" || rc=$?
+  if [ "$rc" -eq 3 ]; then starved=1; elif [ "$rc" -ne 0 ]; then exit "$rc"; fi
+}
 start_server
 echo "== closed loop, masses_N30 (transport-bound)"
-"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --sweep 1,2,8,64 --inline_solve
+run_loadtest --instance "$benchmarks/masses_N30.json" --sweep 1,2,8,64 --inline_solve
 echo "== closed loop, masses_N30, new references every step"
-"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --sweep 1,8 --inline_solve --new_references
+run_loadtest --instance "$benchmarks/masses_N30.json" --sweep 1,8 --inline_solve --new_references
 echo "== closed loop, masses_N300 (solver-bound)"
-"${loadtest[@]}" --instance "$benchmarks/masses_N300.json" --sweep 1,2,8 --inline_solve
+run_loadtest --instance "$benchmarks/masses_N300.json" --sweep 1,2,8 --inline_solve
 echo "== fleet: 100 masses_N30 sessions per SolveFleet call, then 100 separate Control streams"
-"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --fleet 100 --echo=false
+run_loadtest --instance "$benchmarks/masses_N30.json" --fleet 100 --echo=false
 echo "== memory: 10,000 idle masses_N30 sessions"
-"${loadtest[@]}" --instance "$benchmarks/masses_N30.json" --idle_sessions 10000
+run_loadtest --instance "$benchmarks/masses_N30.json" --idle_sessions 10000
 stop_server
 
 start_server --max_queue_wait_ms 20
 echo "== overload, masses_N300 (server refuses work it could not start within 20 ms):"
 echo "   open loop at 10x capacity, then at 0.5x (recovery)"
-"${loadtest[@]}" --instance "$benchmarks/masses_N300.json" --mode open --rate_x 10 --concurrency 64
-"${loadtest[@]}" --instance "$benchmarks/masses_N300.json" --mode open --rate_x 0.5 --concurrency 64
+run_loadtest --instance "$benchmarks/masses_N300.json" --mode open --rate_x 10 --concurrency 64
+run_loadtest --instance "$benchmarks/masses_N300.json" --mode open --rate_x 0.5 --concurrency 64
 stop_server
+if [ "$starved" -ne 0 ]; then
+  echo "deploy/loadtest.sh: a level starved a stream (see nupmpc-loadtest's messages above)" >&2
+  exit 3
+fi

@@ -158,4 +158,9 @@ LevelReport MergeRounds(const std::vector<LevelReport>& rounds) {
   return merged;
 }
 
+bool StarvedAStream(const LevelReport& level) {
+  if (!level.config.closed_loop || level.config.concurrency < 2) return false;
+  return level.stream_min_share < 1.0 / kFairShareFactor || level.stream_max_share > kFairShareFactor;
+}
+
 }  // namespace nupmpc::loadtest

@@ -94,7 +94,8 @@ const nupmpc::cli::ProgramInfo kProgram{
                "throughput and latency next to the core's own solve time for the same steps (and, with --echo, "
                "the transport floor of a zero-work server at the same load). Every stream creates its own "
                "session from --instance and cycles through the instance's recorded closed-loop states (or its "
-               "initial state). --idle_sessions N instead measures the server's memory per idle session.",
+               "initial state). --idle_sessions N instead measures the server's memory per idle session. Exit "
+               "status 3: a closed-loop level starved a stream (one served under half or over twice the mean).",
     .usage = "nupmpc-loadtest [--server HOST:PORT] [--instance FILE] [--concurrency C | --sweep 1,2,8,64] "
              "[--mode closed|open [--rate R | --rate_x X]] [--duration_s T] [--json] | --idle_sessions N",
     .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
@@ -104,6 +105,21 @@ const nupmpc::cli::ProgramInfo kProgram{
 int Fail(const std::string& what, const absl::Status& s) {
   std::fprintf(stderr, "nupmpc-loadtest: %s: %s\n", what.c_str(), s.ToString().c_str());
   return 1;
+}
+
+// Exit status 3 when a level starved a stream (lt::StarvedAStream), after every level ran:
+// the figures are printed either way, and a script that runs the load test fails.
+int ReportStarvedStreams(const std::vector<lt::LevelReport>& levels) {
+  int status = 0;
+  for (const lt::LevelReport& l : levels) {
+    if (!lt::StarvedAStream(l)) continue;
+    std::fprintf(stderr,
+                 "nupmpc-loadtest: concurrency %d starved a stream: the least served got %.2f, the most %.2f of the "
+                 "mean (a fair server stays within a factor %.0f)\n",
+                 l.config.concurrency, l.stream_min_share, l.stream_max_share, lt::kFairShareFactor);
+    status = 3;
+  }
+  return status;
 }
 
 absl::StatusOr<std::vector<int>> ConcurrencyLevels() {
@@ -360,7 +376,7 @@ int main(int argc, char** argv) {
     });
     if (!fleet_core_ms.ok()) return Fail("fleet core baseline", fleet_core_ms.status());
     lt::PrintFleet(header, *stepped, *separate, *fleet_core_ms, json);
-    return 0;
+    return ReportStarvedStreams({*separate});
   }
   std::vector<lt::LevelReport> reports;
   for (const int c : *levels) {
@@ -405,5 +421,5 @@ int main(int argc, char** argv) {
     reports.push_back(std::move(report));
   }
   if (json) lt::PrintJson(header, reports);
-  return 0;
+  return ReportStarvedStreams(reports);
 }

@@ -155,7 +155,8 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                             {"overhead_p50_us", OverheadUs(h, l)},
                             {"fraction_of_capacity", l.solves_per_s / h.capacity_per_s},
                             {"stream_min_share", l.stream_min_share},
-                            {"stream_max_share", l.stream_max_share}};
+                            {"stream_max_share", l.stream_max_share},
+                            {"starved_a_stream", StarvedAStream(l)}};
     if (!l.config.closed_loop) level["offered_per_s"] = l.config.rate_per_s;
     if (l.echo != nullptr) level["echo"] = PeerJson(*l.echo);
     if (l.inline_solve != nullptr) {

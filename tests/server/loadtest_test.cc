@@ -315,6 +315,25 @@ TEST(UsableCores, TheServersCoresAtMostTheCpusItMayRunOn) {
   EXPECT_EQ(loadtest::UsableCores(2, "x"), 2);    // nor readably
 }
 
+TEST(StarvedAStream, AClosedLoopStreamOutsideAFactorTwoOfTheMean) {
+  const auto level = [](bool closed_loop, int concurrency, double least, double most) {
+    loadtest::LevelReport l;
+    l.config.closed_loop = closed_loop;
+    l.config.concurrency = concurrency;
+    l.stream_min_share = least;
+    l.stream_max_share = most;
+    return l;
+  };
+  EXPECT_FALSE(loadtest::StarvedAStream(level(true, 64, 0.98, 1.02)));
+  EXPECT_FALSE(loadtest::StarvedAStream(level(true, 64, 0.5, 2.0)));   // the bound itself is fair
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.49, 1.01)));  // one stream under half the mean
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.0, 1.03)));   // one never answered
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.86, 2.01)));   // one served over twice the mean
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.0, 0.0)));     // nothing answered at all
+  EXPECT_FALSE(loadtest::StarvedAStream(level(false, 64, 0.0, 3.0)));  // open loop: arrivals decide
+  EXPECT_FALSE(loadtest::StarvedAStream(level(true, 1, 1.0, 1.0)));
+}
+
 TEST(Quantile, NearestRank) {
   std::vector<double> v = {5, 1, 4, 2, 3};
   EXPECT_EQ(loadtest::Quantile(v, 0.5), 3);

@@ -13,6 +13,8 @@ server process, a PASS/FAIL line and its figures:
   killed       a client killed mid-solve: the solve is cancelled, the worker free at once
   slow_loris   connections holding half a gRPC message or half an HTTP/2 frame: ended and
                closed, others served meanwhile
+  fair_share   64 Control streams on one worker and one CPU (nupmpc-loadtest): every stream
+               served within a factor 2 of the mean
 
     tests/soak/faults.py [--quick] [SCENARIO ...]
 
@@ -40,6 +42,7 @@ from nupmpc.security import channel_options
 BIN = harness.REPO / "build" / "bin"
 PROBE_BINARY = os.environ.get("NUPMPC_PROBE_BINARY", str(BIN / "nupmpc-scaleout-probe"))
 CLI_BINARY = os.environ.get("NUPMPC_CLI_BINARY", str(BIN / "nupmpc"))
+LOADTEST_BINARY = os.environ.get("NUPMPC_LOADTEST_BINARY", str(BIN / "nupmpc-loadtest"))
 # The slowest benchmark solve: long enough to signal or kill a client in the middle of it.
 LONG_SOLVE = harness.BENCHMARKS / "random_outbox_M40_K20_L20_N1000_s1.json"
 FIRST_MESSAGE_TIMEOUT_S = 2.0
@@ -399,8 +402,43 @@ def slow_loris(quick):
     return r
 
 
+def fair_share(quick):
+    """The schedule on which a stream once starved (issue 24): many more streams than workers,
+    one worker, the server pinned to one CPU and the load generator to another, so that a
+    gRPC thread that solves steps in place competes with the worker for the same core."""
+    r = Result("fair_share")
+    cpus = sorted(os.sched_getaffinity(0))
+    pinned = len(cpus) >= 2
+    server = harness.Server("--threads", "1", "--log_level", "warn", cpus={cpus[0]} if pinned else None)
+    try:
+        levels = 4 if quick else 8
+        command = [LOADTEST_BINARY, "--server", server.target, "--instance", str(harness.MASSES),
+                   "--sweep", ",".join(["64"] * levels), "--duration_s", "2", "--echo=false", "--json",
+                   "--progress", "off", "--baseline_rounds", "2", "--transport_calls", "200"]
+        if pinned:
+            command += ["--server_cpus", str(cpus[0]), "--client_cpus", str(cpus[1])]
+        run = subprocess.run(command, capture_output=True, text=True, timeout=120 + 10 * levels)
+        # Exit status 3: a level starved a stream (the JSON is printed all the same).
+        if run.returncode not in (0, 3):
+            raise harness.HarnessError(f"nupmpc-loadtest exited with {run.returncode}: {run.stderr[-500:]}")
+        report = json.loads(run.stdout)
+        least = [level["stream_min_share"] for level in report["levels"]]
+        most = [level["stream_max_share"] for level in report["levels"]]
+        r.figures.update({"pinned": pinned, "levels": levels,
+                          "solves_per_s": [round(level["solves_per_s"]) for level in report["levels"]],
+                          "least_served_share": [round(x, 2) for x in least],
+                          "most_served_share": [round(x, 2) for x in most]})
+        r.check(all(not level["errors"] for level in report["levels"]), "steps failed")
+        r.check(min(least) >= 0.5, "a stream got under half the mean of the solves")
+        r.check(max(most) <= 2.0, "a stream got over twice the mean of the solves")
+        r.check(run.returncode == 0, f"nupmpc-loadtest reported starvation: {run.stderr.strip()[-500:]}")
+    finally:
+        server.stop()
+    return r
+
+
 SCENARIOS = {"restart": restart, "sigterm": sigterm, "slow_reader": slow_reader, "idle": idle, "killed": killed,
-             "slow_loris": slow_loris}
+             "slow_loris": slow_loris, "fair_share": fair_share}
 
 
 def main():

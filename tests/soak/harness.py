@@ -43,10 +43,12 @@ class Server:
     """nupmpc-server on a loopback port with its metrics endpoint; restart() starts a new
     process on the same ports (what a supervisor does after a crash)."""
 
-    def __init__(self, *flags):
+    def __init__(self, *flags, cpus=None):
+        """cpus: the CPUs the server may run on (sched_setaffinity before exec); None: any."""
         if not os.access(SERVER_BINARY, os.X_OK):
             raise HarnessError(f"no server binary at {SERVER_BINARY} (build nupmpc-server or set NUPMPC_SERVER_BINARY)")
         self.flags = list(flags)
+        self.cpus = cpus
         self.port, self.metrics_port = free_port(), free_port()
         self.target = f"127.0.0.1:{self.port}"
         self.log = tempfile.NamedTemporaryFile(prefix="nupmpc-soak-server-", suffix=".log", delete=False)
@@ -56,7 +58,8 @@ class Server:
     def start(self):
         self.process = subprocess.Popen(
             [SERVER_BINARY, "--address", self.target, "--metrics_address", f"127.0.0.1:{self.metrics_port}",
-             *self.flags], stdout=self.log, stderr=subprocess.STDOUT)
+             *self.flags], stdout=self.log, stderr=subprocess.STDOUT,
+            preexec_fn=None if self.cpus is None else lambda: os.sched_setaffinity(0, self.cpus))
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
             if self.process.poll() is not None:

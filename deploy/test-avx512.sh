@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# The AVX-512 stage, run by deploy/test.sh (so by CI) after the main suite: the core's
+# suites and the service's solve paths built for x86-64-v4 (AVX-512: Eigen's 64-byte
+# packets and alignment, GCC's AVX-512 code) in build-avx512/, Release, warnings as errors.
+# The tests run only on a CPU with AVX-512 (F, BW, CD, DQ, VL: what x86-64-v4 requires;
+# the build's executables refuse to start elsewhere). On any other CPU the build and its
+# warning check still run, and the script says plainly that the tests did not: they are
+# never counted as passed. Not here: the paper examples against Ipopt (lingp_scp_test, the
+# same core code runs in the other suites) and the client and deploy suites (no solver code
+# of their own).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+deploy/install-deps.sh
+jobs=$(nproc)
+cmake -S . -B build-avx512 -G Ninja -DCMAKE_BUILD_TYPE=Release -DNUPMPC_CPU_BASELINE=x86-64-v4 \
+  -DNUPMPC_WERROR=ON >/dev/null
+core_tests=(message_passing_test scalar_rules_test nonconvex_priors_test discrete_plan_test input_differences_test
+            multilevel_inputs_test keep_out_test keep_out_session_test gp_model_test nonlinear_model_test
+            examples_test benchmark_reference_test session_test elastic_test infeasibility_test no_allocation_test
+            interior_point_test interrupt_test step_update_test model_update_test footprint_test facade_test)
+# The server's paths from a request's numbers to the solver's Eigen types and back.
+server_tests=(service_solve_test service_fleet_test solve_placement_test worker_pool_test server_binary_test)
+targets=()
+for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
+cmake --build build-avx512 -j "$jobs" "${targets[@]}"
+
+missing=()
+for flag in avx512f avx512bw avx512cd avx512dq avx512vl; do
+  grep -qw "$flag" /proc/cpuinfo || missing+=("$flag")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "== AVX-512 stage: built for x86-64-v4 without warnings; tests NOT RUN: this CPU lacks ${missing[*]}"
+  exit 0
+fi
+echo "== AVX-512 stage: running the x86-64-v4 build's tests on this AVX-512 CPU"
+# The tests of targets not built above show up as <target>_NOT_BUILT. Labels build (checks
+# of the sources) and deploy (real processes from build/); PythonClient.*, PythonExample.*:
+# the Python client's stubs are not built here.
+cd build-avx512
+ctest --output-on-failure -j "$(( jobs * 2 ))" --timeout 1200 -LE "build|deploy" \
+  -E "_NOT_BUILT$|^Python(Client|Example)\\."
