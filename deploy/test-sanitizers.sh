@@ -31,7 +31,7 @@ core_tests=(message_passing_test scalar_rules_test nonconvex_priors_test discret
 # runs here through the service tests.
 server_tests=(service_solve_test service_validation_test service_transform_test service_keep_out_test
               service_gp_test service_fleet_test solve_placement_test control_stream_lifetime_test
-              worker_pool_test session_strand_test server_binary_test service_admission_test
+              worker_pool_test session_strand_test read_timing_test server_binary_test service_admission_test
               service_stream_bounds_test service_malformed_bytes_test memory_budget_test auth_test
               log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
               hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test)

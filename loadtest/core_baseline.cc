@@ -7,8 +7,8 @@
 #include "core/session/mpc_session.h"
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/load_stream.h"
+#include "loadtest/step_as_server.h"
 #include "server/session_factory.h"
-#include "server/step_conversion.h"
 
 namespace nupmpc::loadtest {
 
@@ -18,23 +18,6 @@ double Quantile(std::vector<double>& values, double q) {
   const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(values.size())));
   return values[std::clamp<std::size_t>(rank, 1, values.size()) - 1];
 }
-
-namespace {
-
-// One step as the server's SolveStep runs it, without the service around it: the Step
-// message converted, applied, the warm start shifted, the solve.
-absl::StatusOr<core::SolveSummary> StepAsTheServerDoes(core::MpcSession& session, const v1::Step& message,
-                                                       bool warm_start, core::Solution* solution) {
-  absl::StatusOr<core::StepUpdate> step = server::StepUpdateFromProto(message, session.dimensions());
-  if (!step.ok()) return step.status();
-  if (absl::Status applied = session.Apply(*step); !applied.ok()) return applied;
-  session.ShiftWarmStart();
-  core::SolveLimits limits;
-  limits.warm_start = warm_start;
-  return session.Solve(limits, solution);
-}
-
-}  // namespace
 
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
                                                  const std::vector<std::vector<double>>& states, int rounds,

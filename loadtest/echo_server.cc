@@ -3,9 +3,14 @@
 #include <chrono>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "loadtest/instances/benchmark_instance.h"
+#include "loadtest/step_as_server.h"
+#include "server/result_conversion.h"
+#include "server/session_factory.h"
 #include "server/thread_cpu_time.h"
 
 namespace nupmpc::loadtest {
@@ -13,6 +18,7 @@ namespace {
 
 // One echoed Control stream. Reads and writes overlap (an open-loop client sends before
 // its previous answer is written), so answers wait in a queue and go out one at a time.
+// Without a fixed answer (the bare peer), the stream solves its own session instead.
 class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
  public:
   EchoStream(const v1::SolveResult* answer, const std::vector<std::chrono::nanoseconds>* busy)
@@ -38,7 +44,9 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
     }
     v1::ControlResponse response;
     response.set_sequence(incoming_.sequence());
-    if (incoming_.has_step()) {
+    if (answer_ == nullptr) {
+      AnswerBySolving(response);
+    } else if (incoming_.has_step()) {
       *response.mutable_result() = *answer_;
     } else {
       response.set_session_id("echo");
@@ -69,6 +77,33 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
   void OnDone() override { delete this; }
 
  private:
+  // The bare peer: the session built from the stream's first message (its spec, as the
+  // server admits it but without limits) and each step solved right here as the server's
+  // SolveStep does, answered with the real result; what fails is answered as an error.
+  void AnswerBySolving(v1::ControlResponse& response) {
+    if (incoming_.has_spec()) {
+      absl::StatusOr<server::BuiltSession> built = server::BuildSession(incoming_.spec(), bench::NoSizeLimits());
+      if (!built.ok()) return Refuse(built.status(), response);
+      session_ = *std::move(built);
+      response.set_session_id("bare");
+    }
+    if (!incoming_.has_step()) return;
+    if (!session_.has_value()) {
+      return Refuse(absl::FailedPreconditionError("spec: the stream's first message carries none"), response);
+    }
+    const bool warm_start = solved_ && incoming_.step().warm_start() != v1::WARM_START_COLD;
+    absl::StatusOr<core::SolveSummary> summary =
+        StepAsTheServerDoes(*session_->solver, incoming_.step(), warm_start, &solution_);
+    if (!summary.ok()) return Refuse(summary.status(), response);
+    solved_ = true;
+    server::ResultToProto(*summary, solution_, response.mutable_result());
+  }
+
+  static void Refuse(const absl::Status& status, v1::ControlResponse& response) {
+    response.set_error_code(static_cast<int>(status.code()));
+    response.set_error_message(std::string(status.message()));
+  }
+
   void FinishIfIdleLocked(std::unique_lock<std::mutex>& lock) {
     if (!reads_done_ || writing_ || finished_) return;
     finished_ = true;
@@ -79,6 +114,9 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
   const v1::SolveResult* const answer_;
   const std::vector<std::chrono::nanoseconds>* const busy_;
   std::size_t steps_ = 0;  ///< steps read (reads are one at a time)
+  std::optional<server::BuiltSession> session_;  ///< the bare peer's
+  core::Solution solution_;
+  bool solved_ = false;
   v1::ControlRequest incoming_;
   std::mutex mu_;
   std::deque<v1::ControlResponse> writes_;
@@ -91,23 +129,31 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
 
 class EchoControlServer::Service : public v1::MpcService::CallbackService {
  public:
-  Service(v1::SolveResult answer, std::vector<std::chrono::nanoseconds> busy)
+  Service(std::optional<v1::SolveResult> answer, std::vector<std::chrono::nanoseconds> busy)
       : answer_(std::move(answer)), busy_(std::move(busy)) {}
 
   grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(
       grpc::CallbackServerContext* /*context*/) override {
-    return new EchoStream(&answer_, &busy_);
+    return new EchoStream(answer_.has_value() ? &*answer_ : nullptr, &busy_);
   }
 
  private:
-  const v1::SolveResult answer_;
+  const std::optional<v1::SolveResult> answer_;  ///< none: the bare peer, which solves
   const std::vector<std::chrono::nanoseconds> busy_;
 };
 
 absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Start(
     v1::SolveResult answer, std::vector<std::chrono::nanoseconds> busy) {
+  return Listen(std::make_unique<Service>(std::move(answer), std::move(busy)));
+}
+
+absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::StartSolving() {
+  return Listen(std::make_unique<Service>(std::nullopt, std::vector<std::chrono::nanoseconds>{}));
+}
+
+absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Listen(std::unique_ptr<Service> service) {
   std::unique_ptr<EchoControlServer> s(new EchoControlServer());
-  s->service_ = std::make_unique<Service>(std::move(answer), std::move(busy));
+  s->service_ = std::move(service);
   grpc::ServerBuilder builder;
   builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &s->port_);
   builder.RegisterService(s->service_.get());

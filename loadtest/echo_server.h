@@ -1,7 +1,7 @@
 #ifndef NUPMPC_LOADTEST_ECHO_SERVER_H_
 #define NUPMPC_LOADTEST_ECHO_SERVER_H_
 
-// The third peer of the load test: a zero-work stand-in for nupmpc-server's Control
+// The peers of the load test: a zero-work stand-in for nupmpc-server's Control
 // stream on a loopback port (nupmpc-loadtest runs it in a child process, EchoProcess). It
 // answers the first message with a session id and every step at once, inside the gRPC
 // reaction, with one fixed real answer (the plan the real server returned for the
@@ -32,6 +32,13 @@ class EchoControlServer {
   // its streams send them.
   static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(v1::SolveResult answer,
                                                                    std::vector<std::chrono::nanoseconds> busy = {});
+  // The bare peer: a server reduced to the real work, in the reaction. Each stream's first
+  // message builds its session from the spec it carries; each step is solved right there as
+  // nupmpc-server's SolveStep does (converted, applied, warm start shifted, solved, the
+  // result converted) and answered, with no worker pool, session registry, admission,
+  // deadlines, metrics or logging. Its round trip against nupmpc-server's is what the
+  // server's own machinery costs for the same solves on the same cores.
+  static absl::StatusOr<std::unique_ptr<EchoControlServer>> StartSolving();
   ~EchoControlServer();
 
   std::string target() const;
@@ -39,6 +46,7 @@ class EchoControlServer {
  private:
   class Service;
   EchoControlServer() = default;
+  static absl::StatusOr<std::unique_ptr<EchoControlServer>> Listen(std::unique_ptr<Service> service);
   std::unique_ptr<Service> service_;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;

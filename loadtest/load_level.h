@@ -48,9 +48,10 @@ struct LevelReport {
   // Answered solves of the least and the most served stream over the mean of all streams
   // (1 and 1 when every stream got the same): how evenly the server shared its cores.
   double stream_min_share = 0.0, stream_max_share = 0.0;
-  // The same level against the zero-work echo server (EchoControlServer), and against the
-  // echo busy for the core's median solve time in its reaction, when run.
-  std::shared_ptr<const LevelReport> echo, inline_solve;
+  // The same level against the zero-work echo server (EchoControlServer), against the
+  // echo busy for the core's median solve time in its reaction, and against the bare
+  // server that really solves in its reaction (EchoControlServer::StartSolving), when run.
+  std::shared_ptr<const LevelReport> echo, inline_solve, bare;
   LevelCore inline_core;
 };
 

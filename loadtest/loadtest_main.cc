@@ -53,7 +53,8 @@ ABSL_FLAG(double, rate_x, 0.0,
 ABSL_FLAG(double, duration_s, 5.0, "measured seconds per level");
 ABSL_FLAG(double, warmup_s, 0.5, "unmeasured seconds before each level");
 ABSL_FLAG(int, rounds, 3,
-          "each level alternates the server under test and its peers (--echo, --inline_solve) this many times, "
+          "each level alternates the server under test and its peers (--echo, --inline_solve, --bare_solve) this "
+          "many times, "
           "each run for duration_s / rounds, and reports the runs of each merged: a machine whose speed drifts "
           "between minutes then slows all of them alike");
 ABSL_FLAG(uint64_t, requests, 0, "stop a level once this many solves were answered (0: by time)");
@@ -65,6 +66,11 @@ ABSL_FLAG(bool, inline_solve, false,
           "also run every level against the echo server busy inside its reaction, for each step, for the core's own "
           "time for that step (a server that solves where the request arrives: the lowest round trip any design "
           "could reach for the same work)");
+ABSL_FLAG(bool, bare_solve, false,
+          "also run every level against a bare server in a child process: each stream's session built from its "
+          "spec and each step solved in the gRPC reaction as nupmpc-server's SolveStep does, and nothing else (no "
+          "worker pool, registry, admission, deadlines, metrics): what the server's own machinery costs");
+ABSL_FLAG(bool, serve_bare, false, "internal: run as the bare peer's child process until stdin closes");
 ABSL_FLAG(std::string, serve_echo_busy_us, "",
           "internal: run as the echo peer's child process until stdin closes, busy per step for these microseconds "
           "(comma-separated, cycled per stream; 0: no work)");
@@ -263,6 +269,11 @@ int main(int argc, char** argv) {
   const std::string name = std::filesystem::path(instance_path).stem().string();
   absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
   if (!security.ok()) return Fail("connection security", security.status());
+  if (absl::GetFlag(FLAGS_serve_bare)) {
+    absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> bare = lt::EchoControlServer::StartSolving();
+    if (!bare.ok()) return Fail("bare server", bare.status());
+    return lt::ServeEchoUntilStdinCloses(**bare);
+  }
   if (const std::string busy_us = absl::GetFlag(FLAGS_serve_echo_busy_us); !busy_us.empty()) {
     return ServeEcho(target, *security, file->spec, busy_us);
   }
@@ -320,6 +331,14 @@ int main(int argc, char** argv) {
     if (!started.ok()) return Fail("echo server", started.status());
     echo = *std::move(started);
   }
+  std::unique_ptr<lt::EchoProcess> bare;
+  if (absl::GetFlag(FLAGS_bare_solve)) {
+    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = lt::EchoProcess::Spawn(
+        {std::filesystem::read_symlink("/proc/self/exe").string(), "--serve_bare"},
+        server_cpus->has_value() ? &**server_cpus : nullptr);
+    if (!started.ok()) return Fail("bare server", started.status());
+    bare = *std::move(started);
+  }
   // The inline peer of a level: busy for the core's own time for each state, in the order
   // every stream sends them, measured with as many sessions stepped in turn as the level
   // has streams (the server's sessions' data are that cold between their steps).
@@ -355,6 +374,7 @@ int main(int argc, char** argv) {
                              .capacity_per_s = capacity_per_s,
                              .echo = echo != nullptr,
                              .inline_solve = absl::GetFlag(FLAGS_inline_solve),
+                             .bare = bare != nullptr,
                              .peer_cpus = server_cpus->has_value() ? nupmpc::server::CpuList(**server_cpus) : "",
                              .generator_cpus = generator_cpus,
                              .rounds = std::max(1, absl::GetFlag(FLAGS_rounds))};
@@ -398,7 +418,8 @@ int main(int argc, char** argv) {
       inline_solve = *std::move(started);
     }
     absl::StatusOr<LevelRuns> runs = RunInterleaved(
-        target, {echo.get(), inline_solve.has_value() ? inline_solve->process.get() : nullptr}, plan, config);
+        target, {echo.get(), inline_solve.has_value() ? inline_solve->process.get() : nullptr, bare.get()}, plan,
+        config);
     if (!runs.ok()) return Fail(absl::StrCat("concurrency ", c), runs.status());
     lt::LevelReport& report = runs->server;
     if (inline_solve.has_value()) {
@@ -412,7 +433,10 @@ int main(int argc, char** argv) {
     if (!json) lt::PrintLevel(header, report);
     for (const auto& [peer, slot, label, busy_ms] :
          {std::tuple{&runs->peers[0], &report.echo, "echo", 0.0},
-          std::tuple{&runs->peers[1], &report.inline_solve, "inline", report.inline_core.median_ms}}) {
+          std::tuple{&runs->peers[1], &report.inline_solve, "inline", report.inline_core.median_ms},
+          std::tuple{&runs->peers[2], &report.bare, "bare", report.inline_core.sessions > 0
+                                                                 ? report.inline_core.median_ms
+                                                                 : header.baseline.median_ms}}) {
       if (!peer->has_value()) continue;
       if (!json) lt::PrintPeerLevel(label, **peer, busy_ms);
       *slot = std::make_shared<const lt::LevelReport>(**std::move(peer));

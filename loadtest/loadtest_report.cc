@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -24,6 +25,13 @@ nlohmann::json PeerJson(const LevelReport& e) {
   return {{"solves_per_s", e.solves_per_s}, {"p50_ms", e.p50_ms},   {"p90_ms", e.p90_ms},
           {"p99_ms", e.p99_ms},             {"p999_ms", e.p999_ms}, {"max_ms", e.max_ms},
           {"superseded", e.tally.superseded}, {"no_plan", e.tally.no_plan}, {"errors", e.tally.errors}};
+}
+
+// The server's level against a peer's run of it.
+nlohmann::json VersusPeerJson(const LevelReport& l, const LevelReport& peer) {
+  return {{"solves_ratio", l.solves_per_s / peer.solves_per_s},
+          {"p50_delta_us", (l.p50_ms - peer.p50_ms) * 1e3},
+          {"p99_ratio", l.p99_ms / peer.p99_ms}};
 }
 
 // One table row; the server's and the peers' rows differ in the label, the iterations and
@@ -63,7 +71,7 @@ void PrintHeader(const RunHeader& h) {
   std::printf("CPUs: nupmpc-server %s (as it reports), echo peers and core baseline %s, load generator %s\n",
               h.server.cpus().empty() ? "?" : h.server.cpus().c_str(),
               h.peer_cpus.empty() ? "not pinned" : h.peer_cpus.c_str(), h.generator_cpus.c_str());
-  if (h.rounds > 1 && (h.echo || h.inline_solve)) {
+  if (h.rounds > 1 && (h.echo || h.inline_solve || h.bare)) {
     std::printf("(each level: %d rounds against nupmpc and each peer in turn, the order reversed every round, "
                 "merged per server)\n",
                 h.rounds);
@@ -73,6 +81,12 @@ void PrintHeader(const RunHeader& h) {
   if (h.echo) {
     std::printf("(echo rows: the same level against a zero-work server, a process of its own, that answers every "
                 "step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
+  }
+  if (h.bare) {
+    std::printf("(bare rows: a bare server, a process of its own, that builds each stream's session from its spec "
+                "and solves each step in its reaction as nupmpc-server's SolveStep does, with nothing else: no "
+                "worker pool, session registry, admission, deadlines, metrics; overhead = its p50 - the core "
+                "median)\n");
   }
   if (h.inline_solve) {
     std::printf("(inline rows: the same echo, busy inside its reaction before it answers, for each step the core's "
@@ -98,10 +112,10 @@ void PrintPeerLevel(const char* label, const LevelReport& l, double busy_ms) {
 
 void PrintRatios(const LevelReport& l) {
   std::printf("%5d ratios", l.config.concurrency);
-  if (l.inline_solve != nullptr && l.inline_solve->solves_per_s > 0.0) {
-    const LevelReport& peer = *l.inline_solve;
-    std::printf("  nupmpc/inline: solves/s %.1f%%, p50 %+.0f \xc2\xb5s, p99 %.2fx", 100.0 * l.solves_per_s / peer.solves_per_s,
-                (l.p50_ms - peer.p50_ms) * 1e3, l.p99_ms / peer.p99_ms);
+  for (const auto& [label, peer] : {std::pair{"inline", l.inline_solve.get()}, std::pair{"bare", l.bare.get()}}) {
+    if (peer == nullptr || peer->solves_per_s <= 0.0) continue;
+    std::printf("  nupmpc/%s: solves/s %.1f%%, p50 %+.0f \xc2\xb5s, p99 %.2fx", label,
+                100.0 * l.solves_per_s / peer->solves_per_s, (l.p50_ms - peer->p50_ms) * 1e3, l.p99_ms / peer->p99_ms);
   }
   if (l.inline_core.sessions > 0) {
     // The peer spins each state's median: a solve's mean is what a server pays.
@@ -165,9 +179,11 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
       level["inline"]["core_mean_ms"] = l.inline_core.mean_ms;
       level["inline"]["busy_mean_ms"] = l.inline_core.busy_mean_ms;
       level["inline"]["core_sessions_in_turn"] = l.inline_core.sessions;
-      level["vs_inline"] = {{"solves_ratio", l.solves_per_s / l.inline_solve->solves_per_s},
-                            {"p50_delta_us", (l.p50_ms - l.inline_solve->p50_ms) * 1e3},
-                            {"p99_ratio", l.p99_ms / l.inline_solve->p99_ms}};
+      level["vs_inline"] = VersusPeerJson(l, *l.inline_solve);
+    }
+    if (l.bare != nullptr) {
+      level["bare"] = PeerJson(*l.bare);
+      level["vs_bare"] = VersusPeerJson(l, *l.bare);
     }
     out["levels"].push_back(std::move(level));
   }

@@ -28,6 +28,7 @@ struct RunHeader {
   double capacity_per_s = 0.0;  ///< solve_cores / core median solve time
   bool echo = false;            ///< every level is also run against the zero-work echo server
   bool inline_solve = false;    ///< and against the echo busy for the core median in its reaction
+  bool bare = false;            ///< and against the bare server solving in its reaction
   std::string peer_cpus;        ///< CPUs the echo peers and the core baseline ran on ("": not pinned)
   std::string generator_cpus;   ///< CPUs the load generator ran on
   int rounds = 1;               ///< runs of each level against each server, interleaved
@@ -40,11 +41,11 @@ int UsableCores(int cores, const std::string& cpus);
 
 void PrintHeader(const RunHeader& header);
 void PrintLevel(const RunHeader& header, const LevelReport& level);
-// The row of a level run against an echo server (`label`: echo or inline), below the real
+// The row of a level run against a peer (`label`: echo, inline or bare), below the real
 // level's row; its overhead is the p50 above `busy_ms`, the echo's stand-in solve.
 void PrintPeerLevel(const char* label, const LevelReport& peer, double busy_ms);
-// The server's level set against the inline peer's: solves/s ratio, p50 difference, p99
-// ratio, and how evenly the streams were served.
+// The server's level set against the inline and the bare peers': solves/s ratio, p50
+// difference, p99 ratio, and how evenly the streams were served.
 void PrintRatios(const LevelReport& level);
 void PrintJson(const RunHeader& header, const std::vector<LevelReport>& levels);
 // --fleet: S sessions per SolveFleet call against S separate Control streams, same run.

@@ -163,6 +163,7 @@ void ControlStream::OnReadDone(bool ok) {
     return;
   }
   bool read_more;
+  bool read_ahead = true;
   std::optional<v1::ControlRequest> start;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -176,13 +177,17 @@ void ControlStream::OnReadDone(bool ok) {
       QueueWriteLocked(ErrorResponse(
           request.sequence(), state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
     } else {
+      read_timing_.StepArrived(solving_, read_after_solve_, Clock::now() - read_started_at_, writing_);
       start = EnqueueStepLocked(std::move(request));
+      read_ahead = read_timing_.ahead();
     }
     read_more = ShouldReadLocked();
   }
-  // Reading on first: a newer step that arrives during the solve supersedes the parked one.
-  if (read_more) ReadNext();
-  if (start.has_value()) StartSolve(*std::move(start));
+  // Reading on first: a newer step that arrives during the solve supersedes the parked one;
+  // unless the client waits for its answers and the step is solved here (ReadTiming).
+  const bool read_after_solve = read_more && start.has_value() && !read_ahead && SolvesHere();
+  if (read_more && !read_after_solve) ReadNext();
+  if (start.has_value()) StartSolve(*std::move(start), read_after_solve);
   Pump();
 }
 
@@ -235,7 +240,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
     }
   }
   if (read_more) ReadNext();
-  if (start.has_value()) StartSolve(*std::move(start));
+  if (start.has_value()) StartSolve(*std::move(start), /*read_after_solve=*/false);
   Pump();
 }
 
@@ -272,7 +277,7 @@ bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms) {
 
 bool ControlStream::SolvesHere() const { return SolvesInPlace(*entry_, state_->options.inline_solve_max_ms); }
 
-void ControlStream::StartSolve(v1::ControlRequest request) {
+void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve) {
   for (;;) {
     const std::uint64_t sequence = request.sequence();
     const auto queued_at = Clock::now();
@@ -286,8 +291,16 @@ void ControlStream::StartSolve(v1::ControlRequest request) {
     const bool short_solve = SolvesHere();
     if (short_solve && SessionStrand::TryRunHere(
                            entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },
-                           [this] { Pump(); }, state_->options.inline_solve_max_ms)) {
+                           [this, read_after_solve] {
+                             Pump();  // the answer first: the read must not start before it left
+                             if (read_after_solve) ReadHeldBack();
+                           },
+                           state_->options.inline_solve_max_ms)) {
       return;
+    }
+    if (read_after_solve) {  // not solved here after all: read ahead of the solve on the pool
+      read_after_solve = false;
+      ReadHeldBack();
     }
     const absl::Status queued = SessionStrand::Submit(
         entry_->strand, state_->pool,
@@ -310,6 +323,15 @@ void ControlStream::StartSolve(v1::ControlRequest request) {
   }
 }
 
+void ControlStream::ReadHeldBack() {
+  bool read_more;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    read_more = ShouldReadLocked();
+  }
+  if (read_more) ReadNext(/*after_solve=*/true);
+}
+
 void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused) {
   std::optional<v1::ControlRequest> next;
   {
@@ -318,7 +340,7 @@ void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& 
     solving_ = false;
     next = TakeParkedLocked();
   }
-  if (next.has_value()) StartSolve(*std::move(next));
+  if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
   Pump();
 }
 
@@ -347,7 +369,7 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
     next = TakeParkedLocked();
   }
   // Still inside this session's strand task: the next step queues behind it.
-  if (next.has_value()) StartSolve(*std::move(next));
+  if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
   if (pump) Pump();
 }
 
@@ -379,7 +401,12 @@ void ControlStream::Pump() {
   if (finish) End(final_status_);
 }
 
-void ControlStream::ReadNext() {
+void ControlStream::ReadNext(bool after_solve) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    read_after_solve_ = after_solve;
+    read_started_at_ = Clock::now();
+  }
   HandToGrpc(this);
   StartRead(&read_buffer_);
 }

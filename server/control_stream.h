@@ -11,6 +11,7 @@
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 #include "server/caller.h"
+#include "server/read_timing.h"
 #include "server/server_context.h"
 
 namespace nupmpc::server {
@@ -28,7 +29,9 @@ bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms);
 // most one waits. A step that arrives while another one waits replaces it, and the replaced
 // one is answered at once with SOLVE_STATUS_SUPERSEDED (nothing of it is applied). A client
 // that sends faster than the server solves therefore always gets the plan for its latest
-// state next, and never builds up a backlog.
+// state next, and never builds up a backlog. A step solved in place is read ahead of only
+// while the client shows it sends before its answers (server/read_timing.h): a closed
+// loop's next step is read after the solve, which is cheaper and loses nothing.
 //
 // Bounded: at most ServerLimits.max_stream_answers answers wait for the client to read
 // them; then the stream stops reading (HTTP/2 flow control holds the client's writes) until
@@ -82,8 +85,12 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   // Solves a step taken by TakeParkedLocked: here if the session and a core are free and its
   // solves are short (no hand-off to a worker: the latency of a transport-bound step),
   // else on the pool through the session's strand. Called without mu_; the caller Pumps
-  // afterwards (an answer solved in place is written then).
-  void StartSolve(v1::ControlRequest request);
+  // afterwards (an answer solved in place is written then). `read_after_solve`: the next
+  // read was held back for this step (ReadTiming): it starts once the answer is written if
+  // the step is solved here, else at once, ahead of the solve on the pool.
+  void StartSolve(v1::ControlRequest request, bool read_after_solve);
+  // Starts the read StartSolve held back, unless the stream stopped reading meanwhile.
+  void ReadHeldBack();
   // Solves and queues the answer; `pump`: also starts writing it (on a worker; in place the
   // caller of StartSolve does, after the core is given back).
   void Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump);
@@ -97,7 +104,8 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void Pump();
   // gRPC's StartRead / StartWrite / Finish, each announced to ThreadSanitizer as a hand-over
   // to gRPC's threads (server/grpc_handover.h).
-  void ReadNext();
+  // `after_solve`: the read starts after the solve of the step read before it (ReadTiming).
+  void ReadNext(bool after_solve = false);
   void Write(const grpc::ByteBuffer* bytes);
   void End(const grpc::Status& status);
 
@@ -136,6 +144,9 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   bool solving_ = false;                       // a step is on the pool (in its session's strand)
   std::deque<grpc::ByteBuffer> writes_;        // serialized answers; front is being written when writing_
   bool writing_ = false;
+  ReadTiming read_timing_;
+  bool read_after_solve_ = false;       // the pending read was started after a solve
+  Clock::time_point read_started_at_;   // when the pending read was started
   grpc::Status final_status_;
   // Set by Begin; cancelled once the first message arrives (the callback holds only a weak
   // reference, so a pending timer never keeps the stream alive).

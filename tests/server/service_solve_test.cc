@@ -4,10 +4,12 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <map>
 #include <thread>
 
 #include "core/session/session.h"
 #include "gmock/gmock.h"
+#include "server/read_timing.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {
@@ -315,6 +317,57 @@ TEST_F(ServiceTest, NewestStateWinsWhenTheClientSendsFasterThanTheServerSolves) 
   int superseded = 0;
   for (const auto& [seq, status] : answered) superseded += status == v1::SOLVE_STATUS_SUPERSEDED;
   EXPECT_GE(superseded, 1);
+}
+
+// Steps solved on the reaction thread (short solves) of a stream that first ran as a closed
+// loop, so that it reads each step after the solve (server/read_timing.h), then sends a
+// burst without reading: the stream notices and reads ahead again, so the burst's steps
+// supersede each other and the newest is solved, as for long solves.
+TEST_F(ServiceTest, NewestStateWinsForABurstAfterAClosedLoopOfStepsSolvedInPlace) {
+  server::ServerOptions options = DefaultOptions();
+  options.inline_solve_max_ms = 100.0;  // in place in the sanitizer builds too
+  server_->Shutdown();
+  StartServer(options);
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
+  ASSERT_TRUE(inst.closed_loop.has_value() && !inst.closed_loop->x1.empty());
+  const std::vector<Eigen::VectorXd>& states = inst.closed_loop->x1;
+  grpc::ClientContext context;
+  auto stream = client_->stub().Control(&context);
+  v1::ControlRequest first;
+  *first.mutable_spec() = SpecOrDie(inst.problem);
+  ASSERT_TRUE(stream->Write(first));
+  v1::ControlResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  std::uint64_t sequence = 0;
+  const auto step = [&](int state) {
+    v1::ControlRequest r;
+    r.set_sequence(++sequence);
+    const Eigen::VectorXd& x = states[static_cast<std::size_t>(state) % states.size()];
+    r.mutable_step()->mutable_state()->Add(x.data(), x.data() + x.size());
+    return r;
+  };
+  for (int t = 0; t < 2 * server::ReadTiming::kClosedLoopSteps; ++t) {  // the closed loop
+    ASSERT_TRUE(stream->Write(step(t)));
+    ASSERT_TRUE(stream->Read(&response));
+    ASSERT_EQ(response.sequence(), sequence);
+    ASSERT_TRUE(response.result().has_plan()) << response.error_message();
+  }
+  constexpr int kBurst = 40;
+  const std::uint64_t first_of_burst = sequence + 1;
+  for (int i = 0; i < kBurst; ++i) ASSERT_TRUE(stream->Write(step(i)));
+  stream->WritesDone();
+  std::map<std::uint64_t, v1::ControlResponse> answered;
+  while (stream->Read(&response)) {
+    EXPECT_EQ(answered.count(response.sequence()), 0u) << "answered twice: " << response.sequence();
+    answered[response.sequence()] = response;
+  }
+  EXPECT_TRUE(stream->Finish().ok());
+  ASSERT_EQ(answered.size(), static_cast<std::size_t>(kBurst));  // every step answered exactly once
+  EXPECT_EQ(answered.begin()->first, first_of_burst);
+  EXPECT_TRUE(answered.rbegin()->second.result().has_plan());  // the newest is solved
+  int superseded = 0;
+  for (const auto& [seq, r] : answered) superseded += r.result().status() == v1::SOLVE_STATUS_SUPERSEDED;
+  EXPECT_GE(superseded, 1) << "the burst was solved step by step: its steps were read after each solve";
 }
 
 }  // namespace

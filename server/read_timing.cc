@@ -1,0 +1,16 @@
+#include "server/read_timing.h"
+
+namespace nupmpc::server {
+
+void ReadTiming::StepArrived(bool solving, bool read_after, std::chrono::steady_clock::duration waited,
+                             bool answer_unsent) {
+  const bool sent_before_its_answer = solving || (read_after && (waited < kAlreadyThere || answer_unsent));
+  if (sent_before_its_answer) {
+    ahead_ = true;
+    closed_loop_steps_ = 0;
+  } else if (ahead_ && ++closed_loop_steps_ >= kClosedLoopSteps) {
+    ahead_ = false;
+  }
+}
+
+}  // namespace nupmpc::server
