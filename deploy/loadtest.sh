@@ -3,9 +3,9 @@
 # this machine, pinned to its own CPUs, and runs nupmpc-loadtest against it from the others:
 #   1. closed loop, concurrency 1, 2, 8, 64 on masses_N30 (transport-bound, solve ~0.1 ms),
 #      with new references every step at 1 and 8, and masses_N300 (solver-bound) at 1, 2,
-#      8; every level also against the zero-work echo and the inline-solve echo (peers in
-#      child processes pinned to the server's CPUs, interleaved with nupmpc in 3 rounds),
-#      with the ratios nupmpc/inline;
+#      8; every level also against the zero-work echo, the inline-solve echo and the bare
+#      server (peers in child processes pinned to the server's CPUs, interleaved with nupmpc
+#      in 3 rounds), with the ratios nupmpc/inline and nupmpc/bare;
 #   2. the fleet path: 100 masses_N30 sessions per SolveFleet call against 100 streams;
 #   3. overload: masses_N300 (a few ms per solve, so the generator can offer 10x what
 #      the server can solve), open loop at 10x the core-alone capacity, then at half of
@@ -64,11 +64,11 @@ run_loadtest() {
 }
 start_server
 echo "== closed loop, masses_N30 (transport-bound)"
-run_loadtest --instance "$benchmarks/masses_N30.json" --sweep 1,2,8,64 --inline_solve
+run_loadtest --instance "$benchmarks/masses_N30.json" --sweep 1,2,8,64 --inline_solve --bare_solve
 echo "== closed loop, masses_N30, new references every step"
-run_loadtest --instance "$benchmarks/masses_N30.json" --sweep 1,8 --inline_solve --new_references
+run_loadtest --instance "$benchmarks/masses_N30.json" --sweep 1,8 --inline_solve --new_references --bare_solve
 echo "== closed loop, masses_N300 (solver-bound)"
-run_loadtest --instance "$benchmarks/masses_N300.json" --sweep 1,2,8 --inline_solve
+run_loadtest --instance "$benchmarks/masses_N300.json" --sweep 1,2,8 --inline_solve --bare_solve
 echo "== fleet: 100 masses_N30 sessions per SolveFleet call, then 100 separate Control streams"
 run_loadtest --instance "$benchmarks/masses_N30.json" --fleet 100 --echo=false
 echo "== memory: 10,000 idle masses_N30 sessions"

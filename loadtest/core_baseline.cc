@@ -41,10 +41,12 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
   for (int round = 0; round < rounds; ++round) {
     for (std::size_t t = 0; t < states.size(); ++t, ++sequence) {
       message.mutable_state()->Assign(states[t].begin(), states[t].end());
+      // Each round from a cold start, as a stream restarts its states.
+      message.set_warm_start(t == 0 ? v1::WARM_START_COLD : v1::WARM_START_UNSPECIFIED);
       if (new_references) *message.mutable_update() = MovingReferences(spec, sequence);
       for (server::BuiltSession& session : built) {
         const auto start = std::chrono::steady_clock::now();
-        absl::StatusOr<core::SolveSummary> summary = StepAsTheServerDoes(*session.solver, message, t > 0, &solution);
+        absl::StatusOr<core::SolveSummary> summary = StepAsTheServerDoes(session, message, &solution);
         const auto stop = std::chrono::steady_clock::now();
         if (!summary.ok()) return summary.status();
         times_ms.push_back(std::chrono::duration<double, std::milli>(stop - start).count());
@@ -79,8 +81,9 @@ absl::StatusOr<double> MeasureFleetCoreMeanMs(const v1::ProblemSpec& spec,
     for (int s = 0; s < sessions; ++s) {
       const std::vector<double>& x = states[(static_cast<std::size_t>(period) + 7 * static_cast<std::size_t>(s)) % states.size()];
       message.mutable_state()->Assign(x.begin(), x.end());
+      message.set_warm_start(period == 0 ? v1::WARM_START_COLD : v1::WARM_START_UNSPECIFIED);
       absl::StatusOr<core::SolveSummary> summary =
-          StepAsTheServerDoes(*fleet[static_cast<std::size_t>(s)].solver, message, period > 0, &solution);
+          StepAsTheServerDoes(fleet[static_cast<std::size_t>(s)], message, &solution);
       if (!summary.ok()) return summary.status();
     }
   }

@@ -36,20 +36,23 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
       while (server::ThreadCpuTime() < until) {
       }
     }
+    // The answer is built before the lock: a solve must not hold up OnWriteDone.
+    v1::ControlResponse response;
+    if (ok) {
+      response.set_sequence(incoming_.sequence());
+      if (answer_ == nullptr) {
+        AnswerBySolving(response);
+      } else if (incoming_.has_step()) {
+        *response.mutable_result() = *answer_;
+      } else {
+        response.set_session_id("echo");
+      }
+    }
     std::unique_lock<std::mutex> lock(mu_);
     if (!ok) {
       reads_done_ = true;
       FinishIfIdleLocked(lock);
       return;
-    }
-    v1::ControlResponse response;
-    response.set_sequence(incoming_.sequence());
-    if (answer_ == nullptr) {
-      AnswerBySolving(response);
-    } else if (incoming_.has_step()) {
-      *response.mutable_result() = *answer_;
-    } else {
-      response.set_session_id("echo");
     }
     writes_.push_back(std::move(response));
     const bool start_write = !writing_;
@@ -79,7 +82,8 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
  private:
   // The bare peer: the session built from the stream's first message (its spec, as the
   // server admits it but without limits) and each step solved right here as the server's
-  // SolveStep does, answered with the real result; what fails is answered as an error.
+  // SolveStep does (StepAsTheServerDoes), answered with the real result; what fails is
+  // answered as an error.
   void AnswerBySolving(v1::ControlResponse& response) {
     if (incoming_.has_spec()) {
       absl::StatusOr<server::BuiltSession> built = server::BuildSession(incoming_.spec(), bench::NoSizeLimits());
@@ -91,11 +95,8 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
     if (!session_.has_value()) {
       return Refuse(absl::FailedPreconditionError("spec: the stream's first message carries none"), response);
     }
-    const bool warm_start = solved_ && incoming_.step().warm_start() != v1::WARM_START_COLD;
-    absl::StatusOr<core::SolveSummary> summary =
-        StepAsTheServerDoes(*session_->solver, incoming_.step(), warm_start, &solution_);
+    absl::StatusOr<core::SolveSummary> summary = StepAsTheServerDoes(*session_, incoming_.step(), &solution_);
     if (!summary.ok()) return Refuse(summary.status(), response);
-    solved_ = true;
     server::ResultToProto(*summary, solution_, response.mutable_result());
   }
 
@@ -116,7 +117,6 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
   std::size_t steps_ = 0;  ///< steps read (reads are one at a time)
   std::optional<server::BuiltSession> session_;  ///< the bare peer's
   core::Solution solution_;
-  bool solved_ = false;
   v1::ControlRequest incoming_;
   std::mutex mu_;
   std::deque<v1::ControlResponse> writes_;

@@ -1,14 +1,15 @@
 #ifndef NUPMPC_LOADTEST_ECHO_SERVER_H_
 #define NUPMPC_LOADTEST_ECHO_SERVER_H_
 
-// The peers of the load test: a zero-work stand-in for nupmpc-server's Control
-// stream on a loopback port (nupmpc-loadtest runs it in a child process, EchoProcess). It
-// answers the first message with a session id and every step at once, inside the gRPC
-// reaction, with one fixed real answer (the plan the real server returned for the
-// instance, so the messages have the real sizes). The same load level against it measures
-// what gRPC and this machine's loopback cost for exactly this traffic, with the load
-// generator on the same cores: the gap between it and the real server is nupmpc's own
-// cost (solve, hand-over to the worker pool, validation, conversion).
+// The peers of the load test: stand-ins for nupmpc-server's Control stream on a loopback
+// port (nupmpc-loadtest runs each in a child process, EchoProcess). The echo answers the
+// first message with a session id and every step at once, inside the gRPC reaction, with
+// one fixed real answer (the plan the real server returned for the instance, so the
+// messages have the real sizes). The same load level against it measures what gRPC and
+// this machine's loopback cost for exactly this traffic, with the load generator on the
+// same cores: the gap between it and the real server is nupmpc's own cost (solve,
+// hand-over to the worker pool, validation, conversion). The inline peer is the echo busy
+// for each step's solve time; the bare peer (StartSolving) really solves.
 
 #include <chrono>
 #include <memory>

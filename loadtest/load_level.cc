@@ -160,6 +160,8 @@ LevelReport MergeRounds(const std::vector<LevelReport>& rounds) {
 
 bool StarvedAStream(const LevelReport& level) {
   if (!level.config.closed_loop || level.config.concurrency < 2) return false;
+  const double answers_per_stream = static_cast<double>(level.tally.latency_ms.size()) / level.config.concurrency;
+  if (answers_per_stream < kMinAnswersToJudge) return false;
   return level.stream_min_share < 1.0 / kFairShareFactor || level.stream_max_share > kFairShareFactor;
 }
 

@@ -69,8 +69,11 @@ LevelReport MergeRounds(const std::vector<LevelReport>& rounds);
 // A closed-loop level starved a stream when its least-served stream got under half the mean
 // or its most served over twice the mean (in any round): every stream asks for its next step
 // only once answered, so a fair server serves them alike. Open-loop levels are not judged:
-// there a stream's answers also depend on which of its arrivals were superseded or refused.
+// there a stream's answers also depend on which of its arrivals were superseded or refused;
+// nor levels with under kMinAnswersToJudge answers per stream, whose shares are mostly
+// counting noise.
 inline constexpr double kFairShareFactor = 2.0;
+inline constexpr double kMinAnswersToJudge = 20.0;
 bool StarvedAStream(const LevelReport& level);
 
 }  // namespace nupmpc::loadtest

@@ -255,6 +255,11 @@ int main(int argc, char** argv) {
   // As nupmpc-server does (see its main): the generator and the peers do not pay Abseil's
   // lock-order debugging per request either, so the comparison stays fair.
   absl::SetMutexDeadlockDetectionMode(absl::OnDeadlockCycle::kIgnore);
+  if (absl::GetFlag(FLAGS_serve_bare)) {  // needs no instance: its streams bring their specs
+    absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> bare = lt::EchoControlServer::StartSolving();
+    if (!bare.ok()) return Fail("bare server", bare.status());
+    return lt::ServeEchoUntilStdinCloses(**bare);
+  }
   const absl::StatusOr<std::optional<cpu_set_t>> server_cpus = PinProcess();
   if (!server_cpus.ok()) return Fail("--server_cpus/--client_cpus", server_cpus.status());
   const std::string generator_cpus = nupmpc::server::CallingThreadCpuList();
@@ -269,11 +274,6 @@ int main(int argc, char** argv) {
   const std::string name = std::filesystem::path(instance_path).stem().string();
   absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
   if (!security.ok()) return Fail("connection security", security.status());
-  if (absl::GetFlag(FLAGS_serve_bare)) {
-    absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> bare = lt::EchoControlServer::StartSolving();
-    if (!bare.ok()) return Fail("bare server", bare.status());
-    return lt::ServeEchoUntilStdinCloses(**bare);
-  }
   if (const std::string busy_us = absl::GetFlag(FLAGS_serve_echo_busy_us); !busy_us.empty()) {
     return ServeEcho(target, *security, file->spec, busy_us);
   }

@@ -63,6 +63,10 @@ void ControlStream::Begin() {
     if (const std::shared_ptr<ControlStream> self = weak.lock()) self->OnFirstMessageTimeout(fired);
   });
   HandToGrpc(&kFirstMessageAlarms);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++reads_starting_;
+  }
   ReadNext();
 }
 
@@ -164,6 +168,7 @@ void ControlStream::OnReadDone(bool ok) {
   }
   bool read_more;
   bool read_ahead = true;
+  bool read_after_solve = false;
   std::optional<v1::ControlRequest> start;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -179,13 +184,14 @@ void ControlStream::OnReadDone(bool ok) {
     } else {
       read_timing_.StepArrived(solving_, read_after_solve_, Clock::now() - read_started_at_, writing_);
       start = EnqueueStepLocked(std::move(request));
-      read_ahead = read_timing_.ahead();
+      read_ahead = read_timing_.ReadAhead();
     }
     read_more = ShouldReadLocked();
+    // Reading on first: a newer step that arrives during the solve supersedes the parked
+    // one; unless the client waits for its answers and the step is solved here (ReadTiming).
+    read_after_solve = read_more && start.has_value() && !read_ahead && SolvesHere();
+    if (read_more && !read_after_solve) ++reads_starting_;
   }
-  // Reading on first: a newer step that arrives during the solve supersedes the parked one;
-  // unless the client waits for its answers and the step is solved here (ReadTiming).
-  const bool read_after_solve = read_more && start.has_value() && !read_ahead && SolvesHere();
   if (read_more && !read_after_solve) ReadNext();
   if (start.has_value()) StartSolve(*std::move(start), read_after_solve);
   Pump();
@@ -237,6 +243,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
         QueueWriteLocked(std::move(hello));
       }
       read_more = ShouldReadLocked();
+      if (read_more) ++reads_starting_;
     }
   }
   if (read_more) ReadNext();
@@ -328,8 +335,13 @@ void ControlStream::ReadHeldBack() {
   {
     std::lock_guard<std::mutex> lock(mu_);
     read_more = ShouldReadLocked();
+    if (read_more) ++reads_starting_;
   }
-  if (read_more) ReadNext(/*after_solve=*/true);
+  if (read_more) {
+    ReadNext(/*after_solve=*/true);
+  } else {
+    Pump();  // the read the stream waited for will not come: it may finish now
+  }
 }
 
 void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused) {
@@ -391,7 +403,7 @@ void ControlStream::Pump() {
     if (!writing_ && !writes_.empty()) {
       writing_ = true;
       to_write = &writes_.front();  // deque: stays valid while other elements are added at the back
-    } else if (!writing_ && !solving_ && phase_ != Phase::kAttaching &&
+    } else if (!writing_ && !solving_ && reads_starting_ == 0 && phase_ != Phase::kAttaching &&
                (phase_ == Phase::kEnding || (reading_ == Reading::kDone && !parked_.has_value()))) {
       phase_ = Phase::kFinished;
       finish = true;
@@ -409,6 +421,9 @@ void ControlStream::ReadNext(bool after_solve) {
   }
   HandToGrpc(this);
   StartRead(&read_buffer_);
+  // From here the pending read keeps the stream open: its OnReadDone pumps.
+  std::lock_guard<std::mutex> lock(mu_);
+  --reads_starting_;
 }
 
 void ControlStream::Write(const grpc::ByteBuffer* bytes) {
@@ -434,6 +449,7 @@ void ControlStream::OnWriteDone(bool ok) {
       reading_ = Reading::kDone;
     }
     resume_reading = reading_ == Reading::kPaused && ShouldReadLocked();
+    if (resume_reading) ++reads_starting_;
   }
   if (resume_reading) ReadNext();
   Pump();

@@ -98,13 +98,15 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
   void QueueWriteLocked(v1::ControlResponse response);
   // Whether to start the next read now: not while the client leaves max_stream_answers
-  // answers unread (then reading_ is kPaused and OnWriteDone resumes). Called with mu_.
+  // answers unread (then reading_ is kPaused and OnWriteDone resumes). Called with mu_; a
+  // caller that then reads counts the read in reads_starting_ before it lets go of mu_.
   bool ShouldReadLocked();
   // Starts the next write / finishes the stream if nothing is left. Called without mu_.
   void Pump();
   // gRPC's StartRead / StartWrite / Finish, each announced to ThreadSanitizer as a hand-over
   // to gRPC's threads (server/grpc_handover.h).
   // `after_solve`: the read starts after the solve of the step read before it (ReadTiming).
+  // The caller counted it in reads_starting_.
   void ReadNext(bool after_solve = false);
   void Write(const grpc::ByteBuffer* bytes);
   void End(const grpc::Status& status);
@@ -144,6 +146,10 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   bool solving_ = false;                       // a step is on the pool (in its session's strand)
   std::deque<grpc::ByteBuffer> writes_;        // serialized answers; front is being written when writing_
   bool writing_ = false;
+  // Reads decided on (under mu_) but not started yet (ReadNext counts it down once its
+  // StartRead is issued): the stream must not finish in between, as no read may start
+  // after Finish.
+  int reads_starting_ = 0;
   ReadTiming read_timing_;
   bool read_after_solve_ = false;       // the pending read was started after a solve
   Clock::time_point read_started_at_;   // when the pending read was started

@@ -19,27 +19,33 @@ namespace nupmpc::server {
 // The stream starts reading ahead. It reads after once kClosedLoopSteps steps in a row
 // arrived with none of its steps being solved (the client waited for its answers), and
 // goes back to reading ahead at the first sign of a step sent before its answer: one that
-// arrives while another is being solved, or one that a read started after a solve finds
-// already there: it completes within kAlreadyThere, or before gRPC has finished writing
-// the answer the read was held back for (a closed loop's client has not seen that answer
-// yet; a loaded machine delays both callbacks alike, so one of the two signs shows). The
-// step that showed it is then read ahead of, so a burst is superseded as before from its
-// second step on.
+// arrives while another is being solved or before gRPC has finished writing an answer of
+// the stream (a closed loop's client has not seen that answer yet), or one that a read
+// started after a solve finds already there (it completes within kAlreadyThere). These
+// signs depend on how soon gRPC's callbacks run, so while reading
+// after, every kProbeSteps-th step is read ahead of all the same: a client sending ahead
+// then shows it by the step that arrives during that solve. A burst is therefore solved
+// in order for at most kProbeSteps steps (each a short solve) before its steps supersede
+// each other again; the step that showed it is read ahead of.
 class ReadTiming {
  public:
   static constexpr int kClosedLoopSteps = 4;
+  static constexpr int kProbeSteps = 8;
   static constexpr std::chrono::microseconds kAlreadyThere{15};
 
   // A step arrived: `solving` whether another of the stream's steps was being solved,
   // `read_after` whether its read was started after a solve, `waited` how long that read
   // was pending, `answer_unsent` whether an answer of the stream is still being written.
   void StepArrived(bool solving, bool read_after, std::chrono::steady_clock::duration waited, bool answer_unsent);
-  // Whether the next in-place solve's read starts before it.
+  // Whether the step that arrived last is read ahead of, should it be solved in place.
+  bool ReadAhead();
+  // Whether the stream reads ahead of every step (else after, but for the probes).
   bool ahead() const { return ahead_; }
 
  private:
   bool ahead_ = true;
   int closed_loop_steps_ = 0;
+  int steps_since_probe_ = 0;
 };
 
 }  // namespace nupmpc::server

@@ -171,9 +171,90 @@ TEST_F(LoadTest, EchoPeerRunsAsAChildProcessOfTheLoadTestBinary) {
   EXPECT_GT(r->tally.iterations, 0u);
   echo->reset();  // returns once the child has exited
 
+  // The bare peer's child mode: it solves, so its answers carry the solver's iterations.
+  absl::StatusOr<std::unique_ptr<loadtest::EchoProcess>> bare =
+      loadtest::EchoProcess::Spawn({NUPMPC_LOADTEST_BINARY, "--serve_bare"});
+  ASSERT_TRUE(bare.ok()) << bare.status();
+  absl::StatusOr<loadtest::LevelReport> solved = loadtest::RunLevel((*bare)->target(), Plan(true), ShortLevel(2));
+  ASSERT_TRUE(solved.ok()) << solved.status();
+  EXPECT_TRUE(solved->tally.errors.empty());
+  EXPECT_GT(solved->tally.latency_ms.size(), 10u);
+  EXPECT_EQ(solved->tally.no_plan, 0u);
+  EXPECT_GT(solved->tally.iterations, 0u);
+  bare->reset();
+
   // A child that never names a target is an error, not a hang.
   absl::StatusOr<std::unique_ptr<loadtest::EchoProcess>> mute = loadtest::EchoProcess::Spawn({"/bin/true"});
   EXPECT_EQ(mute.status().code(), absl::StatusCode::kUnavailable);
+}
+
+// Every closed-loop state of `w` through one Control stream on `stub`, a session created
+// from w.spec; the answers in order (the first message's answer left out).
+std::vector<v1::ControlResponse> StepThrough(v1::MpcService::Stub& stub, const Workload& w, int rounds) {
+  grpc::ClientContext context;
+  auto stream = stub.Control(&context);
+  v1::ControlRequest first;
+  *first.mutable_spec() = w.spec;
+  std::vector<v1::ControlResponse> answers;
+  v1::ControlResponse response;
+  if (!stream->Write(first) || !stream->Read(&response)) return answers;
+  std::uint64_t sequence = 0;
+  for (int r = 0; r < rounds; ++r) {
+    for (std::size_t t = 0; t < w.states.size(); ++t) {
+      v1::ControlRequest step;
+      step.set_sequence(++sequence);
+      step.mutable_step()->mutable_state()->Add(w.states[t].begin(), w.states[t].end());
+      if (t == 0 && r > 0) step.mutable_step()->set_warm_start(v1::WARM_START_COLD);
+      if (!stream->Write(step) || !stream->Read(&response)) return answers;
+      answers.push_back(response);
+    }
+  }
+  stream->WritesDone();
+  (void)stream->Finish();
+  return answers;
+}
+
+TEST_F(LoadTest, BarePeerSolvesEveryStepAsTheServerDoes) {
+  absl::StatusOr<std::unique_ptr<loadtest::EchoControlServer>> bare = loadtest::EchoControlServer::StartSolving();
+  ASSERT_TRUE(bare.ok()) << bare.status();
+  const auto bare_stub = v1::MpcService::NewStub(grpc::CreateChannel((*bare)->target(), grpc::InsecureChannelCredentials()));
+  const std::vector<v1::ControlResponse> from_server = StepThrough(client_->stub(), workload_, 2);
+  const std::vector<v1::ControlResponse> from_bare = StepThrough(*bare_stub, workload_, 2);
+  ASSERT_EQ(from_server.size(), 2 * workload_.states.size());
+  ASSERT_EQ(from_bare.size(), from_server.size());
+  for (std::size_t i = 0; i < from_server.size(); ++i) {
+    ASSERT_TRUE(from_bare[i].result().has_plan()) << i << ": " << from_bare[i].error_message();
+    EXPECT_EQ(from_bare[i].sequence(), from_server[i].sequence());
+    // The same steps, the same warm starts: the same plans, bit for bit.
+    EXPECT_THAT(from_bare[i].result().inputs(), ::testing::ElementsAreArray(from_server[i].result().inputs())) << i;
+    EXPECT_EQ(from_bare[i].result().iterations(), from_server[i].result().iterations()) << i;
+  }
+
+  // A step before any spec is answered with an error; a state of the wrong size with the
+  // server's own error for it.
+  grpc::ClientContext context;
+  auto stream = bare_stub->Control(&context);
+  v1::ControlRequest orphan;
+  orphan.set_sequence(1);
+  orphan.mutable_step()->add_state(1.0);
+  v1::ControlResponse response;
+  ASSERT_TRUE(stream->Write(orphan) && stream->Read(&response));
+  EXPECT_NE(response.error_code(), 0);
+  EXPECT_THAT(response.error_message(), ::testing::HasSubstr("spec"));
+  v1::ControlRequest short_state;
+  *short_state.mutable_spec() = workload_.spec;
+  short_state.set_sequence(2);
+  short_state.mutable_step()->add_state(1.0);
+  ASSERT_TRUE(stream->Write(short_state) && stream->Read(&response));
+  EXPECT_EQ(response.session_id(), "bare");
+  stream->WritesDone();
+  EXPECT_TRUE(stream->Finish().ok());
+  absl::StatusOr<v1::CreateSessionResponse> session = client_->CreateSession(workload_.spec);
+  ASSERT_TRUE(session.ok()) << session.status();
+  absl::StatusOr<v1::SolveResult> refused = client_->Solve(session->session_id(), short_state.step());
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(response.error_code(), static_cast<int>(refused.status().code())) << response.error_message();
+  EXPECT_EQ(response.error_message(), refused.status().message());
 }
 
 TEST_F(LoadTest, OpenLoopArrivalsAreAnsweredOrSupersededNeverLost) {
@@ -316,12 +397,13 @@ TEST(UsableCores, TheServersCoresAtMostTheCpusItMayRunOn) {
 }
 
 TEST(StarvedAStream, AClosedLoopStreamOutsideAFactorTwoOfTheMean) {
-  const auto level = [](bool closed_loop, int concurrency, double least, double most) {
+  const auto level = [](bool closed_loop, int concurrency, double least, double most, int answers_per_stream = 100) {
     loadtest::LevelReport l;
     l.config.closed_loop = closed_loop;
     l.config.concurrency = concurrency;
     l.stream_min_share = least;
     l.stream_max_share = most;
+    l.tally.latency_ms.assign(static_cast<std::size_t>(concurrency * answers_per_stream), 0.1);
     return l;
   };
   EXPECT_FALSE(loadtest::StarvedAStream(level(true, 64, 0.98, 1.02)));
@@ -329,7 +411,8 @@ TEST(StarvedAStream, AClosedLoopStreamOutsideAFactorTwoOfTheMean) {
   EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.49, 1.01)));  // one stream under half the mean
   EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.0, 1.03)));   // one never answered
   EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.86, 2.01)));   // one served over twice the mean
-  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.0, 0.0)));     // nothing answered at all
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.0, 2.5)));     // one stream took most
+  EXPECT_FALSE(loadtest::StarvedAStream(level(true, 8, 0.4, 1.6, 5)));  // 5 answers a stream: noise
   EXPECT_FALSE(loadtest::StarvedAStream(level(false, 64, 0.0, 3.0)));  // open loop: arrivals decide
   EXPECT_FALSE(loadtest::StarvedAStream(level(true, 1, 1.0, 1.0)));
 }
