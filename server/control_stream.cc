@@ -421,9 +421,15 @@ void ControlStream::ReadNext(bool after_solve) {
   }
   HandToGrpc(this);
   StartRead(&read_buffer_);
-  // From here the pending read keeps the stream open: its OnReadDone pumps.
-  std::lock_guard<std::mutex> lock(mu_);
-  --reads_starting_;
+  // From here the pending read keeps the stream open (its OnReadDone pumps), but a stream
+  // that is ending finishes without waiting for the client: the Finish Pump held back.
+  bool pump;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    --reads_starting_;
+    pump = reads_starting_ == 0 && (phase_ == Phase::kEnding || reading_ == Reading::kDone);
+  }
+  if (pump) Pump();
 }
 
 void ControlStream::Write(const grpc::ByteBuffer* bytes) {
