@@ -75,13 +75,17 @@ void ControlStream::OnFirstMessageTimeout(bool fired) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (done_ || phase_ != Phase::kAwaitingFirst) return;
-    phase_ = Phase::kFinished;  // the pending read completes with !ok and finds the stream finished
+    // Through Pump, which finishes only once Begin's read has been started (reads_starting_):
+    // the timer can fire before it is. The pending read then completes with !ok, or with a
+    // late first message that OnReadDone drops.
+    phase_ = Phase::kEnding;
+    final_status_ = state_->ToGrpc(
+        Rpc::kControl,
+        absl::DeadlineExceededError(absl::StrCat("first ControlRequest: none within first_message_timeout_s = ",
+                                                 state_->options.first_message_timeout_s,
+                                                 " s (ServerLimits.first_message_timeout_s); send the attach at once")));
   }
-  End(state_->ToGrpc(
-      Rpc::kControl,
-      absl::DeadlineExceededError(absl::StrCat("first ControlRequest: none within first_message_timeout_s = ",
-                                               state_->options.first_message_timeout_s,
-                                               " s (ServerLimits.first_message_timeout_s); send the attach at once"))));
+  Pump();
 }
 
 bool ControlStream::ShouldReadLocked() {
@@ -148,7 +152,8 @@ void ControlStream::OnReadDone(bool ok) {
   bool first_message;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (phase_ == Phase::kFinished) return;
+    // Ending before its first message was handled (its timer fired): drop what arrives.
+    if (phase_ == Phase::kFinished || phase_ == Phase::kEnding) return;
     first_message = phase_ == Phase::kAwaitingFirst;
     if (first_message) phase_ = Phase::kAttaching;
   }
