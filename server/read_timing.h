@@ -22,11 +22,11 @@ namespace nupmpc::server {
 // arrives while another is being solved or before gRPC has finished writing an answer of
 // the stream (a closed loop's client has not seen that answer yet), or one that a read
 // started after a solve finds already there (it completes within kAlreadyThere). These
-// signs depend on how soon gRPC's callbacks run, so while reading
-// after, every kProbeSteps-th step is read ahead of all the same: a client sending ahead
-// then shows it by the step that arrives during that solve. A burst is therefore solved
-// in order for at most kProbeSteps steps (each a short solve) before its steps supersede
-// each other again; the step that showed it is read ahead of.
+// signs depend on how soon gRPC's callbacks run, so while reading after, every
+// kProbeSteps-th step is read ahead of all the same: a client sending ahead then shows it
+// by the step gRPC delivers during that solve. (Superseding among steps solved in place
+// always depended on gRPC's other thread delivering the next step during the solve.) The
+// step that showed it is read ahead of.
 class ReadTiming {
  public:
   static constexpr int kClosedLoopSteps = 4;

@@ -319,18 +319,19 @@ TEST_F(ServiceTest, NewestStateWinsWhenTheClientSendsFasterThanTheServerSolves) 
   EXPECT_GE(superseded, 1);
 }
 
-// Steps solved on the reaction thread (short solves) of a stream that first ran as a closed
-// loop, so that it reads each step after the solve (server/read_timing.h), then sends a
-// burst without reading: the stream notices and reads ahead again, so the burst's steps
-// supersede each other and the newest is solved, as for long solves.
+// Steps solved on the reaction thread of a stream that first ran as a closed loop, so that
+// it reads each step after the solve (server/read_timing.h), then sends a burst without
+// reading: the stream notices and reads ahead again, so the burst's steps supersede each
+// other and the newest is solved, as for long solves. masses_N300 (about 1 ms a solve, in
+// place here): a step read ahead of a solve is delivered during it by gRPC's other thread
+// also on a loaded machine (with 0.05 ms solves a loaded CI machine delivered none in time).
 TEST_F(ServiceTest, NewestStateWinsForABurstAfterAClosedLoopOfStepsSolvedInPlace) {
   server::ServerOptions options = DefaultOptions();
-  options.inline_solve_max_ms = 100.0;  // in place in the sanitizer builds too
+  options.inline_solve_max_ms = 1000.0;  // in place, in the sanitizer builds too
   server_->Shutdown();
   StartServer(options);
-  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
-  ASSERT_TRUE(inst.closed_loop.has_value() && !inst.closed_loop->x1.empty());
-  const std::vector<Eigen::VectorXd>& states = inst.closed_loop->x1;
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N300");
+
   grpc::ClientContext context;
   auto stream = client_->stub().Control(&context);
   v1::ControlRequest first;
@@ -342,7 +343,7 @@ TEST_F(ServiceTest, NewestStateWinsForABurstAfterAClosedLoopOfStepsSolvedInPlace
   const auto step = [&](int state) {
     v1::ControlRequest r;
     r.set_sequence(++sequence);
-    const Eigen::VectorXd& x = states[static_cast<std::size_t>(state) % states.size()];
+    const Eigen::VectorXd x = inst.problem.initial_mean * (1.0 + 0.01 * (state % 10));  // states apart
     r.mutable_step()->mutable_state()->Add(x.data(), x.data() + x.size());
     return r;
   };
@@ -352,7 +353,7 @@ TEST_F(ServiceTest, NewestStateWinsForABurstAfterAClosedLoopOfStepsSolvedInPlace
     ASSERT_EQ(response.sequence(), sequence);
     ASSERT_TRUE(response.result().has_plan()) << response.error_message();
   }
-  constexpr int kBurst = 40;
+  constexpr int kBurst = 24;
   const std::uint64_t first_of_burst = sequence + 1;
   for (int i = 0; i < kBurst; ++i) ASSERT_TRUE(stream->Write(step(i)));
   stream->WritesDone();
@@ -368,7 +369,7 @@ TEST_F(ServiceTest, NewestStateWinsForABurstAfterAClosedLoopOfStepsSolvedInPlace
   int superseded = 0;
   for (const auto& [seq, r] : answered) superseded += r.result().status() == v1::SOLVE_STATUS_SUPERSEDED;
   EXPECT_GE(superseded, 1) << "the burst was solved step by step: its steps were read after each solve";
-  std::printf("SUPERSEDED %d of %d\n", superseded, kBurst);
+  std::printf("burst of %d steps after a closed loop: %d superseded\n", kBurst, superseded);
 }
 
 }  // namespace
