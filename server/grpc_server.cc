@@ -56,9 +56,14 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
   // (gRPC's own defaults: 120 s for a handshake, no limit for an idle connection).
   builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, Milliseconds(options.first_message_timeout_s));
   builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, Milliseconds(options.connection_idle_timeout_s));
+  // gRPC binds with SO_REUSEPORT by default, so a second server given a port in use would
+  // start and silently take part of its connections; sessions live in one process, so a
+  // client's later calls could then reach a server that does not know its session.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
-    return absl::UnavailableError(absl::StrCat("could not listen on ", options.address));
+    return absl::UnavailableError(
+        absl::StrCat("could not listen on ", options.address, " (in use by another process, or not this machine's)"));
   }
   s->server_->GetHealthCheckService()->SetServingStatus(true);
   if (!options.metrics_address.empty()) {

@@ -1,5 +1,7 @@
 #include "server/metrics_http.h"
 
+#include <sys/socket.h>
+
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "httplib.h"
@@ -30,8 +32,15 @@ absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(cons
     res.status = is_ready ? 200 : 503;
     res.set_content(is_ready ? "ready\n" : "not serving\n", "text/plain");
   });
+  // httplib's default sets SO_REUSEPORT, with which a second server would share the port
+  // and answer some scrapes with its own figures; SO_REUSEADDR alone still allows a
+  // restart while the last run's connections are in TIME_WAIT.
+  s->http_->set_socket_options([](int sock) {
+    const int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
   s->port_ = port == 0 ? s->http_->bind_to_any_port(host) : (s->http_->bind_to_port(host, port) ? port : -1);
-  if (s->port_ <= 0) return absl::UnavailableError(absl::StrCat("--metrics_address \"", address, "\": could not listen"));
+  if (s->port_ <= 0) return absl::UnavailableError(absl::StrCat("--metrics_address \"", address, "\": could not listen (in use by another process, or not this machine's)"));
   s->thread_ = std::thread([http = s->http_.get()] { http->listen_after_bind(); });
   return s;
 }

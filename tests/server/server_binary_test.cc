@@ -1,8 +1,15 @@
 // The nupmpc-server binary as deployed: health reports SERVING, reflection lists the
 // service, flags and environment configure it, and SIGTERM drains it to exit 0.
+#include <netinet/in.h>
+#include <poll.h>
 #include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
+#include <array>
 #include <chrono>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <thread>
@@ -130,6 +137,87 @@ TEST(ServerBinaryTest, OneSigtermServesOutTheDrainDelayThenExits) {
   EXPECT_EQ(seen, grpc::health::v1::HealthCheckResponse::NOT_SERVING);
   EXPECT_EQ(server.StopWith(0), 0);  // signal 0: only waits for the exit
   EXPECT_GE(std::chrono::steady_clock::now() - signalled, std::chrono::seconds(1));
+}
+
+// Runs the server binary with `flags` until it exits by itself: its exit status (-1 if it
+// did not exit within 10 s: then killed) and what it wrote (its log goes to stdout).
+std::pair<int, std::string> RunUntilExit(const std::vector<std::string>& flags) {
+  std::array<int, 2> errors{};
+  if (pipe(errors.data()) != 0) return {-1, "pipe failed"};
+  const pid_t pid = fork();
+  if (pid == 0) {
+    dup2(errors[1], STDOUT_FILENO);
+    dup2(errors[1], STDERR_FILENO);
+    close(errors[0]);
+    std::vector<char*> argv = {const_cast<char*>(NUPMPC_SERVER_BINARY)};
+    for (const std::string& f : flags) argv.push_back(const_cast<char*>(f.c_str()));
+    argv.push_back(nullptr);
+    execv(NUPMPC_SERVER_BINARY, argv.data());
+    _exit(127);
+  }
+  close(errors[1]);
+  // Read until the server exits (end of file), or kill it at the deadline.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  std::string written;
+  std::array<char, 4096> chunk{};
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    pollfd readable{.fd = errors[0], .events = POLLIN, .revents = 0};
+    if (left.count() <= 0 || poll(&readable, 1, static_cast<int>(left.count())) <= 0) {
+      kill(pid, SIGKILL);
+      waitpid(pid, nullptr, 0);
+      close(errors[0]);
+      return {-1, written};
+    }
+    const ssize_t n = read(errors[0], chunk.data(), chunk.size());
+    if (n <= 0) break;
+    written.append(chunk.data(), static_cast<std::size_t>(n));
+  }
+  close(errors[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), written};
+}
+
+bool AcceptsConnections(int port) {
+  const int sock = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<std::uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  const bool connected = connect(sock, reinterpret_cast<const sockaddr*>(&address), sizeof(address)) == 0;
+  close(sock);
+  return connected;
+}
+
+// Sessions live in one process: a second server given a port in use must not start and
+// take part of the first one's connections (gRPC and httplib bind with SO_REUSEPORT unless
+// told not to), and the operator learns why it did not start.
+TEST(ServerBinaryTest, ASecondServerOnAPortInUseRefusesToStart) {
+  const int metrics_port = FreeLoopbackPort();
+  const std::string metrics_address = "--metrics_address=127.0.0.1:" + std::to_string(metrics_port);
+  ServerProcess first(NUPMPC_SERVER_BINARY, FreeLoopbackPort(), {"--log_level=warn", "--grace_period_s=1", metrics_address});
+  auto channel = grpc::CreateChannel(first.target(), grpc::InsecureChannelCredentials());
+  ASSERT_TRUE(WaitUntilServing(channel));
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!AcceptsConnections(metrics_port) && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(AcceptsConnections(metrics_port));
+
+  const auto [grpc_status, grpc_errors] = RunUntilExit({"--address=" + first.target(), "--log_level=warn"});
+  EXPECT_EQ(grpc_status, 1) << grpc_errors;
+  EXPECT_THAT(grpc_errors, ::testing::HasSubstr("could not listen on " + first.target())) << grpc_errors;
+
+  const auto [metrics_status, metrics_errors] = RunUntilExit(
+      {"--address=127.0.0.1:" + std::to_string(FreeLoopbackPort()), "--log_level=warn", metrics_address});
+  EXPECT_EQ(metrics_status, 1) << metrics_errors;
+  EXPECT_THAT(metrics_errors, ::testing::HasSubstr("--metrics_address \"127.0.0.1:" + std::to_string(metrics_port) +
+                                                       "\": could not listen"))
+      << metrics_errors;
+
+  EXPECT_TRUE(Client(channel).GetServerInfo().ok());  // the first one serves on
+  EXPECT_EQ(first.StopWith(SIGTERM), 0);
 }
 
 TEST(ServerBinaryTest, BadFlagValuesAreRefusedAtStartup) {
