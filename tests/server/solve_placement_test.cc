@@ -227,17 +227,10 @@ TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
   EXPECT_LT(cpu_ms, 0.8 * wall_ms) << "the recorded solve time follows the wall clock, not the solve's CPU time";
 }
 
-// The thread CPU clock costs two system calls per solve; after a solve known to be short
-// its wall time, which bounds its CPU time, stands in for it.
-TEST(SolveTime, MeasuredUnlessTheLastSolveWasKnownToBeShort) {
-  EXPECT_TRUE(server::MeasuresSolveCpuTime(-1.0)) << "not solved yet";
-  EXPECT_FALSE(server::MeasuresSolveCpuTime(0.0));
-  EXPECT_FALSE(server::MeasuresSolveCpuTime(0.5 * server::kWallTimeBoundsCpuTimeMs));
-  EXPECT_TRUE(server::MeasuresSolveCpuTime(server::kWallTimeBoundsCpuTimeMs));
-  EXPECT_TRUE(server::MeasuresSolveCpuTime(8.0));
-}
-
-TEST(SolveTime, AfterAShortSolveTheWallTimeStandsForTheCpuTime) {
+// Every solve reads the thread CPU clock, the shortest too: skipping it after short solves
+// (their wall time bounds their CPU time) saved two system calls per step but doubled p99 at
+// 8 streams on one core (the reading also updates the scheduler's account of the thread).
+TEST(SolveTime, EveryShortSolveRecordsItsThreadsCpuTime) {
   const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
   server::WorkerPool pool(1, 4);
   server::SessionRegistry registry(4, pool);
@@ -246,25 +239,18 @@ TEST(SolveTime, AfterAShortSolveTheWallTimeStandsForTheCpuTime) {
   absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry =
       registry.Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
   ASSERT_TRUE(entry.ok()) << entry.status();
-  for (int t = 0; t < 6; ++t) {
-    // Alternately: the last solve known to be short (not measured), and not known (measured).
-    const bool short_before = t % 2 == 1;
-    (*entry)->last_solve_ms.store(short_before ? 0.01 : -1.0);
-    v1::Step step = StepAt((t % 3 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean);
-    step.set_warm_start(v1::WARM_START_COLD);
+  int measured = 0;
+  for (int t = 0; t < 8; ++t) {
     v1::SolveResult r;
-    const absl::Status solved = server::SolveStep(**entry, step, {}, &r);
+    const absl::Status solved = server::SolveStep(**entry, StepAt((t % 2 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean),
+                                                  {}, &r);
     ASSERT_TRUE(solved.ok()) << solved;
     const double cpu_ms = (*entry)->last_solve_cpu_ms.load();
-    EXPECT_EQ((*entry)->last_solve_ms.load(), r.solve_ms());
-    if (short_before) {
-      EXPECT_EQ(cpu_ms, r.solve_ms()) << "step " << t;
-    } else {
-      // Measured on the thread's CPU clock: a different reading from the wall clock's.
-      EXPECT_GT(cpu_ms, 0.0) << "step " << t;
-      EXPECT_NE(cpu_ms, r.solve_ms()) << "step " << t;
-    }
+    EXPECT_GT(cpu_ms, 0.0) << "step " << t;
+    // The CPU clock's reading, not the solver's wall time standing in for it.
+    if (cpu_ms != r.solve_ms()) ++measured;
   }
+  EXPECT_GE(measured, 7) << "the short solves recorded their wall time as their CPU time";
 }
 
 }  // namespace
