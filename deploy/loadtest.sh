@@ -38,10 +38,16 @@ echo "CPUs: server ${server_cpus:-all} (--threads $threads), load generator ${cl
 server_pid=""
 trap '[ -n "$server_pid" ] && kill -TERM "$server_pid" 2>/dev/null || true' EXIT
 start_server() {  # flags for nupmpc-server
+  # A server already there would be measured instead (the new one refuses the port and exits).
+  if build/bin/nupmpc --server "$address" info >/dev/null 2>&1; then
+    echo "a server already answers on $address; stop it or set NUPMPC_ADDRESS" >&2
+    exit 1
+  fi
   "${pin[@]}" build/bin/nupmpc-server --address "$address" --threads "$threads" --log_level warn "$@" &
   server_pid=$!
   for _ in $(seq 100); do
-    build/bin/nupmpc --server "$address" info >/dev/null 2>&1 && return
+    kill -0 "$server_pid" 2>/dev/null || break
+    build/bin/nupmpc --server "$address" info >/dev/null 2>&1 && kill -0 "$server_pid" 2>/dev/null && return
     sleep 0.1
   done
   echo "nupmpc-server did not come up on $address" >&2

@@ -20,6 +20,12 @@ fi
 say "Building nupmpc-server and the nupmpc client (the first build takes several minutes)"
 deploy/build.sh nupmpc-server nupmpc
 
+# Another server answering there would be the one this session talks to (the new one
+# refuses a port in use and exits).
+if build/bin/nupmpc --server "$address" info >/dev/null 2>&1; then
+  echo "deploy/main.sh: a server already answers on $address; stop it or set NUPMPC_ADDRESS" >&2
+  exit 1
+fi
 build/bin/nupmpc-server --address "$address" --log_level warn &
 server_pid=$!
 trap 'kill -TERM "$server_pid" 2>/dev/null || true' EXIT
@@ -29,6 +35,7 @@ for _ in $(seq 100); do
   kill -0 "$server_pid" 2>/dev/null || { echo "deploy/main.sh: nupmpc-server exited at start-up" >&2; exit 1; }
   sleep 0.1
 done
+kill -0 "$server_pid" 2>/dev/null || { echo "deploy/main.sh: nupmpc-server exited at start-up" >&2; exit 1; }
 say "nupmpc-server (pid $server_pid) listens on $address"
 
 say "The plant: 6 masses in a chain between two walls, joined by springs (12 states), pushed" \

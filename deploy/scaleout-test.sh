@@ -46,8 +46,8 @@ cleanup() {
 trap cleanup EXIT
 say() { echo "== scaleout: $*"; }
 fail() { echo "scaleout-test: FAILED: $*" >&2; for f in "$work"/*.log; do echo "--- $f" >&2; tail -5 "$f" >&2; done; exit 1; }
-# Five distinct free ports, drawn while all are held (gRPC and HAProxy bind with
-# SO_REUSEPORT: two processes given one port would silently share it).
+# Five distinct free ports, drawn while all are held (HAProxy binds with SO_REUSEPORT:
+# two processes given one port would silently share it).
 read -r lb_port p1 p2 p3 p4 < <("$py" -c '
 import socket
 held = [socket.socket() for _ in range(5)]

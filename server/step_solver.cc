@@ -33,10 +33,9 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     default: break;
   }
   // Read on every solve, short ones included, although the thread CPU clock is a system
-  // call: reading it also brings the scheduler's account of this thread up to date, and
-  // without that a gRPC thread solving short steps back to back kept its core from gRPC's
-  // other thread (other streams' reads and writes) until the next timer tick, which at 8
-  // streams on one core doubled p99 (README, "Where a step is solved").
+  // call: the reading also brings the scheduler's account of this thread up to date, and
+  // without it p99 at 8 streams on one core doubled (README, "Where a step is solved":
+  // measured on one kernel, cause inferred, not traced).
   const std::chrono::nanoseconds cpu_before = ThreadCpuTime();
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
   entry.compacted = false;  // Solve() took its scratch back

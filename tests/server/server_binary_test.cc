@@ -1,5 +1,6 @@
 // The nupmpc-server binary as deployed: health reports SERVING, reflection lists the
 // service, flags and environment configure it, and SIGTERM drains it to exit 0.
+#include <fcntl.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <signal.h>
@@ -8,6 +9,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <cerrno>
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -142,16 +144,20 @@ TEST(ServerBinaryTest, OneSigtermServesOutTheDrainDelayThenExits) {
 // Runs the server binary with `flags` until it exits by itself: its exit status (-1 if it
 // did not exit within 10 s: then killed) and what it wrote (its log goes to stdout).
 std::pair<int, std::string> RunUntilExit(const std::vector<std::string>& flags) {
+  std::vector<char*> argv = {const_cast<char*>(NUPMPC_SERVER_BINARY)};  // built before fork: the child only execs
+  for (const std::string& f : flags) argv.push_back(const_cast<char*>(f.c_str()));
+  argv.push_back(nullptr);
   std::array<int, 2> errors{};
-  if (pipe(errors.data()) != 0) return {-1, "pipe failed"};
+  if (pipe2(errors.data(), O_CLOEXEC) != 0) return {-1, "pipe2 failed"};
   const pid_t pid = fork();
+  if (pid < 0) {
+    close(errors[0]);
+    close(errors[1]);
+    return {-1, "fork failed"};
+  }
   if (pid == 0) {
     dup2(errors[1], STDOUT_FILENO);
     dup2(errors[1], STDERR_FILENO);
-    close(errors[0]);
-    std::vector<char*> argv = {const_cast<char*>(NUPMPC_SERVER_BINARY)};
-    for (const std::string& f : flags) argv.push_back(const_cast<char*>(f.c_str()));
-    argv.push_back(nullptr);
     execv(NUPMPC_SERVER_BINARY, argv.data());
     _exit(127);
   }
@@ -163,13 +169,16 @@ std::pair<int, std::string> RunUntilExit(const std::vector<std::string>& flags) 
   for (;;) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     pollfd readable{.fd = errors[0], .events = POLLIN, .revents = 0};
-    if (left.count() <= 0 || poll(&readable, 1, static_cast<int>(left.count())) <= 0) {
+    const int ready = left.count() > 0 ? poll(&readable, 1, static_cast<int>(left.count())) : 0;
+    if (ready < 0 && errno == EINTR) continue;
+    if (ready <= 0) {
       kill(pid, SIGKILL);
       waitpid(pid, nullptr, 0);
       close(errors[0]);
       return {-1, written};
     }
     const ssize_t n = read(errors[0], chunk.data(), chunk.size());
+    if (n < 0 && errno == EINTR) continue;
     if (n <= 0) break;
     written.append(chunk.data(), static_cast<std::size_t>(n));
   }
@@ -210,7 +219,7 @@ TEST(ServerBinaryTest, ASecondServerOnAPortInUseRefusesToStart) {
   EXPECT_THAT(grpc_errors, ::testing::HasSubstr("could not listen on " + first.target())) << grpc_errors;
 
   const auto [metrics_status, metrics_errors] = RunUntilExit(
-      {"--address=127.0.0.1:" + std::to_string(FreeLoopbackPort()), "--log_level=warn", metrics_address});
+      {"--address=127.0.0.1:0", "--log_level=warn", metrics_address});
   EXPECT_EQ(metrics_status, 1) << metrics_errors;
   EXPECT_THAT(metrics_errors, ::testing::HasSubstr("--metrics_address \"127.0.0.1:" + std::to_string(metrics_port) +
                                                        "\": could not listen"))
