@@ -182,15 +182,28 @@ TEST(SolvesInPlace, ByTheLastSolvesCpuTimeNotItsWallTime) {
   EXPECT_FALSE(server::SolvesInPlace(session, 0.5));
 }
 
-TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
+// A session of an instance in a registry of its own, as SolveStep finds it on the server.
+class SolveTime : public ::testing::Test {
+ protected:
+  std::shared_ptr<server::SessionEntry> SessionOf(const bench::BenchmarkInstance& inst) {
+    absl::StatusOr<server::BuiltSession> built = server::BuildSession(SpecOrDie(inst.problem), {});
+    EXPECT_TRUE(built.ok()) << built.status();
+    if (!built.ok()) return nullptr;
+    absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry =
+        registry_.Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
+    EXPECT_TRUE(entry.ok()) << entry.status();
+    return entry.ok() ? *std::move(entry) : nullptr;
+  }
+
+ private:
+  server::WorkerPool pool_{1, 4};
+  server::SessionRegistry registry_{4, pool_};
+};
+
+TEST_F(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
   const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N3000");  // solves spanning time slices
-  server::WorkerPool pool(1, 4);
-  server::SessionRegistry registry(4, pool);
-  absl::StatusOr<server::BuiltSession> built = server::BuildSession(SpecOrDie(inst.problem), {});
-  ASSERT_TRUE(built.ok()) << built.status();
-  absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry =
-      registry.Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
-  ASSERT_TRUE(entry.ok()) << entry.status();
+  const std::shared_ptr<server::SessionEntry> entry = SessionOf(inst);
+  ASSERT_NE(entry, nullptr);
 
   // This thread and a spinning one on the same CPU: the scheduler gives each about half.
   cpu_set_t allowed;
@@ -212,11 +225,11 @@ TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
     v1::Step step = StepAt((t % 2 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean);
     step.set_warm_start(v1::WARM_START_COLD);
     v1::SolveResult r;
-    const absl::Status solved = server::SolveStep(**entry, step, {}, &r);
+    const absl::Status solved = server::SolveStep(*entry, step, {}, &r);
     EXPECT_TRUE(solved.ok()) << solved;
     wall_ms += r.solve_ms();
-    cpu_ms += (*entry)->last_solve_cpu_ms.load();
-    EXPECT_EQ((*entry)->last_solve_ms.load(), r.solve_ms()) << "the pool's wait estimate stays wall time";
+    cpu_ms += entry->last_solve_cpu_ms.load();
+    EXPECT_EQ(entry->last_solve_ms.load(), r.solve_ms()) << "the pool's wait estimate stays wall time";
   }
   stop.store(true);
   spinner.join();
@@ -230,22 +243,17 @@ TEST(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
 // Every solve reads the thread CPU clock, the shortest too: skipping it after short solves
 // (their wall time bounds their CPU time) saved two system calls per step but doubled p99 at
 // 8 streams on one core (the reading also updates the scheduler's account of the thread).
-TEST(SolveTime, EveryShortSolveRecordsItsThreadsCpuTime) {
+TEST_F(SolveTime, EveryShortSolveRecordsItsThreadsCpuTime) {
   const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
-  server::WorkerPool pool(1, 4);
-  server::SessionRegistry registry(4, pool);
-  absl::StatusOr<server::BuiltSession> built = server::BuildSession(SpecOrDie(inst.problem), {});
-  ASSERT_TRUE(built.ok()) << built.status();
-  absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry =
-      registry.Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
-  ASSERT_TRUE(entry.ok()) << entry.status();
+  const std::shared_ptr<server::SessionEntry> entry = SessionOf(inst);
+  ASSERT_NE(entry, nullptr);
   int measured = 0;
   for (int t = 0; t < 8; ++t) {
     v1::SolveResult r;
-    const absl::Status solved = server::SolveStep(**entry, StepAt((t % 2 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean),
+    const absl::Status solved = server::SolveStep(*entry, StepAt((t % 2 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean),
                                                   {}, &r);
     ASSERT_TRUE(solved.ok()) << solved;
-    const double cpu_ms = (*entry)->last_solve_cpu_ms.load();
+    const double cpu_ms = entry->last_solve_cpu_ms.load();
     EXPECT_GT(cpu_ms, 0.0) << "step " << t;
     // The CPU clock's reading, not the solver's wall time standing in for it.
     if (cpu_ms != r.solve_ms()) ++measured;
