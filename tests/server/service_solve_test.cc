@@ -331,7 +331,6 @@ TEST_F(ServiceTest, NewestStateWinsForABurstAfterAClosedLoopOfStepsSolvedInPlace
   server_->Shutdown();
   StartServer(options);
   const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N300");
-
   grpc::ClientContext context;
   auto stream = client_->stub().Control(&context);
   v1::ControlRequest first;
