@@ -119,11 +119,10 @@ TEST_F(LoadTest, TransportFloorIsMeasuredOnTheServersHealthService) {
   EXPECT_EQ(floor->calls, 50);
   EXPECT_GT(floor->p50_us, 0.0);
   EXPECT_LE(floor->p50_us, floor->p99_us);
-  // A health check does less than a Control step that solves: at concurrency 1 the step's
-  // median round trip is not far below the transport's (noise: half of it).
-  absl::StatusOr<loadtest::LevelReport> r = RunClosedLoop(1, 0.4);
-  ASSERT_TRUE(r.ok()) << r.status();
-  EXPECT_GE(r->p50_ms * 1e3, 0.5 * floor->p50_us);
+  // No comparison with a Control step's round trip: a health check is a unary call (a new
+  // HTTP/2 stream each time) and a step is one message on an open stream, so either can be
+  // the faster on a loaded machine, and two timings taken at different moments of a shared
+  // machine say nothing about the mechanism.
   // Nothing is listening here: a clear error, no hang.
   absl::StatusOr<loadtest::TransportFloor> none = loadtest::MeasureTransportFloor("127.0.0.1:1", 1);
   EXPECT_EQ(none.status().code(), absl::StatusCode::kUnavailable);
