@@ -65,9 +65,10 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
   return out;
 }
 
-absl::StatusOr<double> MeasureFleetCoreMeanMs(const v1::ProblemSpec& spec,
-                                              const std::vector<std::vector<double>>& states, int sessions,
-                                              int periods) {
+absl::StatusOr<FleetCoreBaseline> MeasureFleetCore(const v1::ProblemSpec& spec,
+                                                   const std::vector<std::vector<double>>& states, int sessions,
+                                                   int periods) {
+  if (sessions < 1 || periods < 1) return absl::InvalidArgumentError("a fleet baseline needs a session and a timed period");
   std::vector<server::BuiltSession> fleet;
   for (int s = 0; s < sessions; ++s) {
     absl::StatusOr<server::BuiltSession> built = server::BuildSession(spec, bench::NoSizeLimits());
@@ -76,8 +77,13 @@ absl::StatusOr<double> MeasureFleetCoreMeanMs(const v1::ProblemSpec& spec,
   }
   core::Solution solution;
   v1::Step message;
-  const auto start = std::chrono::steady_clock::now();
-  for (int period = 0; period < periods; ++period) {
+  std::uint64_t iterations = 0;
+  auto start = std::chrono::steady_clock::now();
+  for (int period = 0; period <= periods; ++period) {
+    if (period == 1) {  // the cold first period is not timed
+      iterations = 0;
+      start = std::chrono::steady_clock::now();
+    }
     for (int s = 0; s < sessions; ++s) {
       const std::vector<double>& x = states[(static_cast<std::size_t>(period) + 7 * static_cast<std::size_t>(s)) % states.size()];
       message.mutable_state()->Assign(x.begin(), x.end());
@@ -85,10 +91,12 @@ absl::StatusOr<double> MeasureFleetCoreMeanMs(const v1::ProblemSpec& spec,
       absl::StatusOr<core::SolveSummary> summary =
           StepAsTheServerDoes(fleet[static_cast<std::size_t>(s)], message, &solution);
       if (!summary.ok()) return summary.status();
+      iterations += summary->iterations;
     }
   }
   const double total_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  return total_ms / std::max(1, sessions * periods);
+  const double steps = std::max(1, sessions * periods);
+  return FleetCoreBaseline{.mean_ms = total_ms / steps, .mean_iterations = static_cast<double>(iterations) / steps};
 }
 
 }  // namespace nupmpc::loadtest

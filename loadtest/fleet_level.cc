@@ -35,8 +35,7 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
                                                    std::chrono::duration<double>(duration_s));
   FleetReport report;
   report.sessions = sessions;
-  std::vector<double> call_ms;
-  std::uint64_t answered = 0;
+  std::uint64_t iterations = 0;
   absl::Status failed;
   Clock::time_point last_answer = measure_from;
   for (std::size_t period = 0;; ++period) {
@@ -53,23 +52,49 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
     }
     if (sent < measure_from) continue;
     last_answer = Clock::now();
-    call_ms.push_back(std::chrono::duration<double, std::milli>(last_answer - sent).count());
+    report.call_ms.push_back(std::chrono::duration<double, std::milli>(last_answer - sent).count());
     ++report.calls;
     for (const v1::FleetAnswer& a : response->answers()) {
       if (a.error_code() != 0) {
         ++report.step_errors;
       } else {
-        ++answered;
+        ++report.answered;
+        if (a.result().status() != v1::SOLVE_STATUS_SUPERSEDED) {
+          ++report.solved;
+          iterations += a.result().iterations();
+        }
       }
     }
   }
   for (const std::string& id : ids) (void)client.CloseSession(id);
   if (!failed.ok()) return failed;
   report.measured_s = std::max(1e-9, std::chrono::duration<double>(last_answer - measure_from).count());
-  report.steps_per_s = static_cast<double>(answered) / report.measured_s;
-  report.call_p50_ms = Quantile(call_ms, 0.5);
-  report.call_p99_ms = Quantile(call_ms, 0.99);
+  report.steps_per_s = static_cast<double>(report.answered) / report.measured_s;
+  report.mean_iterations =
+      report.solved > 0 ? static_cast<double>(iterations) / static_cast<double>(report.solved) : 0.0;
+  report.call_p50_ms = Quantile(report.call_ms, 0.5);
+  report.call_p99_ms = Quantile(report.call_ms, 0.99);
   return report;
+}
+
+FleetReport MergeFleetRounds(const std::vector<FleetReport>& rounds) {
+  FleetReport merged;
+  double iterations = 0.0;
+  for (const FleetReport& round : rounds) {
+    merged.sessions = round.sessions;
+    merged.measured_s += round.measured_s;
+    merged.calls += round.calls;
+    merged.answered += round.answered;
+    merged.solved += round.solved;
+    merged.step_errors += round.step_errors;
+    iterations += round.mean_iterations * static_cast<double>(round.solved);
+    merged.call_ms.insert(merged.call_ms.end(), round.call_ms.begin(), round.call_ms.end());
+  }
+  if (merged.measured_s > 0.0) merged.steps_per_s = static_cast<double>(merged.answered) / merged.measured_s;
+  if (merged.solved > 0) merged.mean_iterations = iterations / static_cast<double>(merged.solved);
+  merged.call_p50_ms = Quantile(merged.call_ms, 0.5);
+  merged.call_p99_ms = Quantile(merged.call_ms, 0.99);
+  return merged;
 }
 
 }  // namespace nupmpc::loadtest

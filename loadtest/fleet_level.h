@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "client/channel_security.h"
@@ -18,13 +19,21 @@ struct FleetReport {
   int sessions = 0;
   double measured_s = 0.0;
   std::uint64_t calls = 0;
-  double steps_per_s = 0.0;  ///< answered steps with a result (solved or superseded)
+  std::uint64_t answered = 0;  ///< steps answered with a result (solved or superseded)
+  double steps_per_s = 0.0;    ///< answered / measured_s
   double call_p50_ms = 0.0, call_p99_ms = 0.0;
   std::uint64_t step_errors = 0;  ///< answers with an error code
+  double mean_iterations = 0.0;   ///< of the solved steps' results
+  std::uint64_t solved = 0;       ///< answers with a result that solved (not superseded)
+  std::vector<double> call_ms;    ///< every measured call's round trip
 };
 
 absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const ChannelSecurity& security,
                                           const StreamPlan& plan, int sessions, double duration_s, double warmup_s);
+
+// One report of several runs (rounds interleaved with the peers'): calls, answers and
+// measured time summed, quantiles over every call, iterations weighted by solved steps.
+FleetReport MergeFleetRounds(const std::vector<FleetReport>& rounds);
 
 }  // namespace nupmpc::loadtest
 

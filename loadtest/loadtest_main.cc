@@ -249,6 +249,64 @@ auto MeasuredOn(const std::optional<cpu_set_t>& cpus, Measure measure) -> declty
   return result;
 }
 
+// --fleet: the fleet calls, as many separate Control streams, and the core alone stepping
+// that many sessions in turn, --rounds times each, in turn (the order reversed every
+// round): calls and streams duration_s / rounds each, the core --baseline_rounds / rounds
+// periods. This VM's speed moves by tens of percent from one minute to the next; only
+// figures taken in the same minutes compare.
+struct FleetRuns {
+  lt::FleetReport fleet;
+  lt::LevelReport separate;
+  lt::FleetCoreBaseline core;
+};
+absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const nupmpc::ChannelSecurity& security,
+                                              const lt::StreamPlan& plan, const nupmpc::ProblemFile& file, int sessions,
+                                              const std::optional<cpu_set_t>& server_cpus) {
+  const int rounds = std::max(1, absl::GetFlag(FLAGS_rounds));
+  const double duration_s = absl::GetFlag(FLAGS_duration_s) / rounds;
+  const int periods = std::max(1, absl::GetFlag(FLAGS_baseline_rounds) / rounds);
+  std::vector<lt::FleetReport> fleet;
+  std::vector<lt::LevelReport> separate;
+  std::vector<lt::FleetCoreBaseline> core;
+  std::vector<int> order = {0, 1, 2};
+  for (int round = 0; round < rounds; ++round) {
+    for (const int run : order) {
+      if (run == 0) {
+        absl::StatusOr<lt::FleetReport> stepped =
+            lt::RunFleetLevel(target, security, plan, sessions, duration_s, absl::GetFlag(FLAGS_warmup_s));
+        if (!stepped.ok()) return absl::Status(stepped.status().code(), absl::StrCat("fleet: ", stepped.status().message()));
+        fleet.push_back(*std::move(stepped));
+      } else if (run == 1) {
+        lt::LevelConfig config;
+        config.concurrency = sessions;
+        config.duration_s = duration_s;
+        config.warmup_s = absl::GetFlag(FLAGS_warmup_s);
+        config.security = security;
+        absl::StatusOr<lt::LevelReport> streams = lt::RunLevel(target, plan, config);
+        if (!streams.ok()) {
+          return absl::Status(streams.status().code(), absl::StrCat("separate streams: ", streams.status().message()));
+        }
+        separate.push_back(*std::move(streams));
+      } else {
+        absl::StatusOr<lt::FleetCoreBaseline> in_turn = MeasuredOn(server_cpus, [&] {
+          return lt::MeasureFleetCore(file.spec, file.closed_loop_states, sessions, periods);
+        });
+        if (!in_turn.ok()) {
+          return absl::Status(in_turn.status().code(), absl::StrCat("fleet core baseline: ", in_turn.status().message()));
+        }
+        core.push_back(*in_turn);
+      }
+    }
+    std::reverse(order.begin(), order.end());
+  }
+  FleetRuns merged{.fleet = lt::MergeFleetRounds(fleet), .separate = lt::MergeRounds(separate), .core = {}};
+  for (const lt::FleetCoreBaseline& c : core) {  // the same number of periods each
+    merged.core.mean_ms += c.mean_ms / static_cast<double>(core.size());
+    merged.core.mean_iterations += c.mean_iterations / static_cast<double>(core.size());
+  }
+  return merged;
+}
+
 int main(int argc, char** argv) {
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
   nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
@@ -381,22 +439,10 @@ int main(int argc, char** argv) {
   if (!json) lt::PrintHeader(header);
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed", absl::GetFlag(FLAGS_new_references)};
   if (const int fleet = absl::GetFlag(FLAGS_fleet); fleet > 0) {
-    absl::StatusOr<lt::FleetReport> stepped = lt::RunFleetLevel(target, *security, plan, fleet, absl::GetFlag(FLAGS_duration_s),
-                                                                absl::GetFlag(FLAGS_warmup_s));
-    if (!stepped.ok()) return Fail("fleet", stepped.status());
-    lt::LevelConfig config;
-    config.concurrency = fleet;
-    config.duration_s = absl::GetFlag(FLAGS_duration_s);
-    config.warmup_s = absl::GetFlag(FLAGS_warmup_s);
-    config.security = *security;
-    absl::StatusOr<lt::LevelReport> separate = lt::RunLevel(target, plan, config);
-    if (!separate.ok()) return Fail("separate streams", separate.status());
-    absl::StatusOr<double> fleet_core_ms = MeasuredOn(*server_cpus, [&] {
-      return lt::MeasureFleetCoreMeanMs(file->spec, file->closed_loop_states, fleet, absl::GetFlag(FLAGS_baseline_rounds));
-    });
-    if (!fleet_core_ms.ok()) return Fail("fleet core baseline", fleet_core_ms.status());
-    lt::PrintFleet(header, *stepped, *separate, *fleet_core_ms, json);
-    return ReportStarvedStreams({*separate});
+    absl::StatusOr<FleetRuns> runs = RunFleetInterleaved(target, *security, plan, *file, fleet, *server_cpus);
+    if (!runs.ok()) return Fail("fleet level", runs.status());
+    lt::PrintFleet(header, runs->fleet, runs->separate, runs->core, json);
+    return ReportStarvedStreams({runs->separate});
   }
   std::vector<lt::LevelReport> reports;
   for (const int c : *levels) {

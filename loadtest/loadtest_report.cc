@@ -190,12 +190,12 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
   std::printf("%s\n", out.dump(2).c_str());
 }
 
-void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& separate, double fleet_core_mean_ms,
-                bool json) {
+void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& separate,
+                const FleetCoreBaseline& core_in_turn, bool json) {
   // A fleet call runs on the workers only: its capacities count them, not the solver cores.
   const double worker_capacity = h.fleet_cores / (h.baseline.median_ms * 1e-3);
   const double of_capacity = f.steps_per_s / worker_capacity;
-  const double fleet_capacity = h.fleet_cores / (fleet_core_mean_ms * 1e-3);
+  const double fleet_capacity = h.fleet_cores / (core_in_turn.mean_ms * 1e-3);
   const double of_fleet_capacity = f.steps_per_s / fleet_capacity;
   const double vs_streams = separate.solves_per_s > 0.0 ? f.steps_per_s / separate.solves_per_s : 0.0;
   if (json) {
@@ -203,6 +203,7 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
                                 {"sessions", f.sessions},
                                 {"calls", f.calls},
                                 {"fleet_steps_per_s", f.steps_per_s},
+                                {"fleet_mean_iterations", f.mean_iterations},
                                 {"call_p50_ms", f.call_p50_ms},
                                 {"call_p99_ms", f.call_p99_ms},
                                 {"step_errors", f.step_errors},
@@ -210,7 +211,8 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
                                 {"worker_cores", h.fleet_cores},
                                 {"capacity_per_s", worker_capacity},
                                 {"fraction_of_capacity", of_capacity},
-                                {"core_in_turn_mean_ms", fleet_core_mean_ms},
+                                {"core_in_turn_mean_ms", core_in_turn.mean_ms},
+                                {"core_in_turn_mean_iterations", core_in_turn.mean_iterations},
                                 {"core_in_turn_capacity_per_s", fleet_capacity},
                                 {"fraction_of_core_in_turn_capacity", of_fleet_capacity},
                                 {"vs_separate_streams", vs_streams}};
@@ -218,12 +220,14 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
     return;
   }
   std::printf("fleet: %d sessions per SolveFleet call: %.0f steps/s (%.0f%% of capacity %d workers / median = "
-              "%.0f/s), call p50 %.3f ms, p99 %.3f ms, %llu step errors\n",
-              f.sessions, f.steps_per_s, 100.0 * of_capacity, h.fleet_cores, worker_capacity, f.call_p50_ms,
-              f.call_p99_ms, static_cast<unsigned long long>(f.step_errors));
-  std::printf("       the core alone stepping the %d sessions in turn: mean %.4f ms per step, capacity %d workers / "
-              "mean = %.0f steps/s; the fleet call reaches %.0f%% of it\n",
-              f.sessions, fleet_core_mean_ms, h.fleet_cores, fleet_capacity, 100.0 * of_fleet_capacity);
+              "%.0f/s), %.2f iterations/step, call p50 %.3f ms, p99 %.3f ms, %llu step errors\n",
+              f.sessions, f.steps_per_s, 100.0 * of_capacity, h.fleet_cores, worker_capacity, f.mean_iterations,
+              f.call_p50_ms, f.call_p99_ms, static_cast<unsigned long long>(f.step_errors));
+  std::printf("       the core alone stepping the %d sessions in turn (warm, as the fleet's calls after warm-up): "
+              "mean %.4f ms per step, %.2f iterations/step, capacity %d workers / mean = %.0f steps/s; the fleet "
+              "call reaches %.0f%% of it\n",
+              f.sessions, core_in_turn.mean_ms, core_in_turn.mean_iterations, h.fleet_cores, fleet_capacity,
+              100.0 * of_fleet_capacity);
   std::printf("       %d separate Control streams: %.0f solves/s, p50 %.3f ms; fleet / streams = %.2fx\n",
               separate.config.concurrency, separate.solves_per_s, separate.p50_ms, vs_streams);
   std::fflush(stdout);

@@ -50,7 +50,7 @@ void PrintRatios(const LevelReport& level);
 void PrintJson(const RunHeader& header, const std::vector<LevelReport>& levels);
 // --fleet: S sessions per SolveFleet call against S separate Control streams, same run.
 void PrintFleet(const RunHeader& header, const FleetReport& fleet, const LevelReport& separate,
-                double fleet_core_mean_ms, bool json);
+                const FleetCoreBaseline& core_in_turn, bool json);
 void PrintIdleSessions(const std::string& instance, const IdleSessionsReport& report, bool json);
 
 }  // namespace nupmpc::loadtest
