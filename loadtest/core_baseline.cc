@@ -67,8 +67,10 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
 
 absl::StatusOr<FleetCoreBaseline> MeasureFleetCore(const v1::ProblemSpec& spec,
                                                    const std::vector<std::vector<double>>& states, int sessions,
-                                                   int periods) {
-  if (sessions < 1 || periods < 1) return absl::InvalidArgumentError("a fleet baseline needs a session and a timed period");
+                                                   int periods, int first_period) {
+  if (sessions < 1 || periods < 1 || first_period < 1) {
+    return absl::InvalidArgumentError("a fleet baseline needs a session, a timed period, and a period before it");
+  }
   std::vector<server::BuiltSession> fleet;
   for (int s = 0; s < sessions; ++s) {
     absl::StatusOr<server::BuiltSession> built = server::BuildSession(spec, bench::NoSizeLimits());
@@ -79,15 +81,16 @@ absl::StatusOr<FleetCoreBaseline> MeasureFleetCore(const v1::ProblemSpec& spec,
   v1::Step message;
   std::uint64_t iterations = 0;
   auto start = std::chrono::steady_clock::now();
-  for (int period = 0; period <= periods; ++period) {
-    if (period == 1) {  // the cold first period is not timed
+  const int cold = first_period - 1;
+  for (int period = cold; period < first_period + periods; ++period) {
+    if (period == first_period) {  // the cold period is not timed
       iterations = 0;
       start = std::chrono::steady_clock::now();
     }
     for (int s = 0; s < sessions; ++s) {
       const std::vector<double>& x = states[(static_cast<std::size_t>(period) + 7 * static_cast<std::size_t>(s)) % states.size()];
       message.mutable_state()->Assign(x.begin(), x.end());
-      message.set_warm_start(period == 0 ? v1::WARM_START_COLD : v1::WARM_START_UNSPECIFIED);
+      message.set_warm_start(period == cold ? v1::WARM_START_COLD : v1::WARM_START_UNSPECIFIED);
       absl::StatusOr<core::SolveSummary> summary =
           StepAsTheServerDoes(fleet[static_cast<std::size_t>(s)], message, &solution);
       if (!summary.ok()) return summary.status();

@@ -33,17 +33,17 @@ absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
 
 // The core alone stepping `sessions` sessions of `spec` in turn, as a fleet call does
 // (session s at period p gets states[(p + 7 s) % size], warm-started from its last plan),
-// for `periods` timed periods after one untimed first period: that one starts every
-// session cold, and the fleet level's warm-up leaves its cold calls out too. Every
-// session's data are as cold as a fleet's leaves them (a session stepped on its own keeps
-// its data in the caches between steps).
+// for `periods` timed periods from `first_period` on, after one untimed period before them
+// that starts every session cold (the fleet level's warm-up leaves its cold calls out too).
+// Every session's data are as cold as a fleet's leaves them (a session stepped on its own
+// keeps its data in the caches between steps).
 struct FleetCoreBaseline {
   double mean_ms = 0.0;  ///< per step
   double mean_iterations = 0.0;
 };
 absl::StatusOr<FleetCoreBaseline> MeasureFleetCore(const v1::ProblemSpec& spec,
                                                    const std::vector<std::vector<double>>& states, int sessions,
-                                                   int periods);
+                                                   int periods, int first_period = 1);
 
 // The q-quantile (0..1) of `values` by nearest rank; sorts them. 0 when empty.
 double Quantile(std::vector<double>& values, double q);

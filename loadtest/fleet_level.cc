@@ -35,7 +35,6 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
                                                    std::chrono::duration<double>(duration_s));
   FleetReport report;
   report.sessions = sessions;
-  std::uint64_t iterations = 0;
   absl::Status failed;
   Clock::time_point last_answer = measure_from;
   for (std::size_t period = 0;; ++period) {
@@ -61,7 +60,7 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
         ++report.answered;
         if (a.result().status() != v1::SOLVE_STATUS_SUPERSEDED) {
           ++report.solved;
-          iterations += a.result().iterations();
+          report.iterations += a.result().iterations();
         }
       }
     }
@@ -71,7 +70,7 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
   report.measured_s = std::max(1e-9, std::chrono::duration<double>(last_answer - measure_from).count());
   report.steps_per_s = static_cast<double>(report.answered) / report.measured_s;
   report.mean_iterations =
-      report.solved > 0 ? static_cast<double>(iterations) / static_cast<double>(report.solved) : 0.0;
+      report.solved > 0 ? static_cast<double>(report.iterations) / static_cast<double>(report.solved) : 0.0;
   report.call_p50_ms = Quantile(report.call_ms, 0.5);
   report.call_p99_ms = Quantile(report.call_ms, 0.99);
   return report;
@@ -79,7 +78,6 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
 
 FleetReport MergeFleetRounds(const std::vector<FleetReport>& rounds) {
   FleetReport merged;
-  double iterations = 0.0;
   for (const FleetReport& round : rounds) {
     merged.sessions = round.sessions;
     merged.measured_s += round.measured_s;
@@ -87,11 +85,11 @@ FleetReport MergeFleetRounds(const std::vector<FleetReport>& rounds) {
     merged.answered += round.answered;
     merged.solved += round.solved;
     merged.step_errors += round.step_errors;
-    iterations += round.mean_iterations * static_cast<double>(round.solved);
+    merged.iterations += round.iterations;
     merged.call_ms.insert(merged.call_ms.end(), round.call_ms.begin(), round.call_ms.end());
   }
   if (merged.measured_s > 0.0) merged.steps_per_s = static_cast<double>(merged.answered) / merged.measured_s;
-  if (merged.solved > 0) merged.mean_iterations = iterations / static_cast<double>(merged.solved);
+  if (merged.solved > 0) merged.mean_iterations = static_cast<double>(merged.iterations) / static_cast<double>(merged.solved);
   merged.call_p50_ms = Quantile(merged.call_ms, 0.5);
   merged.call_p99_ms = Quantile(merged.call_ms, 0.99);
   return merged;

@@ -23,8 +23,9 @@ struct FleetReport {
   double steps_per_s = 0.0;    ///< answered / measured_s
   double call_p50_ms = 0.0, call_p99_ms = 0.0;
   std::uint64_t step_errors = 0;  ///< answers with an error code
-  double mean_iterations = 0.0;   ///< of the solved steps' results
   std::uint64_t solved = 0;       ///< answers with a result that solved (not superseded)
+  std::uint64_t iterations = 0;   ///< the solved steps' iterations, summed
+  double mean_iterations = 0.0;   ///< iterations / solved
   std::vector<double> call_ms;    ///< every measured call's round trip
 };
 
@@ -32,7 +33,7 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
                                           const StreamPlan& plan, int sessions, double duration_s, double warmup_s);
 
 // One report of several runs (rounds interleaved with the peers'): calls, answers and
-// measured time summed, quantiles over every call, iterations weighted by solved steps.
+// measured time summed, quantiles over every call, iterations over every solved step.
 FleetReport MergeFleetRounds(const std::vector<FleetReport>& rounds);
 
 }  // namespace nupmpc::loadtest

@@ -58,7 +58,9 @@ ABSL_FLAG(int, rounds, 3,
           "each run for duration_s / rounds, and reports the runs of each merged: a machine whose speed drifts "
           "between minutes then slows all of them alike");
 ABSL_FLAG(uint64_t, requests, 0, "stop a level once this many solves were answered (0: by time)");
-ABSL_FLAG(int, baseline_rounds, 20, "passes of the core-alone baseline over the closed-loop states");
+ABSL_FLAG(int, baseline_rounds, 20,
+          "passes of the core-alone baseline over the closed-loop states (--fleet: periods of the core stepping the "
+          "sessions in turn, at least one pass over the states)");
 ABSL_FLAG(int, transport_calls, 2000, "health checks that measure gRPC's own round trip");
 ABSL_FLAG(bool, echo, true,
           "also run every level against a zero-work echo server in a child process (the transport floor at that load)");
@@ -251,9 +253,10 @@ auto MeasuredOn(const std::optional<cpu_set_t>& cpus, Measure measure) -> declty
 
 // --fleet: the fleet calls, as many separate Control streams, and the core alone stepping
 // that many sessions in turn, --rounds times each, in turn (the order reversed every
-// round): calls and streams duration_s / rounds each, the core --baseline_rounds / rounds
-// periods. This VM's speed moves by tens of percent from one minute to the next; only
-// figures taken in the same minutes compare.
+// round): calls and streams duration_s / rounds each; the core's rounds time consecutive
+// periods, together at least --baseline_rounds and one of each closed-loop state per
+// session (as the fleet's calls cycle through them all). This VM's speed moves by tens of
+// percent from one minute to the next; only figures taken in the same minutes compare.
 struct FleetRuns {
   lt::FleetReport fleet;
   lt::LevelReport separate;
@@ -264,7 +267,8 @@ absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const n
                                               const std::optional<cpu_set_t>& server_cpus) {
   const int rounds = std::max(1, absl::GetFlag(FLAGS_rounds));
   const double duration_s = absl::GetFlag(FLAGS_duration_s) / rounds;
-  const int periods = std::max(1, absl::GetFlag(FLAGS_baseline_rounds) / rounds);
+  const int all_periods = std::max(absl::GetFlag(FLAGS_baseline_rounds), static_cast<int>(file.closed_loop_states.size()));
+  const int periods = std::max(1, (all_periods + rounds - 1) / rounds);
   std::vector<lt::FleetReport> fleet;
   std::vector<lt::LevelReport> separate;
   std::vector<lt::FleetCoreBaseline> core;
@@ -289,7 +293,7 @@ absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const n
         separate.push_back(*std::move(streams));
       } else {
         absl::StatusOr<lt::FleetCoreBaseline> in_turn = MeasuredOn(server_cpus, [&] {
-          return lt::MeasureFleetCore(file.spec, file.closed_loop_states, sessions, periods);
+          return lt::MeasureFleetCore(file.spec, file.closed_loop_states, sessions, periods, 1 + round * periods);
         });
         if (!in_turn.ok()) {
           return absl::Status(in_turn.status().code(), absl::StrCat("fleet core baseline: ", in_turn.status().message()));

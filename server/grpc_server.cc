@@ -2,14 +2,15 @@
 
 #include <algorithm>
 #include <limits>
+#include <optional>
 
-#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
 #include "server/grpc_handover.h"
 #include "server/listen_probe.h"
 #include "server/metrics_exposition.h"
+#include "server/metrics_http.h"
 #include "server/process_memory.h"
 #include "spdlog/spdlog.h"
 
@@ -46,13 +47,17 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
   }
   // gRPC and the metrics listener start when any one of an address's resolved addresses
   // binds; a port another process holds on one of them is refused here instead.
-  if (absl::Status in_use = CheckNotInUse(options.address, absl::StrCat("--address ", options.address)); !in_use.ok()) return in_use;
+  if (const std::optional<ListenHostPort> grpc_tcp = SplitGrpcTcpAddress(options.address); grpc_tcp.has_value()) {
+    const absl::Status in_use =
+        CheckNotInUse(*grpc_tcp, AnyAddress::kBothFamilies, absl::StrCat("--address ", options.address));
+    if (!in_use.ok()) return in_use;
+  }
   if (!options.metrics_address.empty()) {
-    // The metrics listener takes :PORT as IPv4's every address (MetricsHttpServer::Start).
-    const std::string metrics_binds = absl::StartsWith(options.metrics_address, ":")
-                                          ? absl::StrCat("0.0.0.0", options.metrics_address)
-                                          : options.metrics_address;
-    if (absl::Status in_use = CheckNotInUse(metrics_binds, absl::StrCat("--metrics_address ", options.metrics_address)); !in_use.ok()) return in_use;
+    absl::StatusOr<ListenHostPort> metrics = ParseMetricsAddress(options.metrics_address);
+    if (!metrics.ok()) return metrics.status();
+    const absl::Status in_use =
+        CheckNotInUse(*metrics, AnyAddress::kAsGiven, absl::StrCat("--metrics_address ", options.metrics_address));
+    if (!in_use.ok()) return in_use;
   }
   s->service_ = std::make_unique<MpcServiceImpl>(s->state_.get());
   grpc::EnableDefaultHealthCheckService(true);

@@ -8,8 +8,6 @@
 
 #include <cerrno>
 #include <memory>
-#include <optional>
-#include <string>
 
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
@@ -19,31 +17,8 @@
 namespace nupmpc::server {
 namespace {
 
-struct HostPort {
-  std::string host;  ///< without brackets; empty: every address
-  std::string port;
-};
-
-// gRPC's TCP forms; nullopt for what is not TCP (unix:, unix-abstract:, vsock:) or does
-// not parse (the listener reports that).
-std::optional<HostPort> SplitTcpAddress(absl::string_view address) {
-  if (!absl::ConsumePrefix(&address, "ipv4:")) absl::ConsumePrefix(&address, "ipv6:");
-  const std::size_t colon = address.rfind(':');
-  if (colon == absl::string_view::npos) return std::nullopt;
-  absl::string_view host = address.substr(0, colon);
-  const absl::string_view port = address.substr(colon + 1);
-  int number = 0;
-  if (!absl::SimpleAtoi(port, &number) || number < 0 || number > 65535) return std::nullopt;
-  if (absl::ConsumePrefix(&host, "[")) {
-    if (!absl::ConsumeSuffix(&host, "]")) return std::nullopt;
-  } else if (absl::StrContains(host, ':')) {
-    return std::nullopt;  // a scheme (unix:/path:1 and the like), or an unbracketed IPv6 address
-  }
-  return HostPort{std::string(host), std::string(port)};
-}
-
-// Binds `addr` once (SO_REUSEADDR, as the listeners do: connections of an earlier run in
-// TIME_WAIT do not count; an IPv6 address alone, not its IPv4 twin) and closes it.
+// Binds `addr` once (an IPv6 address alone, not its IPv4 twin) and closes it: the errno
+// of a failed bind, 0 when it bound.
 int BindErrno(const sockaddr* addr, socklen_t length) {
   const int fd = socket(addr->sa_family, SOCK_STREAM | SOCK_CLOEXEC, 0);
   if (fd < 0) return errno;
@@ -64,19 +39,43 @@ std::string Numeric(const sockaddr* addr, socklen_t length) {
   return addr->sa_family == AF_INET6 ? absl::StrCat("[", host, "]:", port) : absl::StrCat(host, ":", port);
 }
 
+bool IsUnspecified(const std::string& host) {
+  in_addr v4{};
+  in6_addr v6{};
+  if (inet_pton(AF_INET, host.c_str(), &v4) == 1) return v4.s_addr == htonl(INADDR_ANY);
+  return inet_pton(AF_INET6, host.c_str(), &v6) == 1 && IN6_IS_ADDR_UNSPECIFIED(&v6);
+}
+
 }  // namespace
 
-absl::Status CheckNotInUse(const std::string& address, const std::string& what) {
-  const std::optional<HostPort> split = SplitTcpAddress(address);
-  if (!split.has_value() || split->port == "0") return absl::OkStatus();
+std::optional<ListenHostPort> SplitGrpcTcpAddress(absl::string_view address) {
+  for (absl::string_view scheme : {"unix:", "unix-abstract:", "vsock:", "ipv4:", "ipv6:", "dns:"}) {
+    if (absl::StartsWith(address, scheme)) return std::nullopt;
+  }
+  const std::size_t colon = address.rfind(':');
+  if (colon == absl::string_view::npos) return std::nullopt;
+  absl::string_view host = address.substr(0, colon);
+  int port = 0;
+  if (!absl::SimpleAtoi(address.substr(colon + 1), &port) || port < 0 || port > 65535) return std::nullopt;
+  if (absl::ConsumePrefix(&host, "[")) {
+    if (!absl::ConsumeSuffix(&host, "]")) return std::nullopt;
+  } else if (absl::StrContains(host, ':')) {
+    return std::nullopt;  // an unbracketed IPv6 address or an unknown scheme
+  }
+  if (host.empty()) return std::nullopt;
+  return ListenHostPort{std::string(host), port};
+}
+
+absl::Status CheckNotInUse(const ListenHostPort& address, AnyAddress any, const std::string& what) {
+  if (address.port == 0) return absl::OkStatus();
   addrinfo hints{};
   hints.ai_socktype = SOCK_STREAM;
   hints.ai_flags = AI_PASSIVE | AI_NUMERICSERV;
-  // An empty host or "::" is every address of both families (gRPC binds both); getaddrinfo
-  // gives one wildcard per family for a null host.
-  const bool every_address = split->host.empty() || split->host == "::";
+  // A null host gives the unspecified address of each family.
+  const bool both_families = any == AnyAddress::kBothFamilies && IsUnspecified(address.host);
   addrinfo* found = nullptr;
-  if (getaddrinfo(every_address ? nullptr : split->host.c_str(), split->port.c_str(), &hints, &found) != 0) {
+  if (getaddrinfo(both_families ? nullptr : address.host.c_str(), std::to_string(address.port).c_str(), &hints,
+                  &found) != 0) {
     return absl::OkStatus();  // unresolvable: the listener says so
   }
   const std::unique_ptr<addrinfo, decltype(&freeaddrinfo)> owned(found, &freeaddrinfo);

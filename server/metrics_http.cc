@@ -8,9 +8,7 @@
 
 namespace nupmpc::server {
 
-absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(const std::string& address,
-                                                                            std::function<std::string()> render_metrics,
-                                                                            std::function<bool()> ready) {
+absl::StatusOr<ListenHostPort> ParseMetricsAddress(const std::string& address) {
   const std::size_t colon = address.rfind(':');
   int port = -1;
   if (colon == std::string::npos || !absl::SimpleAtoi(address.substr(colon + 1), &port) || port < 0 || port > 65535) {
@@ -20,6 +18,16 @@ absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(cons
   std::string host = address.substr(0, colon);
   if (host.empty()) host = "0.0.0.0";
   if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  return ListenHostPort{std::move(host), port};
+}
+
+absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(const std::string& address,
+                                                                            std::function<std::string()> render_metrics,
+                                                                            std::function<bool()> ready) {
+  absl::StatusOr<ListenHostPort> parsed = ParseMetricsAddress(address);
+  if (!parsed.ok()) return parsed.status();
+  const std::string& host = parsed->host;
+  const int port = parsed->port;
 
   std::unique_ptr<MetricsHttpServer> s(new MetricsHttpServer());
   s->http_ = std::make_unique<httplib::Server>();

@@ -12,12 +12,17 @@
 #include <thread>
 
 #include "absl/status/statusor.h"
+#include "server/listen_probe.h"
 
 namespace httplib {
 class Server;
 }
 
 namespace nupmpc::server {
+
+// `address` (HOST:PORT, [V6]:PORT or :PORT) as the endpoint binds it: :PORT is IPv4's every
+// address, 0.0.0.0. INVALID_ARGUMENT naming --metrics_address when it does not parse.
+absl::StatusOr<ListenHostPort> ParseMetricsAddress(const std::string& address);
 
 class MetricsHttpServer {
  public:
