@@ -34,7 +34,8 @@ server_tests=(service_solve_test service_validation_test service_transform_test 
               worker_pool_test session_strand_test read_timing_test server_binary_test service_admission_test
               service_stream_bounds_test service_malformed_bytes_test memory_budget_test auth_test
               log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
-              hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test)
+              hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test
+              listen_probe_test)
 targets=()
 for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
 cmake --build build-asan -j "$jobs" "${targets[@]}"

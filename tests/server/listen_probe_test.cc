@@ -26,7 +26,7 @@ using ::testing::HasSubstr;
 // listening, as another server's would be.
 class HeldPort {
  public:
-  explicit HeldPort(int family, int port = 0) : family_(family) {
+  explicit HeldPort(int family, int port = 0) {
     fd_ = socket(family, SOCK_STREAM | SOCK_CLOEXEC, 0);
     if (fd_ < 0) {
       error_ = errno;
@@ -68,7 +68,6 @@ class HeldPort {
   int error() const { return error_; }  ///< errno of a socket, bind or listen that failed; 0 when held
 
  private:
-  int family_;
   int fd_ = -1;
   int port_ = 0;
   int error_ = 0;
