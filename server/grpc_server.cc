@@ -80,8 +80,7 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     return absl::UnavailableError(
-        absl::StrCat("could not listen on ", options.address,
-                     " (in use by another process, not this machine's address, or a port this user may not bind)"));
+        absl::StrCat("could not listen on ", options.address, " (", kListenFailureCauses, ")"));
   }
   s->server_->GetHealthCheckService()->SetServingStatus(true);
   if (!options.metrics_address.empty()) {

@@ -15,6 +15,10 @@
 
 namespace nupmpc::server {
 
+// Why a listener that passed CheckNotInUse can still fail to bind, for its message.
+inline constexpr char kListenFailureCauses[] =
+    "in use by another process, not this machine's address, or a port this user may not bind";
+
 struct ListenHostPort {
   std::string host;  ///< a name or a numeric address, without brackets
   int port = 0;

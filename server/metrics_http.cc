@@ -49,9 +49,8 @@ absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(cons
   });
   s->port_ = port == 0 ? s->http_->bind_to_any_port(host) : (s->http_->bind_to_port(host, port) ? port : -1);
   if (s->port_ <= 0) {
-    return absl::UnavailableError(absl::StrCat(
-        "--metrics_address \"", address,
-        "\": could not listen (in use by another process, not this machine's address, or a port this user may not bind)"));
+    return absl::UnavailableError(
+        absl::StrCat("--metrics_address \"", address, "\": could not listen (", kListenFailureCauses, ")"));
   }
   s->thread_ = std::thread([http = s->http_.get()] { http->listen_after_bind(); });
   return s;
