@@ -21,7 +21,6 @@ server process, a PASS/FAIL line and its figures:
 Exit 1 when any scenario fails. --quick: shorter phases (the ctest Faults.Quick)."""
 
 import argparse
-import asyncio
 import json
 import os
 import subprocess
@@ -31,7 +30,6 @@ import time
 from collections import Counter
 
 import grpc
-import grpc.aio
 
 import harness
 import raw_http2
@@ -41,12 +39,16 @@ from nupmpc.security import channel_options
 
 BIN = harness.REPO / "build" / "bin"
 PROBE_BINARY = os.environ.get("NUPMPC_PROBE_BINARY", str(BIN / "nupmpc-scaleout-probe"))
+SILENT_STREAMS_BINARY = os.environ.get("NUPMPC_SILENT_STREAMS_BINARY", str(BIN / "silent_streams"))
 CLI_BINARY = os.environ.get("NUPMPC_CLI_BINARY", str(BIN / "nupmpc"))
 LOADTEST_BINARY = os.environ.get("NUPMPC_LOADTEST_BINARY", str(BIN / "nupmpc-loadtest"))
 # The slowest benchmark solve: long enough to signal or kill a client in the middle of it.
 LONG_SOLVE = harness.BENCHMARKS / "random_outbox_M40_K20_L20_N1000_s1.json"
 FIRST_MESSAGE_TIMEOUT_S = 2.0
 CONNECTION_IDLE_TIMEOUT_S = 2.0
+# The idle scenario's silent streams end after FIRST_MESSAGE_TIMEOUT_S; their client gives up
+# on them (a deadline of its own) long after.
+SILENT_STREAMS_GIVE_UP_S = FIRST_MESSAGE_TIMEOUT_S + 30
 NO_RECONNECT = nupmpc.ReconnectOptions(budget_s=0)
 
 
@@ -269,30 +271,23 @@ def slow_reader(quick):
     return r
 
 
-async def silent_streams(target, count, per_connection=100):
-    """`count` Control calls that never send; the code and details each ends with. Run in a
-    process of its own (silent_streams_in_child): grpcio's asyncio stack next to its
-    synchronous one in one process (the Stepper) can stall (grpc/grpc#22733)."""
-    channels = [grpc.aio.insecure_channel(target, options=channel_options(None, True))
-                for _ in range((count + per_connection - 1) // per_connection)]
-    calls = [pb_grpc.MpcServiceStub(channels[i // per_connection]).Control() for i in range(count)]
-
-    async def outcome(call):
-        return await call.code(), await call.details()
+def silent_streams(target, count, outcomes, failures):
+    """`count` Control calls that never send, from SILENT_STREAMS_BINARY (gRPC's C++ client);
+    appends how each ended, (code name, details), to `outcomes`, or why there is no answer to
+    `failures`. Calls the server never ends end at the helper's own deadline."""
     try:
-        return await asyncio.wait_for(asyncio.gather(*(outcome(c) for c in calls)), FIRST_MESSAGE_TIMEOUT_S + 30)
-    finally:
-        for c in channels:
-            await c.close()
-
-
-def silent_streams_in_child(target, count, outcomes):
-    """silent_streams in a child process (this script with --silent_streams); appends its
-    (code name, details) pairs to `outcomes`."""
-    done = subprocess.run([sys.executable, __file__, "--silent_streams", target, str(count)], capture_output=True,
-                          text=True, timeout=FIRST_MESSAGE_TIMEOUT_S + 60)
+        done = subprocess.run([SILENT_STREAMS_BINARY, target, str(count), "100", str(SILENT_STREAMS_GIVE_UP_S)],
+                              capture_output=True, text=True, timeout=SILENT_STREAMS_GIVE_UP_S + 15)
+    except subprocess.TimeoutExpired as hung:
+        failures.append(f"silent_streams did not exit {SILENT_STREAMS_GIVE_UP_S + 15} s after it started; "
+                        f"stderr: {hung.stderr!r:.2000}")
+        return
+    except OSError as error:
+        failures.append(f"silent_streams could not run ({SILENT_STREAMS_BINARY}): {error}")
+        return
     if done.returncode != 0:
-        raise RuntimeError(f"silent streams exited with {done.returncode}: {done.stderr[-2000:]}")
+        failures.append(f"silent_streams exited with {done.returncode}: {done.stderr[-2000:]}")
+        return
     outcomes.extend(tuple(pair) for pair in json.loads(done.stdout))
 
 
@@ -308,15 +303,16 @@ def idle(quick):
         fds_before, rss_before = server.open_fds(), server.rss_bytes()
         tcp = [raw_http2.connect(server.port, handshake=False) for _ in range(500)]
         h2 = [raw_http2.connect(server.port, handshake=True) for _ in range(500)]
-        outcomes = []
-        streams = threading.Thread(target=silent_streams_in_child, args=(server.target, 500, outcomes))
+        outcomes, failures = [], []
+        streams = threading.Thread(target=silent_streams, args=(server.target, 500, outcomes, failures))
         streams.start()
         opened = wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 500, FIRST_MESSAGE_TIMEOUT_S)
         fds_held, rss_held = server.open_fds(), server.rss_bytes()
         served = Stepper(server.target)
         served.start()
         closed, last_close_s = raw_http2.closed_by_peer(tcp + h2, FIRST_MESSAGE_TIMEOUT_S + CONNECTION_IDLE_TIMEOUT_S + 15)
-        streams.join(timeout=60)
+        streams.join(timeout=SILENT_STREAMS_GIVE_UP_S + 20)
+        streams_open_after = server.metric_sum("nupmpc_control_streams")
         served.stop()
         for s in tcp + h2:
             s.close()
@@ -327,9 +323,12 @@ def idle(quick):
             "rss_before_mib": round(rss_before / 2**20, 1), "rss_held_mib": round(rss_held / 2**20, 1),
             "rss_after_mib": round(server.rss_bytes() / 2**20, 1), "connections_closed_by_server": closed,
             "last_closed_after_s": round(last_close_s, 2), "silent_streams_open_at_once": opened,
-            "silent_stream_endings": dict(codes), "other_client_steps": len(served.samples),
+            "silent_stream_endings": dict(codes), "control_streams_open_after": streams_open_after,
+            "other_client_steps": len(served.samples),
             "other_client_errors": dict(served.errors)})
         r.check(closed == 1000, f"only {closed} of 1000 idle connections were closed by the server")
+        for failure in failures:
+            r.check(False, failure)
         r.check(codes["DEADLINE_EXCEEDED"] == 500 and all("first_message_timeout_s" in d for _, d in outcomes),
                 "not every silent stream was ended naming first_message_timeout_s")
         r.check(server.open_fds() <= fds_before + 10, "file descriptors were not given back")
@@ -444,16 +443,8 @@ SCENARIOS = {"restart": restart, "sigterm": sigterm, "slow_reader": slow_reader,
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="shorter phases (the ctest)")
-    parser.add_argument("--silent_streams", nargs=2, metavar=("TARGET", "COUNT"),
-                        help="internal (the idle scenario's child): open COUNT silent Control streams, print how "
-                             "each ended as JSON")
     parser.add_argument("scenarios", nargs="*", help=f"of {', '.join(SCENARIOS)} (default: all)")
     args = parser.parse_args()
-    if args.silent_streams:
-        target, count = args.silent_streams[0], int(args.silent_streams[1])
-        ended = asyncio.run(silent_streams(target, count))
-        print(json.dumps([[code.name, details] for code, details in ended]))
-        return 0
     unknown = [n for n in args.scenarios if n not in SCENARIOS]
     if unknown:
         parser.error(f"unknown scenario {unknown[0]}: one of {', '.join(SCENARIOS)}")
