@@ -6,7 +6,8 @@
 #      8; every level also against the zero-work echo, the inline-solve echo and the bare
 #      server (peers in child processes pinned to the server's CPUs, interleaved with nupmpc
 #      in 3 rounds), with the ratios nupmpc/inline and nupmpc/bare;
-#   2. the fleet path: 100 masses_N30 sessions per SolveFleet call against 100 streams;
+#   2. the fleet path: 100 masses_N30 sessions per SolveFleet call against 100 streams,
+#      then in 2 calls of 50 in flight at once;
 #   3. overload: masses_N300 (a few ms per solve, so the generator can offer 10x what
 #      the server can solve), open loop at 10x the core-alone capacity, then at half of
 #      it (recovery), against a server that refuses work it could not start within 20 ms;
@@ -77,6 +78,8 @@ echo "== closed loop, masses_N300 (solver-bound)"
 run_loadtest --instance "$benchmarks/masses_N300.json" --sweep 1,2,8 --inline_solve --bare_solve
 echo "== fleet: 100 masses_N30 sessions per SolveFleet call, then 100 separate Control streams"
 run_loadtest --instance "$benchmarks/masses_N30.json" --fleet 100 --echo=false
+echo "== fleet: the same 100 sessions in 2 SolveFleet calls of 50 in flight at once (the server's throughput)"
+run_loadtest --instance "$benchmarks/masses_N30.json" --fleet 100 --fleet_calls_in_flight 2 --echo=false
 echo "== memory: 10,000 idle masses_N30 sessions"
 run_loadtest --instance "$benchmarks/masses_N30.json" --idle_sessions 10000
 stop_server

@@ -3,7 +3,8 @@
 
 // nupmpc-loadtest --fleet S: S sessions stepped together, one SolveFleet call per period
 // (closed loop: the next call when the answer arrives), each session cycling through the
-// instance's closed-loop states from its own offset.
+// instance's closed-loop states from its own offset; with --fleet_calls_in_flight K, the S
+// sessions in K calls of S/K, each caller closed-loop on its own.
 
 #include <cstdint>
 #include <string>
@@ -17,6 +18,7 @@ namespace nupmpc::loadtest {
 
 struct FleetReport {
   int sessions = 0;
+  int calls_in_flight = 1;  ///< callers stepping their share of the sessions at once
   double measured_s = 0.0;
   std::uint64_t calls = 0;
   std::uint64_t answered = 0;  ///< steps answered with a result (solved or superseded)
@@ -29,8 +31,12 @@ struct FleetReport {
   std::vector<double> call_ms;    ///< every measured call's round trip
 };
 
+// `calls_in_flight` callers, each on a connection of its own, step their share of the
+// sessions (as equal as can be) one call after another, at the same time: with more than
+// one, the server has the next call while a caller handles its answer.
 absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const ChannelSecurity& security,
-                                          const StreamPlan& plan, int sessions, double duration_s, double warmup_s);
+                                          const StreamPlan& plan, int sessions, int calls_in_flight, double duration_s,
+                                          double warmup_s);
 
 // One report of several runs (rounds interleaved with the peers'): calls, answers and
 // measured time summed, quantiles over every call, iterations over every solved step.

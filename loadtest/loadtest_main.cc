@@ -86,6 +86,10 @@ ABSL_FLAG(std::string, client_cpus, "",
 ABSL_FLAG(int, fleet, 0,
           "fleet mode: step this many sessions per SolveFleet call (closed loop), then the same number of "
           "separate Control streams, and compare");
+ABSL_FLAG(int, fleet_calls_in_flight, 1,
+          "fleet mode: the --fleet sessions in this many SolveFleet calls at once, each caller closed-loop on its own "
+          "connection (1: one call per period, as one supervisory controller; 2: the server has the next call while "
+          "a caller handles its answer, which measures the server's throughput)");
 ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
 ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
 ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
@@ -277,7 +281,8 @@ absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const n
     for (const int run : order) {
       if (run == 0) {
         absl::StatusOr<lt::FleetReport> stepped =
-            lt::RunFleetLevel(target, security, plan, sessions, duration_s, absl::GetFlag(FLAGS_warmup_s));
+            lt::RunFleetLevel(target, security, plan, sessions, absl::GetFlag(FLAGS_fleet_calls_in_flight), duration_s,
+                             absl::GetFlag(FLAGS_warmup_s));
         if (!stepped.ok()) return absl::Status(stepped.status().code(), absl::StrCat("fleet: ", stepped.status().message()));
         fleet.push_back(*std::move(stepped));
       } else if (run == 1) {

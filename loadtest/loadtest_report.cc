@@ -201,6 +201,7 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
   if (json) {
     const nlohmann::json out = {{"instance", h.instance},
                                 {"sessions", f.sessions},
+                                {"calls_in_flight", f.calls_in_flight},
                                 {"calls", f.calls},
                                 {"fleet_steps_per_s", f.steps_per_s},
                                 {"fleet_mean_iterations", f.mean_iterations},
@@ -219,10 +220,13 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
     std::printf("%s\n", out.dump(2).c_str());
     return;
   }
-  std::printf("fleet: %d sessions per SolveFleet call: %.0f steps/s (%.0f%% of capacity %d workers / median = "
+  const std::string calls =
+      f.calls_in_flight == 1 ? "per SolveFleet call"
+                             : absl::StrCat("in ", f.calls_in_flight, " SolveFleet calls in flight at once");
+  std::printf("fleet: %d sessions %s: %.0f steps/s (%.0f%% of capacity %d workers / median = "
               "%.0f/s), %.2f iterations/step, call p50 %.3f ms, p99 %.3f ms, %llu step errors\n",
-              f.sessions, f.steps_per_s, 100.0 * of_capacity, h.fleet_cores, worker_capacity, f.mean_iterations,
-              f.call_p50_ms, f.call_p99_ms, static_cast<unsigned long long>(f.step_errors));
+              f.sessions, calls.c_str(), f.steps_per_s, 100.0 * of_capacity, h.fleet_cores, worker_capacity,
+              f.mean_iterations, f.call_p50_ms, f.call_p99_ms, static_cast<unsigned long long>(f.step_errors));
   std::printf("       the core alone stepping the %d sessions in turn (warm, as the fleet's calls after warm-up): "
               "mean %.4f ms per step, %.2f iterations/step, capacity %d workers / mean = %.0f steps/s; the fleet "
               "call reaches %.0f%% of it\n",

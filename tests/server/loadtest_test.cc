@@ -407,7 +407,7 @@ TEST(FleetRounds, MergedOverEveryCallAndEverySolvedStep) {
 }
 
 TEST_F(LoadTest, AFleetLevelCountsEveryStepOfEveryCall) {
-  absl::StatusOr<loadtest::FleetReport> r = loadtest::RunFleetLevel(target_, {}, Plan(true), 3, 0.5, 0.05);
+  absl::StatusOr<loadtest::FleetReport> r = loadtest::RunFleetLevel(target_, {}, Plan(true), 3, 1, 0.5, 0.05);
   ASSERT_TRUE(r.ok()) << r.status();
   ASSERT_GT(r->calls, 0u);
   EXPECT_EQ(r->call_ms.size(), r->calls);
@@ -416,6 +416,24 @@ TEST_F(LoadTest, AFleetLevelCountsEveryStepOfEveryCall) {
   EXPECT_EQ(r->step_errors, 0u);
   EXPECT_GE(r->iterations, r->solved);  // every solve takes a pass at least
   EXPECT_GT(r->measured_s, 0.0);
+}
+
+TEST_F(LoadTest, AFleetInTwoCallsInFlightStepsEachSessionInOneOfThem) {
+  // 3 sessions in 2 callers: calls of 1 and of 2 sessions, each session in one caller's calls only.
+  absl::StatusOr<loadtest::FleetReport> r = loadtest::RunFleetLevel(target_, {}, Plan(true), 3, 2, 0.5, 0.05);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_EQ(r->calls_in_flight, 2);
+  ASSERT_GE(r->calls, 2u);
+  EXPECT_EQ(r->call_ms.size(), r->calls);
+  EXPECT_GE(r->answered, r->calls);
+  EXPECT_LE(r->answered, 2 * r->calls);
+  EXPECT_EQ(r->solved, r->answered);  // no session in two calls at once: nothing superseded
+  EXPECT_EQ(r->step_errors, 0u);
+  EXPECT_DOUBLE_EQ(r->steps_per_s, static_cast<double>(r->answered) / r->measured_s);
+  for (const int refused : {0, 4}) {
+    const absl::StatusOr<loadtest::FleetReport> bad = loadtest::RunFleetLevel(target_, {}, Plan(true), 3, refused, 0.1, 0);
+    EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument) << refused;
+  }
 }
 
 TEST(CoreBaseline, SteppingAFleetInTurnTimesTheWarmPeriodsAndRefusesAWrongState) {
