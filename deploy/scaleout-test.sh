@@ -54,7 +54,10 @@ held = [socket.socket() for _ in range(5)]
 for s in held: s.bind(("127.0.0.1", 0))
 print(*(s.getsockname()[1] for s in held))')
 declare -A port=([r1]=$p1 [r2]=$p2 [r3]=$p3 [r4]=$p4) pid
-drain_delay_s=3
+# Longer than the balancer's worst case to take a replica out (inter 500ms, fall 2, timeout
+# check 2s: 3 s when a check hangs), so that a drained replica is seen DOWN before it exits
+# even on a loaded machine; it answers NOT_SERVING at once, so it is out after about 1 s.
+drain_delay_s=5
 start_replica() {  # name
   local name=$1
   "$bin/nupmpc-server" --address "127.0.0.1:${port[$name]}" --log_level warn --drain_delay_s "$drain_delay_s" \

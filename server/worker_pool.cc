@@ -51,6 +51,11 @@ int WorkerPool::queued() const {
   return static_cast<int>(queue_.size());
 }
 
+int WorkerPool::callers_waiting() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return here_waiting_;
+}
+
 void WorkerPool::Shutdown() {
   {
     std::lock_guard<std::mutex> lock(mu_);

@@ -64,6 +64,8 @@ class WorkerPool {
   int cores() const { return cores_; }
   int queue_capacity() const { return capacity_; }
   int queued() const;
+  // Callers of TryRunHere waiting for a core now.
+  int callers_waiting() const;
   // Tasks run on a caller's thread by TryRunHere since start, its own and queued ones.
   std::uint64_t run_here() const { return run_here_.load(std::memory_order_relaxed); }
   // For the metrics: tasks running now (on workers and callers), and the seconds all of them

@@ -129,21 +129,25 @@ CliRun RunCli(int port, const std::string& spec, std::vector<std::string> flags,
 }
 
 // Kills the server when the CLI has printed step `kill_at`, waits `down_for`, starts it
-// again on the same port, and lets the run finish.
+// again on the same port, and lets the run finish. On a thread of its own, so that this
+// reader keeps draining the pipe meanwhile: a CLI blocked writing to a full pipe would see
+// the break only after the restart, and reconnect at its first attempt.
 CliRun RunThroughRestart(std::chrono::milliseconds down_for, int steps, int kill_at) {
   const int port = FreeLoopbackPort();
   auto server = StartServer(port);
   EXPECT_TRUE(WaitUntilServing(port));
   const std::string spec = WriteSpec("masses_N30_spec.json");
-  bool restarted = false;
+  std::thread restarter;
   CliRun run = RunCli(port, spec, {"--steps=" + std::to_string(steps), "--reconnect_budget_s=25"}, [&](int step) {
-    if (restarted || step < kill_at) return;
-    server->Kill();
-    std::this_thread::sleep_for(down_for);
-    server = StartServer(port);
-    restarted = true;
+    if (restarter.joinable() || step < kill_at) return;
+    restarter = std::thread([&] {
+      server->Kill();
+      std::this_thread::sleep_for(down_for);
+      server = StartServer(port);
+    });
   });
-  EXPECT_TRUE(restarted) << "the run ended before step " << kill_at;
+  EXPECT_TRUE(restarter.joinable()) << "the run ended before step " << kill_at;
+  if (restarter.joinable()) restarter.join();
   return run;
 }
 

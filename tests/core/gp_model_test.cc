@@ -295,7 +295,11 @@ TEST(HyperparameterFit, StopsAtItsTimeLimitWithinOneEvaluation) {
   ASSERT_TRUE(fit.ok()) << fit.status();
   EXPECT_TRUE(fit->stopped) << fit->report;
   EXPECT_FALSE(fit->converged);
-  EXPECT_LT(fit->seconds, options.max_seconds + 2 * evaluation) << fit->report << "; one evaluation " << evaluation;
+  // One evaluation measured again after the fit as well: on a shared machine whose load
+  // changed meanwhile, the slower of the two is the fit's evaluation.
+  const double slower_evaluation = std::max(evaluation, EvaluationSeconds(d));
+  EXPECT_LT(fit->seconds, options.max_seconds + 2 * slower_evaluation)
+      << fit->report << "; one evaluation " << evaluation << " s before the fit, " << slower_evaluation << " s at most";
   EXPECT_LE(fit->negative_log_likelihood, fit->initial_negative_log_likelihood);
   // What it reports is the likelihood at the kernel it returns.
   EXPECT_NEAR(fit->negative_log_likelihood, *NegativeLogLikelihood(d.x, d.y, fit->kernel, nullptr),

@@ -289,9 +289,12 @@ TEST(WorkerPool, ACallerWaitsForACoreRunningShortWorkAndTakesOverTheQueue) {
   std::thread::id queued_ran_on;
   ASSERT_TRUE(pool.TrySubmit([&] { queued_ran_on = std::this_thread::get_id(); }, 0.1, Placement::kAnyCoreHolder).ok());
   std::thread releaser([&] {
-    // Ends the worker's task a little later: a caller that did not wait for the core
-    // would be refused meanwhile.
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    // Ends the worker's task once the caller waits for the core (a caller that did not
+    // wait would have been refused by then), or after 30 s, which fails the test.
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (pool.callers_waiting() == 0 && std::chrono::steady_clock::now() < give_up) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
     release.set_value();
   });
   std::thread::id ran_on;

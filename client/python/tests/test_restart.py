@@ -2,7 +2,6 @@
 the same port, and the loop goes on; every step's plan is for the state sent."""
 
 import asyncio
-import threading
 
 import numpy as np
 
@@ -10,31 +9,29 @@ import nupmpc
 from conftest import ServerProcess
 
 
-def _restart_soon(server, delay_s):
-    """Kills the server now and starts it again after delay_s (in the background)."""
-    server.kill()
-    restarter = threading.Timer(delay_s, server.start)
-    restarter.start()
-    return restarter
-
-
 def test_a_session_rides_through_a_server_restart(masses, reference):
     j_star = reference["masses_N30"]["closed_loop"]["J_star"]
     server = ServerProcess()
     attempts = []
+
+    def on_attempt(attempt):
+        """The server comes back once an attempt was refused: the step is sent while it is down,
+        however slow this machine."""
+        attempts.append(attempt)
+        if attempt.error is not None and server.process.poll() is not None:
+            server.start()
+
     try:
         with nupmpc.connect(server.target) as client:
-            session = client.session(masses.problem, nupmpc.ReconnectOptions(on_attempt=attempts.append, seed=1))
+            session = client.session(masses.problem, nupmpc.ReconnectOptions(on_attempt=on_attempt, seed=1))
             first_id = session.id
-            restarter = None
             for t, x in enumerate(masses.closed_loop_states[:40]):
                 if t == 15:
-                    restarter = _restart_soon(server, 0.3)  # down while the step is sent
+                    server.kill()
                 plan = session.step(x)
                 np.testing.assert_array_equal(plan.x[0], x)
                 assert plan.converged, t
                 assert abs(plan.objective - j_star[t]) <= 1e-6 * abs(j_star[t]), t
-            restarter.join()
             assert session.reconnects == 1
             assert session.id != first_id  # re-created under a new id
             assert attempts[-1].error is None and len(attempts) >= 2  # refused while down, then back
