@@ -9,7 +9,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 minutes="${1:-10}"
-deploy/build.sh nupmpc-server nupmpc nupmpc-loadtest nupmpc-scaleout-probe nupmpc_python
+deploy/build.sh nupmpc-server nupmpc nupmpc-loadtest nupmpc-scaleout-probe silent_streams nupmpc_python
 status=0
 /usr/bin/python3 tests/soak/soak.py --seconds "$(awk "BEGIN { print $minutes * 60 }")" || status=1
 if [ "${NUPMPC_SOAK_FAULTS:-1}" != 0 ]; then

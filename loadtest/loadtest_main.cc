@@ -362,7 +362,7 @@ int main(int argc, char** argv) {
   const std::string mode = absl::GetFlag(FLAGS_mode);
   if (mode != "closed" && mode != "open") return Fail("--mode", absl::InvalidArgumentError("must be closed or open"));
   if (const int fleet = absl::GetFlag(FLAGS_fleet), in_flight = absl::GetFlag(FLAGS_fleet_calls_in_flight);
-      fleet > 0 && (in_flight < 1 || in_flight > fleet)) {
+      in_flight != 1 && (in_flight < 1 || in_flight > fleet)) {
     return Fail("--fleet_calls_in_flight", absl::InvalidArgumentError(
                                                absl::StrCat(in_flight, ": from 1 to the --fleet sessions (", fleet, ")")));
   }

@@ -9,7 +9,8 @@ server process, a PASS/FAIL line and its figures:
   slow_reader  a client that sends steps and never reads: the server stops reading it
                (memory bounded), other streams keep being served
   idle         1,000 idle connections (half silent TCP, half HTTP/2 without calls) and 500
-               Control streams that never send: all ended by the server's timeouts
+               Control streams that never send (build/bin/silent_streams, a test helper):
+               all ended by the server's timeouts
   killed       a client killed mid-solve: the solve is cancelled, the worker free at once
   slow_loris   connections holding half a gRPC message or half an HTTP/2 frame: ended and
                closed, others served meanwhile
@@ -280,7 +281,7 @@ def silent_streams(target, count, outcomes, failures):
                               capture_output=True, text=True, timeout=SILENT_STREAMS_GIVE_UP_S + 15)
     except subprocess.TimeoutExpired as hung:
         failures.append(f"silent_streams did not exit {SILENT_STREAMS_GIVE_UP_S + 15} s after it started; "
-                        f"stderr: {hung.stderr!r:.2000}")
+                        f"stderr: {(hung.stderr or b'')[-2000:]!r}")
         return
     except OSError as error:
         failures.append(f"silent_streams could not run ({SILENT_STREAMS_BINARY}): {error}")
@@ -323,7 +324,8 @@ def idle(quick):
             "rss_before_mib": round(rss_before / 2**20, 1), "rss_held_mib": round(rss_held / 2**20, 1),
             "rss_after_mib": round(server.rss_bytes() / 2**20, 1), "connections_closed_by_server": closed,
             "last_closed_after_s": round(last_close_s, 2), "silent_streams_open_at_once": opened,
-            "silent_stream_endings": dict(codes), "control_streams_open_after": streams_open_after,
+            "silent_stream_endings": dict(codes),
+            "control_streams_open_after_with_the_other_clients": streams_open_after,
             "other_client_steps": len(served.samples),
             "other_client_errors": dict(served.errors)})
         r.check(closed == 1000, f"only {closed} of 1000 idle connections were closed by the server")
