@@ -402,6 +402,7 @@ void ControlStream::QueueWriteLocked(v1::ControlResponse response) {
 void ControlStream::Pump() {
   const grpc::ByteBuffer* to_write = nullptr;
   bool finish = false;
+  bool close_owned_session = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (phase_ == Phase::kFinished) return;
@@ -412,10 +413,20 @@ void ControlStream::Pump() {
                (phase_ == Phase::kEnding || (reading_ == Reading::kDone && !parked_.has_value()))) {
       phase_ = Phase::kFinished;
       finish = true;
+      close_owned_session = entry_ != nullptr && entry_->owned_by_stream;  // no solve of it runs: !solving_
     }
   }
   if (to_write != nullptr) Write(to_write);
+  if (close_owned_session) CloseOwnedSession();
   if (finish) End(final_status_);
+}
+
+void ControlStream::CloseOwnedSession() {
+  if (owned_session_closed_) return;
+  owned_session_closed_ = true;
+  const LogContext log_context(entry_->id, caller_.principal);
+  (void)state_->registry.Close(entry_->id);
+  spdlog::info("session {} closed with its Control stream", entry_->id);
 }
 
 void ControlStream::ReadNext(bool after_solve) {
@@ -490,8 +501,7 @@ void ControlStream::OnDone() {
   }
   if (entry_ != nullptr) {
     if (entry_->owned_by_stream) {
-      (void)state_->registry.Close(entry_->id);
-      spdlog::info("session {} closed with its Control stream", entry_->id);
+      CloseOwnedSession();  // unless the stream's end did, before its status
     } else {
       entry_->attached.store(false);
       spdlog::info("session {}: its Control stream detached", entry_->id);

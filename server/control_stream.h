@@ -110,6 +110,10 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void ReadNext(bool after_solve = false);
   void Write(const grpc::ByteBuffer* bytes);
   void End(const grpc::Status& status);
+  // Closes the session this stream created, once: before the stream's status when it ends
+  // by itself (so that a client holding the status no longer sees or counts the session),
+  // else in OnDone. Called without mu_; ordered before OnDone by End's hand-over.
+  void CloseOwnedSession();
 
   ServerState* const state_;
   // Valid until OnDone; read only while the stream cannot finish (a read pending, the
@@ -122,6 +126,7 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   const Caller caller_;   // who opened the stream: owns the session it creates
   const Clock::time_point started_at_ = Clock::now();
   bool counted_for_principal_ = false;  // in state_->principal_streams (set by Begin)
+  bool owned_session_closed_ = false;   // by CloseOwnedSession
 
   // Where the stream is in its life.
   enum class Phase {

@@ -72,5 +72,28 @@ TEST_F(ServiceTest, StreamsEndingWhileTheirSolveIsQueuedOrRunningLeaveNothingBeh
   EXPECT_EQ(after->status(), v1::SOLVE_STATUS_CONVERGED);
 }
 
+// A stream that ends by itself (the client half-closes, or the server ends it) closes the
+// session it created before it sends its status: a client holding the status neither lists
+// nor counts that session any more (it would, for a moment, when the session closed only in
+// OnDone, after the status).
+TEST_F(ServiceTest, AStreamsOwnSessionIsClosedBeforeTheClientHasTheStreamsStatus) {
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("masses_N30");
+  v1::ControlRequest first;
+  *first.mutable_spec() = SpecOrDie(inst.problem);
+  const Eigen::VectorXd& x = inst.closed_loop->x1[0];
+  first.mutable_step()->mutable_state()->Add(x.data(), x.data() + x.size());
+  const std::unique_ptr<v1::MpcService::Stub> stub =
+      v1::MpcService::NewStub(grpc::CreateChannel(target_, grpc::InsecureChannelCredentials()));
+  for (int i = 0; i < 20; ++i) {
+    RunShortStream(*stub, first, Ending::kHalfCloseAfterTheAnswer);
+    absl::StatusOr<v1::GetServerInfoResponse> info = client_->GetServerInfo();
+    ASSERT_TRUE(info.ok()) << info.status();
+    ASSERT_EQ(info->active_sessions(), 0u) << "stream " << i << ": its session was still open after its status";
+    absl::StatusOr<std::vector<v1::SessionInfo>> listed = client_->ListSessions();
+    ASSERT_TRUE(listed.ok()) << listed.status();
+    ASSERT_TRUE(listed->empty()) << "stream " << i;
+  }
+}
+
 }  // namespace
 }  // namespace nupmpc::testing
