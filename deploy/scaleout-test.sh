@@ -47,12 +47,9 @@ trap cleanup EXIT
 say() { echo "== scaleout: $*"; }
 fail() { echo "scaleout-test: FAILED: $*" >&2; for f in "$work"/*.log; do echo "--- $f" >&2; tail -5 "$f" >&2; done; exit 1; }
 # Five distinct free ports, drawn while all are held (HAProxy binds with SO_REUSEPORT:
-# two processes given one port would silently share it).
-read -r lb_port p1 p2 p3 p4 < <("$py" -c '
-import socket
-held = [socket.socket() for _ in range(5)]
-for s in held: s.bind(("127.0.0.1", 0))
-print(*(s.getsockname()[1] for s in held))')
+# two processes given one port would silently share it), from outside the range the kernel
+# takes outgoing connections' ports from (the replicas restart on theirs).
+read -r lb_port p1 p2 p3 p4 < <("$py" tests/util/loopback_port.py 5)
 declare -A port=([r1]=$p1 [r2]=$p2 [r3]=$p3 [r4]=$p4) pid
 # Longer than the balancer's worst case to take a replica out (inter 500ms, fall 2, timeout
 # check 2s: 3 s when a check hangs), so that a drained replica is seen DOWN before it exits

@@ -19,7 +19,6 @@ is measured on a core of its own. The order of the servers rotates from round to
 import argparse
 import json
 import os
-import socket
 import statistics
 import subprocess
 import sys
@@ -31,12 +30,8 @@ import urllib.request
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.join(ROOT, "build", "bin")
 TOKEN = "overhead-0123456789abcdef0123456789"
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+sys.path.insert(0, os.path.join(ROOT, "tests", "util"))
+from loopback_port import free_port  # noqa: E402
 
 
 def make_certificate(directory):

@@ -7,7 +7,6 @@ import os
 import pathlib
 import re
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -15,11 +14,13 @@ import time
 import urllib.request
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
-for _path in (str(REPO / "client" / "python"), os.environ.get("NUPMPC_PYTHON_STUBS", str(REPO / "build" / "python"))):
+for _path in (str(REPO / "client" / "python"), os.environ.get("NUPMPC_PYTHON_STUBS", str(REPO / "build" / "python")),
+              str(REPO / "tests" / "util")):
     if _path not in sys.path:
         sys.path.insert(0, _path)
 
 import numpy as np  # noqa: E402
+from loopback_port import free_ports  # noqa: E402
 
 import nupmpc  # noqa: E402
 from nupmpc._proto import pb  # noqa: E402
@@ -33,12 +34,6 @@ class HarnessError(RuntimeError):
     """The set-up failed (no binary, no server): a failed run, never a skipped one."""
 
 
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 class Server:
     """nupmpc-server on a loopback port with its metrics endpoint; restart() starts a new
     process on the same ports (what a supervisor does after a crash)."""
@@ -49,7 +44,7 @@ class Server:
             raise HarnessError(f"no server binary at {SERVER_BINARY} (build nupmpc-server or set NUPMPC_SERVER_BINARY)")
         self.flags = list(flags)
         self.cpus = cpus
-        self.port, self.metrics_port = free_port(), free_port()
+        self.port, self.metrics_port = free_ports(2)
         self.target = f"127.0.0.1:{self.port}"
         self.log = tempfile.NamedTemporaryFile(prefix="nupmpc-soak-server-", suffix=".log", delete=False)
         self.process = None

@@ -10,10 +10,9 @@
 #include <utility>
 #include <vector>
 
-namespace nupmpc::testing {
+#include "tests/util/loopback_port.h"
 
-// A free loopback port: bind to port 0 and ask which one the kernel chose (0 on failure).
-int FreeLoopbackPort();
+namespace nupmpc::testing {
 
 class ServerProcess {
  public:

@@ -17,18 +17,14 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(REPO / "client" / "python"))
 sys.path.insert(0, os.environ.get("NUPMPC_PYTHON_STUBS", str(REPO / "build" / "python")))
+sys.path.insert(0, str(REPO / "tests" / "util"))
 
 import nupmpc  # noqa: E402
+from loopback_port import free_port  # noqa: E402
 
 SERVER_BINARY = os.environ.get("NUPMPC_SERVER_BINARY", str(REPO / "build" / "bin" / "nupmpc-server"))
 CLI_BINARY = os.environ.get("NUPMPC_CLI_BINARY", str(REPO / "build" / "bin" / "nupmpc"))
 BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO.parent / "shared" / "benchmarks")))
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class ServerProcess:
