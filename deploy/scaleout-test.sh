@@ -212,8 +212,7 @@ if [ $quick = 0 ]; then
   if command -v podman >/dev/null && podman image exists localhost/nupmpc:latest 2>/dev/null &&
      podman image exists localhost/nupmpc-haproxy:latest 2>/dev/null; then
     say "compose stack (podman kube play): deploy/compose/smoke.sh"
-    NUPMPC_BIN_DIR="$bin" deploy/compose/smoke.sh --port "$("$py" -c '
-import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')" ||
+    NUPMPC_BIN_DIR="$bin" deploy/compose/smoke.sh --port "$("$py" tests/util/loopback_port.py)" ||
       fail "the compose stack's smoke test"
   else
     say "compose stack: not run (needs podman and the images of deploy/container/build-image.sh and" \

@@ -38,7 +38,7 @@ stop_timeout=$(awk -v g="$grace" 'BEGIN { printf "%d", g + 5.999 }')
 now_ns() { date +%s%N; }
 ms_between() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.0f", (b - a) / 1e6 }'; }
 
-port=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+port=$(python3 tests/util/loopback_port.py)
 address=127.0.0.1:$port
 name=nupmpc-smoke-$$
 cleanup() { "${podman_run[@]}" rm -f --time 0 "$name" >/dev/null 2>&1 || true; }
