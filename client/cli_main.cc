@@ -9,7 +9,7 @@
 //   nupmpc info                server version, limits, counters
 //   nupmpc sessions            open sessions
 //
-// FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.
+// FILE is an instance in the benchmarks/ format or a ProblemSpec in proto JSON.
 // --format table|json; with json, closed-loop prints one object per step and line with
 // step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, has_plan,
 // u0 (the input applied: the plan's u[0], or the held one when the result has no plan),
@@ -37,7 +37,7 @@
 #include "client/solve_status_name.h"
 #include "google/protobuf/util/json_util.h"
 
-ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, server, "127.0.0.1:50051", "server address host:port (env NUPMPC_SERVER)");
 ABSL_FLAG(std::string, format, "table", "table or json");
 ABSL_FLAG(int, steps, 0, "closed-loop: number of steps (0: the instance's sequence, or 50)");
 ABSL_FLAG(double, noise, 0.0, "closed-loop simulation: std. dev. of additive state noise");
@@ -65,7 +65,7 @@ const nupmpc::cli::ProgramInfo kProgram{
                "                    FitGpModelRequest in proto JSON\n"
                "  info              server version, CPU baseline, limits, counters\n"
                "  sessions          open sessions\n"
-               "FILE is an instance in the ../shared/benchmarks format or a ProblemSpec in proto JSON.",
+               "FILE is an instance in the benchmarks/ format or a ProblemSpec in proto JSON.",
     .usage = "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
              "sessions",
     .environment = {{"NUPMPC_SERVER", "server address when --server is not given"},

@@ -3,7 +3,7 @@
 
 // C++ client of nupmpc.v1.MpcService.
 //
-//   nupmpc::Client client("localhost:50051");
+//   nupmpc::Client client("127.0.0.1:50051");
 //   auto session = client.OpenSession(spec);          // a Control stream owning a session
 //   v1::Step step;  step.add_state(...);               // measured x[0]
 //   auto result = (*session)->Step(step);              // u = result->inputs() (N×L)

@@ -17,7 +17,7 @@
 // optional trust region, Levenberg-Marquardt proximal terms and step control (the
 // algorithm of core/nonlinear/sequential_solver.h, here on the client's side of the API).
 //
-//   nupmpc::Client client("localhost:50051");
+//   nupmpc::Client client("127.0.0.1:50051");
 //   nupmpc::NonlinearModel model = ...;       // f, h (and optionally their Jacobians)
 //   v1::ProblemSpec spec = ...;               // horizon, x[0], priors, costs, keep_out, options
 //   auto session = nupmpc::NonlinearSession::Create(client, model, spec);

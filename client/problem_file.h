@@ -2,7 +2,7 @@
 #define NUPMPC_CLIENT_PROBLEM_FILE_H_
 
 // Reads the problem files the command-line tools accept: an instance in the
-// ../shared/benchmarks format (recognised by its "dims" key) or a ProblemSpec in proto
+// benchmarks/ format (recognised by its "dims" key) or a ProblemSpec in proto
 // JSON. Proto only: an instance becomes a v1::ProblemSpec directly (the one reader of the
 // instance format; the core view of an instance, loadtest/instances/, is this spec through
 // the server's conversion).
@@ -30,7 +30,7 @@ absl::StatusOr<ProblemFile> LoadProblemFile(const std::string& path);
 // The same from the file's text (`name` prefixes the errors).
 absl::StatusOr<ProblemFile> ParseProblemFile(const std::string& name, const std::string& text);
 
-// An instance in the ../shared/benchmarks format as a ProblemSpec: benchmark x_1 = x[0],
+// An instance in the benchmarks/ format as a ProblemSpec: benchmark x_1 = x[0],
 // y_n = y[n-1] (no output prior at step N); R and Qy must be diagonal (the priors are per
 // scalar); per-step arrays that are constant are written as one value. INVALID_ARGUMENT
 // naming the file and the field for a malformed instance.

@@ -7,7 +7,7 @@
 #   deploy/bench-cpu-baselines.sh [BASELINE...]    (env: ROUNDS=3, NUPMPC_BENCHMARKS)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-benchmarks="${NUPMPC_BENCHMARKS:-../shared/benchmarks}"
+benchmarks="${NUPMPC_BENCHMARKS:-benchmarks}"
 rounds="${ROUNDS:-3}"
 baselines=("$@")
 [ ${#baselines[@]} -gt 0 ] || baselines=(x86-64-v3 native)

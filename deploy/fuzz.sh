@@ -14,8 +14,10 @@ seconds="${1:-60}"
 [ $# -gt 0 ] && shift
 targets=("$@")
 [ ${#targets[@]} -eq 0 ] && targets=(spec_solve_fuzzer step_fuzzer control_stream_fuzzer problem_file_fuzzer)
-benchmarks="${NUPMPC_BENCHMARKS:-../shared/benchmarks}"
+benchmarks="${NUPMPC_BENCHMARKS:-benchmarks}"
 deploy/install-deps.sh
+source deploy/sanitizer-symbolizer.sh
+check_symbolizer address
 deploy/sanitizer-tree.sh asan
 build_targets=(--target nupmpc-fuzz-seeds)
 for t in "${targets[@]}"; do build_targets+=(--target "$t"); done
@@ -26,8 +28,8 @@ seeds=$work/seeds
 rm -rf "$seeds"
 build-asan/bin/nupmpc-fuzz-seeds "$seeds" "$benchmarks"/*.json
 mkdir -p "$work/findings"
-export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1
-export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1$sanitizer_options_symbolizer
+export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1$sanitizer_options_symbolizer
 
 # fuzz TARGET: one run; its log is $work/TARGET.log, its exit code the verdict.
 fuzz() {

@@ -1,25 +1,52 @@
 #!/usr/bin/env bash
 # Installs every build and test dependency of nupmpc from Debian 12 packages, saying what
-# it does (one line per step). Idempotent; run as root (or with sudo available).
+# it does (one line per step), then checks that every program the build, the tests and
+# their scripts call is there. Idempotent; run as root (or with sudo available). Packages
+# are installed without their recommendations, so a program the suite calls is listed here
+# by its own package even where another package recommends it.
 set -euo pipefail
 
 packages=(
-  build-essential cmake ninja-build pkg-config git python3
+  build-essential cmake ninja-build pkg-config git python3 ca-certificates
   libeigen3-dev libabsl-dev
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   liblbfgs-dev coinor-libipopt-dev
   clang libclang-rt-14-dev
+  llvm-14       # llvm-symbolizer: sanitizer stacks are unreadable without it (clang only recommends it)
+  openssl       # the TLS tests' certificates (tests/util/test_pki.cc, the Python client's tests)
+  prometheus    # promtool: Prometheus' own check of /metrics (metrics_endpoint_test)
   haproxy python3-yaml python3-kubernetes yamllint libcpp-httplib-dev
   python3-grpcio python3-protobuf python3-numpy python3-matplotlib python3-pytest
 )
+# Programs the build, the tests and their scripts call (beyond a minimal Debian's own), and
+# the package each comes from: checked after every run, so a package that no longer brings
+# one is reported here rather than as a test that failed or, worse, did not run.
+programs=(
+  cmake:cmake ninja:ninja-build g++:build-essential pkg-config:pkg-config git:git python3:python3
+  protoc:protobuf-compiler grpc_cpp_plugin:protobuf-compiler-grpc grpc_python_plugin:protobuf-compiler-grpc
+  clang++:clang llvm-symbolizer-14:llvm-14 nm:binutils c++filt:binutils
+  openssl:openssl promtool:prometheus haproxy:haproxy yamllint:yamllint
+)
+
+check_programs() {
+  local missing=() entry
+  for entry in "${programs[@]}"; do
+    command -v "${entry%%:*}" >/dev/null || missing+=("${entry%%:*} (package ${entry#*:})")
+  done
+  if [ ${#missing[@]} -gt 0 ]; then
+    printf 'install-deps: missing after installing: %s\n' "${missing[@]}" >&2
+    exit 1
+  fi
+}
 
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 if [ ${#missing[@]} -eq 0 ]; then
+  check_programs
   exit 0
 fi
 
@@ -39,4 +66,5 @@ for p in "${missing[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
     { echo "install-deps: $p failed to install (run: apt-get install $p)" >&2; exit 1; }
 done
+check_programs
 echo "install-deps: done"

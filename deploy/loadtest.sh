@@ -22,7 +22,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 deploy/build.sh
-benchmarks="${NUPMPC_BENCHMARKS:-../shared/benchmarks}"
+benchmarks="${NUPMPC_BENCHMARKS:-benchmarks}"
 address="${NUPMPC_ADDRESS:-127.0.0.1:50052}"
 cpus=$(nproc)
 if [ "$cpus" -ge 3 ]; then

@@ -6,14 +6,14 @@
 # SIGTERM (it drains and exits 0).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-benchmarks="${NUPMPC_BENCHMARKS:-../shared/benchmarks}"
+benchmarks="${NUPMPC_BENCHMARKS:-benchmarks}"
 address="${NUPMPC_ADDRESS:-127.0.0.1:50051}"
 instance="$benchmarks/masses_N30.json"
 
 say() { echo "== $*"; }
 if [ ! -f "$instance" ]; then
-  echo "deploy/main.sh: $instance not found. The benchmark instances live in ../shared/benchmarks" \
-       "beside this checkout (or set NUPMPC_BENCHMARKS to their folder)." >&2
+  echo "deploy/main.sh: $instance not found. The benchmark instances live in benchmarks/ of this checkout" \
+       "(or set NUPMPC_BENCHMARKS to their folder)." >&2
   exit 1
 fi
 

@@ -23,7 +23,7 @@ quick=0
 [ "${1:-}" = "--quick" ] && quick=1
 if [ $quick = 1 ]; then phase_s=4; streams=24; else phase_s=20; streams=24; fi
 bin="${NUPMPC_BIN_DIR:-build/bin}"
-instance="${NUPMPC_BENCHMARKS:-../shared/benchmarks}/masses_N30.json"
+instance="${NUPMPC_BENCHMARKS:-benchmarks}/masses_N30.json"
 for p in nupmpc-server nupmpc nupmpc-loadtest nupmpc-scaleout-probe; do
   [ -x "$bin/$p" ] || deploy/build.sh nupmpc-server nupmpc nupmpc-loadtest nupmpc-scaleout-probe
 done

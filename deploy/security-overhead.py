@@ -37,8 +37,8 @@ from loopback_port import free_port  # noqa: E402
 def make_certificate(directory):
     key, cert = os.path.join(directory, "server.key"), os.path.join(directory, "server.pem")
     subprocess.run(["openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
-                    "-days", "1", "-keyout", key, "-out", cert, "-subj", "/CN=localhost",
-                    "-addext", "subjectAltName=DNS:localhost"], check=True, capture_output=True)
+                    "-days", "1", "-keyout", key, "-out", cert, "-subj", "/CN=nupmpc-server",
+                    "-addext", "subjectAltName=IP:127.0.0.1"], check=True, capture_output=True)
     return cert, key
 
 
@@ -52,7 +52,7 @@ def start(name, flags, pin):
 
 def wait_ready(server, client_flags):
     for _ in range(100):
-        if subprocess.run([os.path.join(BIN, "nupmpc"), f"--server=localhost:{server['port']}", "--deadline_ms=1000",
+        if subprocess.run([os.path.join(BIN, "nupmpc"), f"--server=127.0.0.1:{server['port']}", "--deadline_ms=1000",
                            "info"] + client_flags, capture_output=True).returncode == 0:
             return
         time.sleep(0.1)
@@ -74,7 +74,7 @@ def main():
     parser.add_argument("--duration_s", type=float, default=3.0)
     parser.add_argument("--levels", default="1,8")
     parser.add_argument("--pin", action="store_true")
-    parser.add_argument("--instance", default=os.path.join(ROOT, "..", "shared", "benchmarks", "masses_N30.json"))
+    parser.add_argument("--instance", default=os.path.join(ROOT, "benchmarks", "masses_N30.json"))
     args = parser.parse_args()
     levels = [int(c) for c in args.levels.split(",")]
 
@@ -106,7 +106,7 @@ def main():
                     shift = round_index % len(servers)
                     for server in servers[shift:] + servers[:shift]:
                         out = subprocess.run(
-                            (["taskset", "-c", "1"] if args.pin else []) + [os.path.join(BIN, "nupmpc-loadtest"), f"--server=localhost:{server['port']}",
+                            (["taskset", "-c", "1"] if args.pin else []) + [os.path.join(BIN, "nupmpc-loadtest"), f"--server=127.0.0.1:{server['port']}",
                              f"--instance={args.instance}", f"--concurrency={level}", "--echo=false", "--json",
                              "--progress=off", f"--duration_s={args.duration_s}", "--transport_calls=200",
                              "--baseline_rounds=2"] + client_flags[server["name"]],

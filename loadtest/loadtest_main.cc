@@ -40,8 +40,8 @@
 #include "loadtest/transport_floor.h"
 #include "server/cpu_affinity.h"
 
-ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
-ABSL_FLAG(std::string, instance, "../shared/benchmarks/masses_N30.json",
+ABSL_FLAG(std::string, server, "127.0.0.1:50051", "server address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json",
           "benchmark instance or ProblemSpec JSON every stream solves");
 ABSL_FLAG(int, concurrency, 1, "concurrent streams (sessions)");
 ABSL_FLAG(std::string, sweep, "", "comma-separated concurrency levels, run one after another (overrides --concurrency)");

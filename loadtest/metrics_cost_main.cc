@@ -14,7 +14,7 @@
 #include "server/session_factory.h"
 #include "client/problem_file.h"
 
-ABSL_FLAG(std::string, instance, "../shared/benchmarks/masses_N30.json", "the sessions' problem");
+ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json", "the sessions' problem");
 ABSL_FLAG(int, sessions, 10000, "open sessions while /metrics is rendered");
 ABSL_FLAG(int, records, 2000000, "RecordSolve calls timed");
 

@@ -12,8 +12,8 @@
 #include "client/problem_file.h"
 #include "loadtest/failover_probe.h"
 
-ABSL_FLAG(std::string, server, "localhost:50051", "balancer (or server) address host:port (env NUPMPC_SERVER)");
-ABSL_FLAG(std::string, instance, "../shared/benchmarks/masses_N30.json", "instance whose closed-loop states are sent");
+ABSL_FLAG(std::string, server, "127.0.0.1:50051", "balancer (or server) address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json", "instance whose closed-loop states are sent");
 ABSL_FLAG(std::string, probe, "streams", "streams: Control streams through failures; addressed: calls by session id");
 ABSL_FLAG(int, streams, 24, "streams probe: concurrent Control streams, each on its own connection");
 ABSL_FLAG(double, duration_s, 20.0, "streams probe: how long every stream keeps stepping");

@@ -67,18 +67,23 @@ std::optional<ListenHostPort> SplitGrpcTcpAddress(absl::string_view address) {
 }
 
 absl::Status CheckNotInUse(const ListenHostPort& address, AnyAddress any, const std::string& what) {
-  if (address.port == 0) return absl::OkStatus();
   addrinfo hints{};
   hints.ai_socktype = SOCK_STREAM;
   hints.ai_flags = AI_PASSIVE | AI_NUMERICSERV;
   // A null host gives the unspecified address of each family.
   const bool both_families = any == AnyAddress::kBothFamilies && IsUnspecified(address.host);
   addrinfo* found = nullptr;
-  if (getaddrinfo(both_families ? nullptr : address.host.c_str(), std::to_string(address.port).c_str(), &hints,
-                  &found) != 0) {
-    return absl::OkStatus();  // unresolvable: the listener says so
+  const int resolved = getaddrinfo(both_families ? nullptr : address.host.c_str(),
+                                   std::to_string(address.port).c_str(), &hints, &found);
+  if (resolved != 0) {
+    // gRPC would fail with a message that names neither the host nor the cause (a minimal
+    // container has no /etc/hosts, so not even "localhost" resolves there).
+    return absl::InvalidArgumentError(absl::StrCat("could not listen on ", what, ": the host '", address.host,
+                                                   "' does not resolve (", gai_strerror(resolved),
+                                                   "); give a numeric address such as 127.0.0.1 or [::1]"));
   }
   const std::unique_ptr<addrinfo, decltype(&freeaddrinfo)> owned(found, &freeaddrinfo);
+  if (address.port == 0) return absl::OkStatus();  // the kernel picks a free port
   for (const addrinfo* a = found; a != nullptr; a = a->ai_next) {
     if (a->ai_family != AF_INET && a->ai_family != AF_INET6) continue;
     if (BindErrno(a->ai_addr, a->ai_addrlen) == EADDRINUSE) {

@@ -1,7 +1,8 @@
 #ifndef NUPMPC_SERVER_LISTEN_PROBE_H_
 #define NUPMPC_SERVER_LISTEN_PROBE_H_
 
-// Before a listener starts: is any address it would bind taken by another process?
+// Before a listener starts: does its host resolve, and is any address it would bind taken
+// by another process?
 // gRPC (and cpp-httplib) start when at least one of an address's resolved addresses binds:
 // `[::]:P` or `localhost:P` with one family's port held by another server would listen on
 // the other family only, and clients reaching the first would talk to that other server,
@@ -34,8 +35,9 @@ enum class AnyAddress {
   kAsGiven,       ///< cpp-httplib: the family written
 };
 
-// UNAVAILABLE naming the address in use when one of `host`'s addresses (resolved as the
-// listener does) has `port` held by another socket; OK for port 0 and for addresses this
+// INVALID_ARGUMENT naming the host when it does not resolve; UNAVAILABLE naming the address
+// in use when one of `host`'s addresses (resolved as the listener does) has `port` held by
+// another socket; OK for port 0 and for addresses this
 // machine cannot bind for other reasons (not its own, a family it lacks, a port it may not
 // bind: the listener reports those). Each address is bound once, without listening, with
 // SO_REUSEADDR as the listeners (a restart's connections in TIME_WAIT do not count), and

@@ -15,7 +15,7 @@
 #include "client/examples/bicycle.h"
 #include "client/examples/period_table.h"
 
-ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, server, "127.0.0.1:50051", "server address host:port (env NUPMPC_SERVER)");
 ABSL_FLAG(int, periods, 200, "most control periods to run (the run ends earlier at the goal)");
 ABSL_FLAG(bool, finite_differences, false, "linearise with finite differences instead of the analytic Jacobians");
 

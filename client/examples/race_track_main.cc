@@ -16,7 +16,7 @@
 #include "client/examples/period_table.h"
 #include "client/examples/race_track.h"
 
-ABSL_FLAG(std::string, server, "localhost:50051", "server address host:port (env NUPMPC_SERVER)");
+ABSL_FLAG(std::string, server, "127.0.0.1:50051", "server address host:port (env NUPMPC_SERVER)");
 ABSL_FLAG(int, steps, 100, "spatial steps K of the lap (at least 20)");
 ABSL_FLAG(int, max_linearisations, 300, "most linearisations (server solves) for the lap");
 

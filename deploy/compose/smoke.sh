@@ -9,7 +9,7 @@
 # Usage: deploy/compose/smoke.sh [--port P]          (default 50051)
 # Environment:
 #   NUPMPC_BIN_DIR       the host build with nupmpc-scaleout-probe (default build/bin)
-#   NUPMPC_BENCHMARKS    instances (default ../shared/benchmarks; masses_N30.json is used)
+#   NUPMPC_BENCHMARKS    instances (default benchmarks/; masses_N30.json is used)
 #   NUPMPC_SERVER_IMAGE, NUPMPC_PODMAN_RUNTIME, NUPMPC_PODMAN_STORAGE   see up.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -22,7 +22,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 probe=${NUPMPC_BIN_DIR:-build/bin}/nupmpc-scaleout-probe
-instance=${NUPMPC_BENCHMARKS:-../shared/benchmarks}/masses_N30.json
+instance=${NUPMPC_BENCHMARKS:-benchmarks}/masses_N30.json
 [ -x "$probe" ] || { echo "smoke: no $probe (deploy/build.sh nupmpc-scaleout-probe, or set NUPMPC_BIN_DIR)" >&2; exit 1; }
 [ -f "$instance" ] || { echo "smoke: no $instance (set NUPMPC_BENCHMARKS)" >&2; exit 1; }
 failures=()

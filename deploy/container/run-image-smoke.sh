@@ -8,7 +8,7 @@
 # Environment:
 #   NUPMPC_HOST_CLI        the host's nupmpc for the closed loop (default build/bin/nupmpc;
 #                          if missing, the CLI inside the container runs it)
-#   NUPMPC_SMOKE_INSTANCE  closed-loop instance (default ../shared/benchmarks/masses_N30.json)
+#   NUPMPC_SMOKE_INSTANCE  closed-loop instance (default benchmarks/masses_N30.json)
 #   NUPMPC_SMOKE_STEPS     closed-loop steps (default 20)
 #   NUPMPC_GRACE_PERIOD_S  the server's drain grace (default 5); podman stop waits 5 s more
 #   NUPMPC_PODMAN_RUNTIME, NUPMPC_PODMAN_STORAGE   see podman-env.sh
@@ -31,7 +31,7 @@ nupmpc_podman_runtime "$image"
 say "image $image, runtime $NUPMPC_PODMAN_RUNTIME, storage $NUPMPC_PODMAN_STORAGE"
 
 host_cli=${NUPMPC_HOST_CLI:-build/bin/nupmpc}
-instance=${NUPMPC_SMOKE_INSTANCE:-../shared/benchmarks/masses_N30.json}
+instance=${NUPMPC_SMOKE_INSTANCE:-benchmarks/masses_N30.json}
 steps=${NUPMPC_SMOKE_STEPS:-20}
 grace=${NUPMPC_GRACE_PERIOD_S:-5}
 stop_timeout=$(awk -v g="$grace" 'BEGIN { printf "%d", g + 5.999 }')

@@ -33,7 +33,7 @@ ABSL_FLAG(bool, interior_point, true,
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-bench",
     .summary = "nupmpc-bench: the core's speed and accuracy on benchmark instance files (format: "
-               "../shared/benchmarks/README.md), in process, without the service. Per instance: algorithm, "
+               "benchmarks/README.md), in process, without the service. Per instance: algorithm, "
                "iterations, median cold solve time of --repeat solves, objective, relative gap to reference.json, "
                "max violation, status and GFLOP/s next to the machine's Eigen GEMM rate; instances with a "
                "closed loop also get warm and cold per-step times and iterations.",

@@ -8,7 +8,7 @@
 namespace nupmpc::bench {
 
 // A random output-box problem of any horizon, drawn as the random_outbox benchmark
-// instances were (../shared/benchmarks/README.md, nup-algorithms.md §13.4): A, B, C with
+// instances were (benchmarks/README.md, nup-algorithms.md §13.4): A, B, C with
 // entries iid N(0, 1/1000) (the instances' scaling at their horizon 1000, kept for every
 // horizon so that the dynamics do not change with it), x[0] ~ N(0, I/M) as a decision
 // variable, R = L·I, and at every step a two-sided box of half-width 0.1|y̌| around

@@ -13,13 +13,13 @@
 
 namespace nupmpc::bench {
 
-// The test data of ../shared/benchmarks for the core benchmarks and the tests, in the
+// The test data of benchmarks/ for the core benchmarks and the tests, in the
 // core's terms. An instance file is read once, by the proto-only reader of the command-line
 // tools (client/problem_file.h: the instance as a v1::ProblemSpec and its recorded
 // closed-loop states); its core Problem is that spec through the server's conversion
 // (server::ProblemFromSpec), so every tool and test solves the problem the service would.
 
-// One instance file in the format of shared/benchmarks/README.md as a core Problem
+// One instance file in the format of benchmarks/README.md as a core Problem
 // (benchmark x_1 = x[0], y_n = y[n-1]; no output prior at step N; R and Qy must be
 // diagonal, since the core's priors are per scalar).
 struct BenchmarkInstance {

@@ -48,6 +48,8 @@ def eigen_symbols(library, dynamic):
     in namespace Eigen, demangled."""
     args = ["nm", "--defined-only"] + (["-D"] if dynamic else []) + [library]
     result = subprocess.run(args, capture_output=True, text=True)
+    if result.returncode != 0:  # an unreadable library must not read as one without Eigen code
+        sys.exit(f"eigen odr check: {' '.join(args)} failed: {result.stderr.strip()}")
     found = []
     for line in result.stdout.splitlines():
         parts = line.split()

@@ -13,6 +13,11 @@ inversion, ...) is a finding and fails the run. Our reactors state gRPC's orderi
 own reactions with annotations (server/grpc_handover.h), so reports about their fields are
 findings too.
 
+A report is judged only when its stacks are symbolized: every access stack (or, for reports
+of another kind, the report) has a frame with a source line. Without llvm-symbolizer every
+frame reads "<null>", and such a report is neither a finding nor dismissed: it is counted
+as unreadable and fails the run with the cause.
+
 A report's accesses are attributed to the first stack frame outside the C++ standard
 library and Abseil's vocabulary headers (a std::function or absl::string_view copied by
 someone else's code belongs to that code).
@@ -58,6 +63,17 @@ def split_reports(text):
         yield kind, stacks, block
 
 
+SOURCE_LINE = re.compile(r" \S+:\d+(:\d+)? \(")
+
+
+def symbolized(stacks, block):
+    """Whether the report can be read: the accessing code is instrumented and compiled with
+    line tables, so only a missing symbolizer leaves a stack without any source line."""
+    if stacks:
+        return all(any(SOURCE_LINE.search(frame) for frame in stack) for stack in stacks)
+    return any(SOURCE_LINE.search(line) for line in re.findall(r"#\d+ [^\n]*", block))
+
+
 def attributed(stack):
     for frame in stack:
         if not any(p in frame for p in PASS_THROUGH):
@@ -87,9 +103,13 @@ def main(argv):
         return 2
     dismissed = collections.Counter()
     findings = []
+    unreadable = 0
     logs = sorted(pathlib.Path(argv[1]).glob("*"))
     for log in logs:
         for kind, stacks, block in split_reports(log.read_text(errors="replace")):
+            if not symbolized(stacks, block):
+                unreadable += 1
+                continue
             rule = rule_of(kind, stacks)
             if rule is None:
                 findings.append((log.name, block))
@@ -98,9 +118,12 @@ def main(argv):
     for name, reason in [(n, r) for n, r, _ in THIRD_PARTY] + [REACTOR_DISPATCH]:
         print(f"tsan triage: {dismissed[name]:5d} reports dismissed as {name}: {reason}")
     print(f"tsan triage: {len(findings)} findings in {len(logs)} logs")
+    if unreadable:
+        print(f"tsan triage: {unreadable} reports NOT JUDGED: their stacks are not symbolized (no source "
+              "line in any frame; is llvm-symbolizer, package llvm-14, installed?)")
     for log_name, block in findings[:20]:
         print(f"--- finding in {log_name}:\nWARNING: ThreadSanitizer: {block}\n")
-    return 1 if findings else 0
+    return 1 if findings or unreadable else 0
 
 
 if __name__ == "__main__":

@@ -2,7 +2,8 @@
 """The TSan triage dismisses only what it is there to dismiss: a race between two pieces of
 gRPC's inline code passes, and so does gRPC's virtual call of a reaction against the
 reactor's constructor; the same log plus a race with our code on one side, or a report that
-is not a race, fails. Reports are in TSan's own format.
+is not a race, fails. A report without a source line in its stacks (no symbolizer) is
+neither dismissed nor a finding: it fails as not judged. Reports are in TSan's own format.
 
     tsan_triage_selftest.py
 """
@@ -62,4 +63,14 @@ VPTR = "data race on vptr (ctor/dtor vs virtual call)"
 CTOR = "nupmpc::server::UnaryCall<nupmpc::v1::SolveRequest, nupmpc::v1::SolveResponse>::UnaryCall(int) /w/server/unary_call.h:129:7"
 expect(triage(report(VPTR, GRPC, CTOR)), 0, "1 reports dismissed as grpc-dispatch")
 expect(triage(report(VPTR, GRPC, OURS)), 1, "1 findings")
+# Without llvm-symbolizer every frame reads "<null> <null> (module+offset)": not judged.
+UNSYMBOLIZED = report("data race", "<null> <null>", "<null> <null>").replace(
+    "swap /usr/bin/../lib/gcc/x86_64-linux-gnu/12/../../../../include/c++/12/bits/move.h:206:11", "<null> <null>")
+expect(triage(UNSYMBOLIZED), 1, "1 reports NOT JUDGED")
+expect(triage(UNSYMBOLIZED), 1, "0 reports dismissed as grpc")
+expect(triage(UNSYMBOLIZED), 1, "0 findings")
+expect(triage(third_party, UNSYMBOLIZED), 1, "1 reports dismissed as grpc")
+expect(triage(report("heap-use-after-free", "<null> <null>", "<null> <null>").replace(
+    "swap /usr/bin/../lib/gcc/x86_64-linux-gnu/12/../../../../include/c++/12/bits/move.h:206:11", "<null> <null>")),
+    1, "1 reports NOT JUDGED")
 print("tsan triage self-test: passed")

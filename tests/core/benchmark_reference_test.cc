@@ -1,4 +1,4 @@
-// Every instance in ../shared/benchmarks against reference.json (issue test 3): objective
+// Every instance in benchmarks/ against reference.json (issue test 3): objective
 // within 1e-6 relative of J*, max violation ≤ 1e-6 × bound scale, u within 1e-4 × scale of
 // u_star, for each algorithm that applies, with the active-set polish and without it (the
 // plain algorithms of the papers).

@@ -675,10 +675,11 @@ def balancer_findings(m, balancer, headless, drain, findings, notes):
     except (ValueError, IndexError) as error:
         findings.append(f"{cfg_where} defaults: {error}")
 
-    # HAProxy's own verdict, where it is installed (Debian package haproxy).
+    # HAProxy's own verdict (Debian package haproxy, which deploy/install-deps.sh installs):
+    # without it the check fails rather than passing the configuration unchecked.
     haproxy = shutil.which("haproxy")
     if haproxy is None:
-        notes.append("haproxy is not installed: `haproxy -c` skipped")
+        findings.append(f"{cfg_where}: haproxy is not installed (deploy/install-deps.sh): `haproxy -c` not run")
     else:
         values = {name: e.get("value", "nupmpc") for name, e in env.items()}  # fieldRef: a namespace
         with tempfile.NamedTemporaryFile("w", suffix=".cfg") as f:
@@ -755,8 +756,8 @@ def selftest(source_dir):
             return 1
         for file, old, new, expected in PLANTED:
             if "haproxy -c" in expected and shutil.which("haproxy") is None:
-                print(f"skipped {file}: {old!r}: haproxy is not installed")
-                continue
+                print(f"FAIL: haproxy is not installed (deploy/install-deps.sh): {file}: {old!r} cannot be checked")
+                return 1
             path = os.path.normpath(os.path.join(work, "deploy", "k8s", file))
             with open(path, encoding="utf-8") as f:
                 original = f.read()

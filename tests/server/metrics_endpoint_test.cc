@@ -21,10 +21,11 @@
 namespace nupmpc::testing {
 namespace {
 
-// Prometheus' own linter, where the prometheus package is installed (not a build
-// dependency: the parser above is the check everywhere).
+// Prometheus' own linter (package prometheus, which deploy/install-deps.sh installs): a
+// missing promtool fails the test rather than passing it unchecked.
 void CheckWithPromtool(const std::string& body) {
-  if (access("/usr/bin/promtool", X_OK) != 0) return;
+  ASSERT_EQ(access("/usr/bin/promtool", X_OK), 0) << "/usr/bin/promtool is missing (package prometheus; "
+                                                     "deploy/install-deps.sh installs it)";
   const std::string path = ::testing::TempDir() + "/metrics." + std::to_string(getpid()) + ".txt";
   {
     std::ofstream file(path);

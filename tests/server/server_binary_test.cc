@@ -262,6 +262,20 @@ TEST(ServerBinaryTest, AServerWhosePortIsHeldOnOneFamilyRefusesToStart) {
       << errors;
 }
 
+// Minimal containers have no /etc/hosts: a name that does not resolve is refused at start-up
+// naming it, for the service's and the metrics' address alike.
+TEST(ServerBinaryTest, AnAddressThatDoesNotResolveIsRefusedAtStartup) {
+  for (const std::string flag : {"--address", "--metrics_address"}) {
+    std::vector<std::string> args = {flag + "=no-such-host.invalid:5", "--log_level=warn"};
+    if (flag == "--metrics_address") args.push_back("--address=127.0.0.1:0");
+    const auto [status, errors] = RunUntilExit(args);
+    EXPECT_EQ(status, 1) << errors;
+    EXPECT_THAT(errors, ::testing::HasSubstr("could not listen on " + flag + " no-such-host.invalid:5: the host "
+                                             "'no-such-host.invalid' does not resolve"))
+        << errors;
+  }
+}
+
 TEST(ServerBinaryTest, BadFlagValuesAreRefusedAtStartup) {
   for (const char* bad : {"--threads=0", "--drain_delay_s=nan", "--drain_delay_s=1e9", "--grace_period_s=-1"}) {
     const pid_t pid = fork();

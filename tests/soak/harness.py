@@ -26,7 +26,7 @@ import nupmpc  # noqa: E402
 from nupmpc._proto import pb  # noqa: E402
 
 SERVER_BINARY = os.environ.get("NUPMPC_SERVER_BINARY", str(REPO / "build" / "bin" / "nupmpc-server"))
-BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO.parent / "shared" / "benchmarks")))
+BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO / "benchmarks")))
 MASSES = BENCHMARKS / "masses_N30.json"
 
 

@@ -18,7 +18,7 @@ for path in (REPO / "client" / "python", REPO / "build" / "python"):
     if str(path) not in sys.path:
         sys.path.insert(0, str(path))
 
-BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", REPO.parent / "shared" / "benchmarks"))
+BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", REPO / "benchmarks"))
 
 
 def arguments(description, **extra):

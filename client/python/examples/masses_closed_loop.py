@@ -1,4 +1,4 @@
-"""Six masses on springs (../shared/benchmarks/masses_N30.json): 100 control periods of a
+"""Six masses on springs (benchmarks/masses_N30.json): 100 control periods of a
 closed loop against the session's own linear model with a push on the first mass at
 t = 30; writes masses_closed_loop.png (states, outputs with |y| ≤ 4, inputs with |u| ≤ 0.5,
 solve and round-trip times)."""

@@ -2,7 +2,7 @@
 
     import nupmpc
     problem = nupmpc.Problem(A, B, C, horizon=30).input_box(-0.5, 0.5).output_weight(1.0)
-    with nupmpc.connect("localhost:50051") as client:
+    with nupmpc.connect("127.0.0.1:50051") as client:
         session = client.session(problem)
         plan = session.step(x)          # plan.u (N, L), plan.x (N+1, M), plan.y (N+1, K)
         plan = session.step(x, model=nupmpc.ModelUpdate(state_offset=d_hat))  # new model terms

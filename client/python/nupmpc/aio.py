@@ -1,6 +1,6 @@
 """The asyncio variant: the same client and session on grpc.aio.
 
-    async with nupmpc.aio.connect("localhost:50051") as client:
+    async with nupmpc.aio.connect("127.0.0.1:50051") as client:
         session = await client.session(problem)
         plan = await session.step(x)
 

@@ -1,6 +1,6 @@
 """The client: one channel to a server, unary calls, and sessions (Control streams).
 
-    with nupmpc.connect("localhost:50051", token=...) as client:
+    with nupmpc.connect("127.0.0.1:50051", token=...) as client:
         plan = client.solve_once(problem)
         session = client.session(problem)
 """

@@ -1,4 +1,4 @@
-"""The problem files of the command-line tools: an instance in the ../shared/benchmarks
+"""The problem files of the command-line tools: an instance in the benchmarks/
 format (recognised by its "dims" key) or a ProblemSpec in proto JSON.
 
 The instance → ProblemSpec conversion mirrors client/problem_file.cc exactly (the C++

@@ -24,7 +24,7 @@ from loopback_port import free_port  # noqa: E402
 
 SERVER_BINARY = os.environ.get("NUPMPC_SERVER_BINARY", str(REPO / "build" / "bin" / "nupmpc-server"))
 CLI_BINARY = os.environ.get("NUPMPC_CLI_BINARY", str(REPO / "build" / "bin" / "nupmpc"))
-BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO.parent / "shared" / "benchmarks")))
+BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO / "benchmarks")))
 
 
 class ServerProcess:

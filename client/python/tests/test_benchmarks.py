@@ -15,7 +15,7 @@ INSTANCES = sorted(p for p in BENCHMARKS.glob("*.json") if p.name != "reference.
 
 
 def test_there_are_instances_to_compare():
-    assert len(INSTANCES) >= 10, INSTANCES  # ../shared/benchmarks holds 10
+    assert len(INSTANCES) >= 10, INSTANCES  # benchmarks/ holds 10
 
 
 def test_every_instance_through_solve_once_matches_the_cli(server):
