@@ -22,10 +22,7 @@ absl::StatusOr<std::vector<core::ComponentPriors>> ComponentsFromProto(
   std::vector<core::ComponentPriors> components(entries.size());
   for (int i = 0; i < entries.size(); ++i) {
     const v1::PriorUpdate::Entry& entry = entries[i];
-    // Out of int range is out of any session's range: the session's check names it.
-    components[i].index = entry.index() > static_cast<unsigned>(std::numeric_limits<int>::max())
-                              ? std::numeric_limits<int>::max()
-                              : static_cast<int>(entry.index());
+    components[i].index = entry.index();  // as sent: the session's check names it
     components[i].priors.resize(steps);
     NUPMPC_RETURN_IF_ERROR(ComponentPriorsFromProto(entry.prior(), steps,
                                                     absl::StrCat("step.update.", field, "[", i, "].prior"),
@@ -34,12 +31,6 @@ absl::StatusOr<std::vector<core::ComponentPriors>> ComponentsFromProto(
   return components;
 }
 
-// A step index as the core takes it: out of int range is out of any session's range (the
-// session's check names it).
-int StepIndex(std::uint32_t step) {
-  return step > static_cast<unsigned>(std::numeric_limits<int>::max()) ? std::numeric_limits<int>::max()
-                                                                      : static_cast<int>(step);
-}
 
 // The matrix as given (its size is the session's to check), once its data matches it.
 absl::StatusOr<Eigen::MatrixXd> GivenMatrix(const v1::Matrix& m, const std::string& path) {
@@ -60,7 +51,7 @@ absl::StatusOr<std::vector<core::ModelChanges::At<Eigen::MatrixXd>>> MatricesFro
     const google::protobuf::RepeatedPtrField<v1::ModelUpdate::MatrixAt>& entries, const char* field) {
   std::vector<core::ModelChanges::At<Eigen::MatrixXd>> out(entries.size());
   for (int i = 0; i < entries.size(); ++i) {
-    out[i].step = StepIndex(entries[i].step());
+    out[i].step = entries[i].step();  // as sent: the session's check names it
     NUPMPC_ASSIGN_OR_RETURN(out[i].value,
                             GivenMatrix(entries[i].matrix(), absl::StrCat("step.model.", field, "[", i, "].matrix")));
   }
@@ -71,7 +62,7 @@ std::vector<core::ModelChanges::At<Eigen::VectorXd>> VectorsFromProto(
     const google::protobuf::RepeatedPtrField<v1::ModelUpdate::VectorAt>& entries) {
   std::vector<core::ModelChanges::At<Eigen::VectorXd>> out(entries.size());
   for (int i = 0; i < entries.size(); ++i) {
-    out[i].step = StepIndex(entries[i].step());
+    out[i].step = entries[i].step();
     out[i].value = ToVector(entries[i].values());
   }
   return out;

@@ -10,19 +10,36 @@
 
 namespace nupmpc::server {
 
+namespace {
+
+// Takes the budget's share the step needs (the scratch an idle session gave back, storage
+// for a model that becomes per-step), then applies the update.
+absl::Status ReserveAndApply(SessionEntry& entry, const core::StepUpdate& update) {
+  if (entry.compacted) {
+    NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(entry.memory.scratch_bytes,
+                                                       "session_id (allocating the idle session's solver scratch again)"));
+  }
+  if (update.changes_model()) NUPMPC_RETURN_IF_ERROR(ReserveModelStorage(*entry.solver, update.model, &entry.memory));
+  return AsStepError(entry.solver->Apply(update));
+}
+
+}  // namespace
+
 absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallContext& call, v1::SolveResult* out) {
   if (entry.closed) return absl::NotFoundError(absl::StrCat("session_id \"", entry.id, "\": closed"));
   entry.Touch();
   core::MpcSession& solver = *entry.solver;
   NUPMPC_ASSIGN_OR_RETURN(const core::StepUpdate update, StepUpdateFromProto(step, solver.dimensions()));
   NUPMPC_ASSIGN_OR_RETURN(core::SolveLimits limits, SolveLimitsFor(entry.default_time_limit_ms, &step, call));
-  if (entry.compacted) {
-    // Its scratch was given back while idle: take the budget's share again first.
-    NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(entry.memory.scratch_bytes,
-                                                       "session_id (allocating the idle session's solver scratch again)"));
+  // A refused step leaves the session as it was, its share of the budget included (the
+  // core checks an update when it applies it, after the storage for it was reserved).
+  const std::int64_t resident_before = entry.memory.resident.bytes();
+  const std::int64_t scratch_before = entry.memory.scratch.bytes();
+  if (absl::Status applied = ReserveAndApply(entry, update); !applied.ok()) {
+    entry.memory.resident.ShrinkTo(resident_before);
+    entry.memory.scratch.ShrinkTo(scratch_before);
+    return applied;
   }
-  if (update.changes_model()) NUPMPC_RETURN_IF_ERROR(ReserveModelStorage(solver, update.model, &entry.memory));
-  NUPMPC_RETURN_IF_ERROR(AsStepError(solver.Apply(update)));
   entry.algorithm.store(solver.algorithm());  // other priors may need another algorithm
 
   switch (step.warm_start()) {

@@ -16,7 +16,7 @@ absl::Status Invalid(const std::string& message) { return absl::InvalidArgumentE
 template <typename Value>
 absl::Status CheckEntries(const std::vector<ModelChanges::At<Value>>& entries, const char* field, int steps,
                           const char* steps_name, int rows, int cols) {
-  std::set<int> seen;
+  std::set<std::int64_t> seen;
   for (std::size_t i = 0; i < entries.size(); ++i) {
     const auto& e = entries[i];
     const std::string path = absl::StrCat("model.", field, "[", i, "]");

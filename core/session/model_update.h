@@ -7,6 +7,7 @@
 // (a disturbance estimate). The messages of a rejected update name the API's fields
 // ("model.a[2].step = 40: ...").
 
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -19,7 +20,7 @@ namespace nupmpc::core {
 struct ModelChanges {
   template <typename Value>
   struct At {
-    int step = 0;
+    std::int64_t step = 0;  ///< wide enough for any index the API can send, so messages echo it
     Value value;
   };
   // First: every per-step term moves one step earlier, the last step repeated.

@@ -11,6 +11,7 @@
 // of a rejected update name them ("update.inputs[0].index = 7: ..."), so the service only
 // prefixes "step.".
 
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -24,7 +25,7 @@ namespace nupmpc::core {
 
 // All of one component's priors, replacing the session's for that component.
 struct ComponentPriors {
-  int index = 0;                    ///< input l or output k
+  std::int64_t index = 0;           ///< input l or output k (wide enough for any index the API can send)
   std::vector<ScalarPrior> priors;  ///< one per step: N for an input, N + 1 for an output
 };
 

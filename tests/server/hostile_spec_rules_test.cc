@@ -697,7 +697,7 @@ std::vector<StepRule> StepRules() {
        "step.update.inputs[0].index"},
       {"update of an output that does not exist",
        [](v1::Step* s) { s->mutable_update()->add_outputs()->set_index(4'000'000'000u); }, C::kInvalidArgument,
-       "step.update.outputs[0].index"},
+       "step.update.outputs[0].index = 4000000000: must be"},  // echoed as sent, not clamped to an int
       {"update with a per-step array of wrong length",
        [](v1::Step* s) {
          auto* e = UpdateEntry(s->mutable_update()->mutable_inputs(), 0, v1::PRIOR_KIND_UNSPECIFIED);

@@ -185,6 +185,9 @@ TEST_F(ModelUpdateTest, ARejectedUpdateNamesTheFieldAndLeavesTheSessionBitIdenti
       {"step.model.a[0].matrix: expected 12x12, got 12x3",
        [](v1::ModelUpdate* m) { m->mutable_a(0)->mutable_matrix()->CopyFrom(m->b(0).matrix()); }},
       {"step.model.b[29].step = 30: must be < horizon = 30", [](v1::ModelUpdate* m) { m->mutable_b(29)->set_step(30); }},
+      // Echoed as sent (it was reported as 2147483647, clamped to an int).
+      {"step.model.a[2].step = 4294967295: must be < horizon = 30",
+       [](v1::ModelUpdate* m) { m->mutable_a(2)->set_step(4294967295u); }},
       {"step.model.state_offsets: expected 12 values (every step) or 360",
        [](v1::ModelUpdate* m) { m->add_state_offsets(1.0); }},
       {"step.model.a[3].matrix.data[5] = nan: must be finite",
@@ -219,6 +222,29 @@ TEST_F(ModelUpdateTest, ARejectedUpdateNamesTheFieldAndLeavesTheSessionBitIdenti
     EXPECT_EQ(a->objective(), b->objective());
     EXPECT_TRUE(std::equal(a->inputs().begin(), a->inputs().end(), b->inputs().begin(), b->inputs().end()));
   }
+}
+
+// The storage for a per-step model is reserved before the core checks the update: a refused
+// update gives it back, so the budget admits what it admitted before.
+TEST_F(ModelUpdateTest, ARejectedUpdateGivesBackTheMemoryReservedForIt) {
+  absl::StatusOr<v1::CreateSessionResponse> created = client_->CreateSession(SpecOrDie(masses_.problem));
+  ASSERT_TRUE(created.ok()) << created.status();
+  ASSERT_TRUE(client_->Solve(created->session_id(), StepAt(x0_)).ok());
+  const std::int64_t reserved = server_->state().budget.reserved();
+  v1::Step bad = StepAt(x0_);
+  *bad.mutable_model() = TimeVarying(masses_.problem, 0.02).update;
+  bad.mutable_model()->mutable_a(0)->mutable_matrix()->CopyFrom(bad.model().b(0).matrix());
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    absl::StatusOr<v1::SolveResult> refused = client_->Solve(created->session_id(), bad);
+    ASSERT_FALSE(refused.ok());
+    EXPECT_THAT(std::string(refused.status().message()), HasSubstr("step.model.a[0].matrix: expected 12x12, got 12x3"));
+    EXPECT_EQ(server_->state().budget.reserved(), reserved) << "attempt " << attempt;
+  }
+  // The same update, well formed, makes the model per-step: its storage is reserved and kept.
+  v1::Step good = StepAt(x0_);
+  *good.mutable_model() = TimeVarying(masses_.problem, 0.02).update;
+  ASSERT_TRUE(client_->Solve(created->session_id(), good).ok());
+  EXPECT_GT(server_->state().budget.reserved(), reserved);
 }
 
 TEST_F(ModelUpdateTest, AFleetCallCarriesEachSessionsModelAndOneBadUpdateFailsOnlyItsStep) {
