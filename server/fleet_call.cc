@@ -81,25 +81,35 @@ class FleetRun : public std::enable_shared_from_this<FleetRun> {
 
   void StartStep(std::size_t i) {
     const std::shared_ptr<SessionEntry>& entry = items_[i].entry;
+    // A newer step of the session (later in this call, or in a later call) was accepted:
+    // this one takes no place in the session's queue.
+    if (Superseded(i)) return AnswerSuperseded(i);
     auto solve = [self = shared_from_this(), i] { self->SolveOne(i); };
     // This runner holds a core already: an idle session's step is solved right here.
     if (SessionStrand::RunNowIfIdle(entry->strand, state_->pool, solve)) return;
     const absl::Status queued = SessionStrand::Submit(
         entry->strand, state_->pool,
-        {solve, [self = shared_from_this(), i](absl::Status refused) { self->AnswerError(i, refused); },
-         entry->last_solve_ms.load(std::memory_order_relaxed)});
+        {.run = solve,
+         .fail = [self = shared_from_this(), i](absl::Status refused) { self->AnswerError(i, refused); },
+         .expected_ms = entry->last_solve_ms.load(std::memory_order_relaxed),
+         .superseded = [self = shared_from_this(), i] { return self->Superseded(i); },
+         .answer_superseded = [self = shared_from_this(), i] { self->AnswerSuperseded(i); }});
     if (!queued.ok()) AnswerError(i, queued);
+  }
+
+  bool Superseded(std::size_t i) const { return items_[i].ticket < items_[i].entry->fleet_steps_accepted.load(); }
+
+  // Nothing of the step is applied: a newer step of its session follows.
+  void AnswerSuperseded(std::size_t i) {
+    response_->mutable_answers(static_cast<int>(i))->mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
+    Done();
   }
 
   // Runs as a task of the step's session (its strand).
   void SolveOne(std::size_t i) {
     Item& item = items_[i];
     v1::FleetAnswer* answer = response_->mutable_answers(static_cast<int>(i));
-    if (item.ticket < item.entry->fleet_steps_accepted.load()) {
-      answer->mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);  // a newer step of the session follows
-      Done();
-      return;
-    }
+    if (Superseded(i)) return AnswerSuperseded(i);
     const auto started_at = Clock::now();
     const absl::Status status = RunCatchingExceptions("SolveFleet", [&] {
       return SolveStep(*item.entry, request_.steps(static_cast<int>(i)).step(), context_, answer->mutable_result());

@@ -10,7 +10,10 @@
 // of an earlier call, a unary Solve) gets the step through its strand, where it waits
 // without holding the runner. Newest state wins per session through a ticket: every
 // accepted fleet step of a session takes the next number, and a step that finds a higher
-// number taken when it starts is answered SUPERSEDED without touching the session.
+// number taken is answered SUPERSEDED without touching the session: when a runner takes it
+// (so of repeated entries in one call only the last waits for the session), when it would
+// start, and while it waits, as soon as a newer step is submitted to the session's strand
+// (so stale steps never fill the session's wait bound and get the newest refused).
 
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/caller.h"

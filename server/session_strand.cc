@@ -1,6 +1,7 @@
 #include "server/session_strand.h"
 
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 
@@ -8,14 +9,28 @@ namespace nupmpc::server {
 
 absl::Status SessionStrand::Submit(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task) {
   {
-    std::lock_guard<std::mutex> lock(strand->mu_);
+    std::unique_lock<std::mutex> lock(strand->mu_);
     if (strand->busy_) {
-      if (static_cast<int>(strand->waiting_.size()) >= kMaxWaiting) {
-        return absl::ResourceExhaustedError(absl::StrCat(
-            "session_id: ", kMaxWaiting, " solves already wait for this session; send the next one after an answer"));
+      std::vector<Task> superseded;
+      for (auto it = strand->waiting_.begin(); it != strand->waiting_.end();) {
+        if (it->superseded && it->superseded()) {
+          superseded.push_back(std::move(*it));
+          it = strand->waiting_.erase(it);
+        } else {
+          ++it;
+        }
       }
-      strand->waiting_.push_back(std::move(task));
-      return absl::OkStatus();
+      absl::Status queued = absl::OkStatus();
+      if (static_cast<int>(strand->waiting_.size()) >= kMaxWaiting) {
+        queued = absl::ResourceExhaustedError(absl::StrCat(
+            "session_id: ", kMaxWaiting, " solves already wait for this session; send the next one after an answer"));
+      } else {
+        strand->waiting_.push_back(std::move(task));
+      }
+      lock.unlock();
+      // Outside the lock: an answer may finish a call, whose end may submit again.
+      for (Task& t : superseded) t.answer_superseded();
+      return queued;
     }
     strand->busy_ = true;
   }

@@ -29,11 +29,18 @@ class SessionStrand {
     std::function<void(absl::Status)> fail;  ///< answers the call if the pool refuses it later
     double expected_ms = -1.0;               ///< for the pool's admission (WorkerPool::TrySubmit)
     WorkerPool::Placement placement = WorkerPool::Placement::kWorker;
+    // Steps that a newer one of the session replaces (SolveFleet's "newest state wins"):
+    // whether a newer step has been accepted since, and how this one is then answered
+    // without running. Each Submit removes the waiting tasks that say so first, so stale
+    // steps never hold the session's waiting places (or get the newest one refused).
+    std::function<bool()> superseded = nullptr;
+    std::function<void()> answer_superseded = nullptr;
   };
 
-  // OK: the task will run (or, if the pool refuses it once it is its turn, fail) exactly
-  // once. Otherwise it was not taken and the caller answers with the status: the pool's
-  // refusal, or RESOURCE_EXHAUSTED when kMaxWaiting tasks already wait for this session.
+  // OK: the task will run (or, if the pool refuses it once it is its turn, fail, or, if it
+  // is superseded while it waits, be answered so) exactly once. Otherwise it was not taken
+  // and the caller answers with the status: the pool's refusal, or RESOURCE_EXHAUSTED when
+  // kMaxWaiting tasks (none of them superseded) already wait for this session.
   static absl::Status Submit(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, Task task);
 
   // Runs `run` now on the calling thread, as the session's next task, if no task of this

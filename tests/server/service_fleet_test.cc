@@ -1,12 +1,15 @@
 // SolveFleet (many sessions stepped in one call): each step is answered as Solve would
 // answer it, one step's error fails no other, a session's steps are applied in order, and a
 // step overtaken by a newer one of its session is answered SUPERSEDED with nothing applied.
+// Bursts for one busy session: fleet steps end with the newest solved, unary Solve calls
+// are all solved in order up to the wait bound and only the excess is refused.
 #include <future>
 #include <limits>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "absl/cleanup/cleanup.h"
 #include "gmock/gmock.h"
 #include "server/session_strand.h"
 #include "tests/server/service_fixture.h"
@@ -55,6 +58,42 @@ class FleetTest : public ServiceTest {
     return {r->inputs().begin(), r->inputs().end()};
   }
   static std::vector<double> Plan(const v1::FleetAnswer& a) { return {a.result().inputs().begin(), a.result().inputs().end()}; }
+
+  // Holds `id`'s strand, as a long solve of the session would, until ReleaseSession. A test
+  // releases it at its end in any case (an absl::Cleanup declared after its calls'
+  // futures, whose destructors wait for the calls): a failed assertion must not leave the
+  // calls waiting for the session.
+  void HoldSession(const std::string& id) {
+    std::shared_future<void> released = release_.get_future().share();
+    absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry = server_->state().registry.Find(id);
+    ASSERT_TRUE(entry.ok()) << entry.status();
+    held_ = *entry;
+    ASSERT_TRUE(server::SessionStrand::Submit(held_->strand, server_->state().pool,
+                                              {[released] { released.wait(); }, [](absl::Status) {}, 0.0})
+                    .ok());
+  }
+  void ReleaseSession() {
+    if (!released_) release_.set_value();
+    released_ = true;
+  }
+  auto ReleaseAtExit() {
+    return absl::Cleanup([this] { ReleaseSession(); });
+  }
+  // Waits until `n` tasks wait for the held session.
+  void WaitForQueued(int n) {
+    ASSERT_NE(held_, nullptr);
+    for (int i = 0; i < 3000 && held_->strand->waiting() != n; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    ASSERT_EQ(held_->strand->waiting(), n);
+  }
+  auto FleetAsync(v1::SolveFleetRequest request) {
+    return std::async(std::launch::async, [this, request] { return client_->SolveFleet(request); });
+  }
+
+  std::shared_ptr<server::SessionEntry> held_;
+  std::promise<void> release_;
+  bool released_ = false;
 
   bench::BenchmarkInstance inst_;
   v1::ProblemSpec spec_;
@@ -144,31 +183,22 @@ TEST_F(FleetTest, ASessionTwiceInOneCallSolvesOnlyItsLastStep) {
 
 TEST_F(FleetTest, AStepOvertakenByALaterCallIsSupersededAndLaterStepsFollowInOrder) {
   const std::string busy = NewSession(), free = NewSession();
-  absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry = server_->state().registry.Find(busy);
-  ASSERT_TRUE(entry.ok()) << entry.status();
-  // Hold the session's strand (as a long solve of it would) while two calls arrive.
-  std::promise<void> release;
-  std::shared_future<void> released = release.get_future().share();
-  ASSERT_TRUE(server::SessionStrand::Submit((*entry)->strand, server_->state().pool,
-                                            {[released] { released.wait(); }, [](absl::Status) {}, 0.0})
-                  .ok());
-  const auto wait_for_queued = [&](int n) {
-    for (int i = 0; i < 3000 && (*entry)->strand->waiting() < n; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    ASSERT_EQ((*entry)->strand->waiting(), n);
-  };
-  const auto fleet_async = [&](v1::SolveFleetRequest request) {
-    return std::async(std::launch::async, [this, request] { return client_->SolveFleet(request); });
-  };
+  std::future<absl::StatusOr<v1::SolveFleetResponse>> first_answer, second_answer;
+  const auto release_at_exit = ReleaseAtExit();
+  HoldSession(busy);
   v1::SolveFleetRequest first;
   *first.add_steps() = FleetStep(busy, StateStep(3));
   *first.add_steps() = FleetStep(free, StateStep(4));
-  auto first_answer = fleet_async(first);
-  wait_for_queued(1);
+  first_answer = FleetAsync(first);
+  WaitForQueued(1);
   v1::SolveFleetRequest second;
   *second.add_steps() = FleetStep(busy, StateStep(7));
-  auto second_answer = fleet_async(second);
-  wait_for_queued(2);
-  release.set_value();
+  second_answer = FleetAsync(second);
+  // The overtaken step gives up its place at once: the first call is answered while the
+  // session is still busy, and only the newest step waits.
+  ASSERT_EQ(first_answer.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  WaitForQueued(1);
+  ReleaseSession();
 
   absl::StatusOr<v1::SolveFleetResponse> a = first_answer.get(), b = second_answer.get();
   ASSERT_TRUE(a.ok()) << a.status();
@@ -184,6 +214,95 @@ TEST_F(FleetTest, AStepOvertakenByALaterCallIsSupersededAndLaterStepsFollowInOrd
   absl::StatusOr<v1::SolveFleetResponse> c = client_->SolveFleet(third);
   ASSERT_TRUE(c.ok()) << c.status();
   EXPECT_EQ(Plan(c->answers(0)), ReferencePlan({StateStep(7), StateStep(8)}));
+}
+
+// More entries for one busy session than may wait for it, in one call: all but the last
+// are superseded without waiting, the last is solved.
+TEST_F(FleetTest, ABurstInOneCallForABusySessionEndsWithItsNewestStepSolved) {
+  const std::string id = NewSession();
+  constexpr int kBurst = server::SessionStrand::kMaxWaiting + 4;
+  std::future<absl::StatusOr<v1::SolveFleetResponse>> answer;
+  const auto release_at_exit = ReleaseAtExit();
+  HoldSession(id);
+  v1::SolveFleetRequest burst;
+  for (int t = 0; t < kBurst; ++t) *burst.add_steps() = FleetStep(id, StateStep(t));
+  answer = FleetAsync(burst);
+  WaitForQueued(1);
+  ReleaseSession();
+  absl::StatusOr<v1::SolveFleetResponse> answered = answer.get();
+  ASSERT_TRUE(answered.ok()) << answered.status();
+  ASSERT_EQ(answered->answers_size(), kBurst);
+  for (int t = 0; t + 1 < kBurst; ++t) {
+    EXPECT_EQ(answered->answers(t).error_code(), 0) << t << ": " << answered->answers(t).error_message();
+    EXPECT_EQ(answered->answers(t).result().status(), v1::SOLVE_STATUS_SUPERSEDED) << t;
+  }
+  const v1::FleetAnswer& newest = answered->answers(kBurst - 1);
+  ASSERT_EQ(newest.error_code(), 0) << newest.error_message();
+  EXPECT_EQ(newest.result().status(), v1::SOLVE_STATUS_CONVERGED);
+  EXPECT_EQ(Plan(newest), ReferencePlan({StateStep(kBurst - 1)}));
+}
+
+// The same burst as one call per step, each sent once the one before waits: every older
+// step is superseded as the next arrives (its call answered while the session is busy),
+// none is refused, and the newest is solved.
+TEST_F(FleetTest, ABurstOfCallsForABusySessionEndsWithItsNewestStepSolved) {
+  const std::string id = NewSession();
+  constexpr int kBurst = server::SessionStrand::kMaxWaiting + 4;
+  std::vector<std::future<absl::StatusOr<v1::SolveFleetResponse>>> answers;
+  const auto release_at_exit = ReleaseAtExit();
+  HoldSession(id);
+  for (int t = 0; t < kBurst; ++t) {
+    v1::SolveFleetRequest one;
+    *one.add_steps() = FleetStep(id, StateStep(t));
+    answers.push_back(FleetAsync(one));
+    if (t > 0) {
+      ASSERT_EQ(answers[t - 1].wait_for(std::chrono::seconds(10)), std::future_status::ready) << t;
+    }
+    WaitForQueued(1);
+  }
+  ReleaseSession();
+  for (int t = 0; t < kBurst; ++t) {
+    absl::StatusOr<v1::SolveFleetResponse> a = answers[t].get();
+    ASSERT_TRUE(a.ok()) << t << ": " << a.status();
+    ASSERT_EQ(a->answers(0).error_code(), 0) << t << ": " << a->answers(0).error_message();
+    EXPECT_EQ(a->answers(0).result().status(),
+              t + 1 < kBurst ? v1::SOLVE_STATUS_SUPERSEDED : v1::SOLVE_STATUS_CONVERGED)
+        << t;
+  }
+}
+
+// Unary Solve calls of one busy session are never superseded: those that may wait are all
+// solved, in order, and only the excess is refused (proto: SolveRequest).
+TEST_F(FleetTest, AUnaryBurstForABusySessionIsSolvedInOrderAndOnlyTheExcessRefused) {
+  const std::string id = NewSession();
+  constexpr int kWaiting = server::SessionStrand::kMaxWaiting;
+  std::vector<std::future<absl::StatusOr<v1::SolveResult>>> answers;
+  const auto release_at_exit = ReleaseAtExit();
+  HoldSession(id);
+  std::vector<v1::Step> sent;
+  for (int t = 0; t < kWaiting + 4; ++t) {
+    sent.push_back(StateStep(t));
+    answers.push_back(std::async(std::launch::async, [this, id, step = sent.back()] { return client_->Solve(id, step); }));
+    if (t < kWaiting) {
+      WaitForQueued(t + 1);
+    } else {
+      absl::StatusOr<v1::SolveResult> refused = answers.back().get();
+      ASSERT_FALSE(refused.ok()) << t;
+      EXPECT_EQ(refused.status().code(), absl::StatusCode::kResourceExhausted) << t;
+      EXPECT_THAT(std::string(refused.status().message()), HasSubstr("solves already wait for this session"));
+    }
+  }
+  ReleaseSession();
+  std::vector<double> last;
+  for (int t = 0; t < kWaiting; ++t) {
+    absl::StatusOr<v1::SolveResult> r = answers[t].get();
+    ASSERT_TRUE(r.ok()) << t << ": " << r.status();
+    EXPECT_EQ(r->status(), v1::SOLVE_STATUS_CONVERGED) << t;
+    EXPECT_TRUE(r->has_plan()) << t;
+    last.assign(r->inputs().begin(), r->inputs().end());
+  }
+  // In order: the session saw the waiting states one after another, none of the refused.
+  EXPECT_EQ(last, ReferencePlan(std::vector<v1::Step>(sent.begin(), sent.begin() + kWaiting)));
 }
 
 TEST_F(FleetTest, ACallOverTheStepLimitIsRefusedNamingIt) {
