@@ -276,8 +276,13 @@ std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
   if (solving_ || !parked_.has_value()) return std::nullopt;
   std::optional<v1::ControlRequest> step = std::move(parked_);
   parked_.reset();
-  solving_ = true;
+  SetSolvingLocked(true);
   return step;
+}
+
+void ControlStream::SetSolvingLocked(bool solving) {
+  if (solving != solving_) state_->work_in_flight.fetch_add(solving ? 1 : -1);
+  solving_ = solving;
 }
 
 bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms) {
@@ -327,7 +332,7 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
     {
       std::lock_guard<std::mutex> lock(mu_);
       QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, queued)));
-      solving_ = false;
+      SetSolvingLocked(false);
       next = TakeParkedLocked();  // parked while this one was being handed over
     }
     if (!next.has_value()) return;
@@ -354,7 +359,7 @@ void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& 
   {
     std::lock_guard<std::mutex> lock(mu_);
     QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, refused)));
-    solving_ = false;
+    SetSolvingLocked(false);
     next = TakeParkedLocked();
   }
   if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
@@ -382,7 +387,7 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
     } else {
       QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
     }
-    solving_ = false;
+    SetSolvingLocked(false);
     next = TakeParkedLocked();
   }
   // Still inside this session's strand task: the next step queues behind it.

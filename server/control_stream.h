@@ -80,6 +80,8 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   std::optional<v1::ControlRequest> EnqueueStepLocked(v1::ControlRequest request);
   // The parked step, marked as being solved, if none is. Called with mu_.
   std::optional<v1::ControlRequest> TakeParkedLocked();
+  // Sets solving_, counting the step in ServerState::work_in_flight while it is set.
+  void SetSolvingLocked(bool solving);
   // Whether this session's steps are short enough to solve on the thread that has them.
   bool SolvesHere() const;
   // Solves a step taken by TakeParkedLocked: here if the session and a core are free and its

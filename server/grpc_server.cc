@@ -1,8 +1,10 @@
 #include "server/grpc_server.h"
 
 #include <algorithm>
+#include <chrono>
 #include <limits>
 #include <optional>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
@@ -142,10 +144,17 @@ void GrpcServer::Shutdown() {
   if (janitor_.joinable()) janitor_.join();
   state_->draining.store(true);
   ReportNotServing();
-  const auto grace = std::chrono::duration_cast<std::chrono::milliseconds>(
-      std::chrono::duration<double>(state_->options.grace_period_s));
+  // Work already accepted (unary calls, Control steps being solved) finishes within the
+  // grace period; then what is left is idle and ends at once: Control streams waiting for
+  // their next step get UNAVAILABLE, idle connections are closed. (gRPC's own Shutdown
+  // with a deadline waits for open streams until the deadline, and on idle connections
+  // for up to seconds even when no call is open.)
+  const auto grace_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(state_->options.grace_period_s);
+  while (state_->work_in_flight.load() > 0 && std::chrono::steady_clock::now() < grace_end) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
   if (server_ != nullptr) {
-    server_->Shutdown(std::chrono::system_clock::now() + grace);
+    server_->Shutdown(std::chrono::system_clock::now());
     TakeFromGrpc(state_.get());  // every call's OnDone has run (server/grpc_handover.h)
   }
   state_->pool.Shutdown();

@@ -159,7 +159,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerCont
   for (v1::Algorithm a : {v1::ALGORITHM_IAKE, v1::ALGORITHM_IBFFD, v1::ALGORITHM_IFFBDD}) response->add_algorithms(a);
   state_->metrics.Fill(response);
   response->set_active_sessions(state_->registry.size());
-  response->set_draining(state_->draining.load());
+  response->set_draining(!state_->serving.load());
   response->set_resident_memory_bytes(ResidentMemoryBytes());
   response->set_cpu_baseline(platform::kBuildCpuBaseline);
   response->set_cpu_features(std::string(absl::StripLeadingAsciiWhitespace(platform::kBuildCpuFeatures)));

@@ -85,8 +85,14 @@ struct ServerState {
   std::shared_ptr<TokenStore> tokens;  ///< --auth_tokens_file (null: none), re-read by the janitor
   std::shared_ptr<AuthProcessor> auth;  ///< null: authentication off
   GpModelCache gp_models;  ///< factorised GP models shared by the sessions that use them
+  // From SIGTERM on (the drain delay included): what grpc.health.v1 (NOT_SERVING),
+  // nupmpc_draining and GetServerInfo.draining report, one truth for the three.
+  std::atomic<bool> serving{true};
+  // After the drain delay: new calls, streams and steps are refused with UNAVAILABLE.
   std::atomic<bool> draining{false};
-  std::atomic<bool> serving{true};  ///< what grpc.health.v1 reports (false from SIGTERM on)
+  // Unary calls not yet answered and Control streams with a step being solved: the work a
+  // shutdown lets finish before it ends what is left (idle connections and streams).
+  std::atomic<int> work_in_flight{0};
   std::atomic<int> control_streams{0};  ///< open Control streams
   std::atomic<std::uint64_t> stream_read_pauses{0};  ///< times a stream stopped reading (flow control)
 

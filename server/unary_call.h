@@ -51,6 +51,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
   static UnaryCall* Start(ServerState* state, grpc::CallbackServerContext* context, const grpc::ByteBuffer* raw_request,
                           grpc::ByteBuffer* raw_response) {
     auto* call = new UnaryCall(state, context, raw_response);
+    state->work_in_flight.fetch_add(1);  // until Reply
     grpc::ByteBuffer bytes(*raw_request);  // parsing consumes its buffer
     const absl::Status parsed = ParseRaw(&bytes, &call->request_);
     call->parsed_ = parsed.ok();
@@ -75,6 +76,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     const grpc::Status sent =
         state_->ToGrpc(RpcOf<Request>::value, status.ok() ? SerializeRaw(response_, raw_response_) : status);
     if (spdlog::should_log(spdlog::level::debug)) LogAccess(sent);
+    state_->work_in_flight.fetch_sub(1);
     HandToGrpc(this);
     Finish(sent);
   }

@@ -100,6 +100,9 @@ TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
   const v1::ProblemSpec& spec = masses->spec;
   auto created = client.CreateSession(spec);
   ASSERT_TRUE(created.ok()) << created.status();
+  absl::StatusOr<v1::GetServerInfoResponse> info = client.GetServerInfo();
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_FALSE(info->draining());
 
   server.Signal(SIGTERM);
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
@@ -108,6 +111,11 @@ TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::NOT_SERVING);
+  // One truth: GetServerInfo says draining as the health service does (and nupmpc_draining,
+  // read from the same flag).
+  info = client.GetServerInfo();
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_TRUE(info->draining());
   // Still serving: the existing session solves, and a new one can be made.
   v1::Step step;
   *step.mutable_state() = spec.initial_state().mean();
@@ -139,6 +147,42 @@ TEST(ServerBinaryTest, OneSigtermServesOutTheDrainDelayThenExits) {
   EXPECT_EQ(seen, grpc::health::v1::HealthCheckResponse::NOT_SERVING);
   EXPECT_EQ(server.StopWith(0), 0);  // signal 0: only waits for the exit
   EXPECT_GE(std::chrono::steady_clock::now() - signalled, std::chrono::seconds(1));
+}
+
+// After the drain delay the server exits as soon as no work is in flight: an idle connection
+// and a Control stream waiting for its next step do not hold it for the grace period (the
+// stream ends with an error status).
+TEST(ServerBinaryTest, AfterTheDrainDelayAnIdleConnectionAndStreamDoNotHoldTheExit) {
+  constexpr int kGraceS = 20;
+  ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
+                       {"--log_level=warn", "--grace_period_s=" + std::to_string(kGraceS), "--drain_delay_s=0.2"});
+  auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
+  ASSERT_TRUE(WaitUntilServing(channel));
+  absl::StatusOr<ProblemFile> masses = LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  ASSERT_TRUE(masses.ok()) << masses.status();
+  // An open Control stream, its first step answered, then idle.
+  Client client(channel);
+  grpc::ClientContext context;
+  auto stream = client.stub().Control(&context);
+  v1::ControlRequest first;
+  *first.mutable_spec() = masses->spec;
+  *first.mutable_step()->mutable_state() = masses->spec.initial_state().mean();
+  ASSERT_TRUE(stream->Write(first));
+  v1::ControlResponse answer;
+  ASSERT_TRUE(stream->Read(&answer));
+  ASSERT_TRUE(answer.result().has_plan());
+
+  const auto signalled = std::chrono::steady_clock::now();
+  EXPECT_EQ(server.StopWith(SIGTERM), 0);
+  const double exit_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
+  // The drain delay plus a moment, far from the grace period (StopWith gives up after 10 s).
+  EXPECT_LT(exit_s, kGraceS / 4.0);
+  while (stream->Read(&answer)) {
+  }
+  const grpc::Status ended = stream->Finish();
+  EXPECT_FALSE(ended.ok());
+  EXPECT_THAT(ended.error_code(), ::testing::AnyOf(grpc::StatusCode::UNAVAILABLE, grpc::StatusCode::CANCELLED))
+      << ended.error_message();
 }
 
 // Runs the server binary with `flags` until it exits by itself: its exit status (-1 if it
