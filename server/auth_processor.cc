@@ -29,6 +29,10 @@ grpc::Status AuthProcessor::Process(const InputMetadata& auth_metadata, grpc::Au
     return grpc::Status::OK;
   }
   const auto header = auth_metadata.find("authorization");
+  if (const std::size_t given = auth_metadata.count("authorization"); given > 1) {
+    // Which one would count is up to the order of headers: refuse rather than guess.
+    return Refuse("authorization: given more than once; send one credential per call");
+  }
   if (header != auth_metadata.end()) {
     const absl::string_view value = View(header->second);
     if (tokens_ == nullptr) return Refuse("authorization: this server takes no bearer tokens (mTLS only)");
@@ -37,6 +41,7 @@ grpc::Status AuthProcessor::Process(const InputMetadata& auth_metadata, grpc::Au
     if (!principal.has_value()) return Refuse("authorization: the bearer token is not valid");
     context->AddProperty(kPrincipalProperty, principal->name);
     if (principal->admin) context->AddProperty(kAdminProperty, "1");
+    context->AddProperty(kBearerTokenProperty, "1");
     // Consumed: the token does not reach the service's metadata (nor any log of it).
     consumed_auth_metadata->insert(std::make_pair(std::string(header->first.data(), header->first.size()),
                                                   std::string(value)));

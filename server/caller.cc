@@ -13,6 +13,7 @@ Caller CallerOf(const grpc::ServerContextBase& context) {
     caller.principal.assign(value.data(), value.size());
   }
   caller.admin = !auth->FindPropertyValues(kAdminProperty).empty();
+  caller.by_token = !auth->FindPropertyValues(kBearerTokenProperty).empty();
   return caller;
 }
 

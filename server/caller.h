@@ -13,10 +13,12 @@ namespace nupmpc::server {
 // Properties the authentication processor adds to a call's AuthContext.
 inline constexpr char kPrincipalProperty[] = "nupmpc_principal";
 inline constexpr char kAdminProperty[] = "nupmpc_admin";
+inline constexpr char kBearerTokenProperty[] = "nupmpc_bearer_token";  ///< set when a token authenticated the call
 
 struct Caller {
   std::string principal;   ///< empty: authentication is off
   bool admin = false;      ///< may see and close every session
+  bool by_token = false;   ///< authenticated by a bearer token (revoked with it), not a certificate
   std::string connection;  ///< the peer address (one per client connection)
 
   bool authenticated() const { return !principal.empty(); }

@@ -48,7 +48,13 @@ void ControlStream::Begin() {
                      " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
     return;
   }
-  if (absl::Status quota = state_->principal_streams.Acquire(caller_.principal); !quota.ok()) {
+  std::function<void()> revoke;
+  if (caller_.by_token) {
+    revoke = [weak = weak_from_this()] {
+      if (const std::shared_ptr<ControlStream> self = weak.lock()) self->Revoke();
+    };
+  }
+  if (absl::Status quota = state_->principal_streams.Acquire(caller_.principal, this, std::move(revoke)); !quota.ok()) {
     End(state_->ToGrpc(Rpc::kControl, quota));
     return;
   }
@@ -84,6 +90,22 @@ void ControlStream::OnFirstMessageTimeout(bool fired) {
         absl::DeadlineExceededError(absl::StrCat("first ControlRequest: none within first_message_timeout_s = ",
                                                  state_->options.first_message_timeout_s,
                                                  " s (ServerLimits.first_message_timeout_s); send the attach at once")));
+  }
+  Pump();
+}
+
+void ControlStream::Revoke() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    // While the first message's session is built (kAttaching) the phase is not ours to
+    // change: the janitor revokes again a second later.
+    if (done_ || phase_ == Phase::kAttaching || phase_ == Phase::kEnding || phase_ == Phase::kFinished) return;
+    phase_ = Phase::kEnding;
+    parked_.reset();  // nothing more is solved for a caller whose access is gone
+    final_status_ = state_->ToGrpc(
+        Rpc::kControl, absl::UnauthenticatedError(absl::StrCat("principal \"", caller_.principal,
+                                                               "\": its token was removed from the server's tokens "
+                                                               "file; the stream ends")));
   }
   Pump();
 }
@@ -497,7 +519,7 @@ void ControlStream::OnDone() {
   }
   first_message_timer_.Cancel();
   if (counted_) state_->control_streams.fetch_sub(1);
-  if (counted_for_principal_) state_->principal_streams.Release(caller_.principal);
+  if (counted_for_principal_) state_->principal_streams.Release(caller_.principal, this);
   const LogContext log_context(entry_ != nullptr ? absl::string_view(entry_->id) : absl::string_view(),
                                caller_.principal);
   if (spdlog::should_log(spdlog::level::debug)) {

@@ -67,6 +67,10 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void Begin();
   // The first message's timer fired (`fired`: not cancelled): ends a stream still waiting for it.
   void OnFirstMessageTimeout(bool fired);
+  // Ends the stream with UNAUTHENTICATED: its caller's token was revoked (the janitor, once
+  // a second, through ServerState::principal_streams). What is being solved is answered
+  // first; a parked step is dropped.
+  void Revoke();
   // The session the first message names or creates (marked attached).
   absl::StatusOr<std::shared_ptr<SessionEntry>> Attach(const v1::ControlRequest& first);
   // Handles the first message: on the pool when it carries a spec (building a session

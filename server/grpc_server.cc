@@ -106,6 +106,7 @@ void GrpcServer::Janitor() {
     janitor_wake_.wait_for(lock, std::chrono::seconds(1));
     if (stopping_) break;
     ReloadTokens();
+    RevokeStreamsWithoutAccess();
     const int expired = state_->registry.ExpireIdle(state_->options.session_idle_timeout_s);
     if (expired > 0) spdlog::debug("closed {} idle sessions", expired);
     const double compact_after_s = state_->options.session_compact_idle_s;
@@ -127,6 +128,14 @@ void GrpcServer::ReloadTokens() {
   } else if (*reloaded) {
     spdlog::info("re-read {}: {} tokens", state_->tokens->path(), state_->tokens->size());
   }
+}
+
+void GrpcServer::RevokeStreamsWithoutAccess() {
+  if (state_->tokens == nullptr) return;
+  const TokenStore& tokens = *state_->tokens;
+  const std::vector<std::function<void()>> revoked =
+      state_->principal_streams.Revoked([&tokens](const std::string& principal) { return tokens.HasPrincipal(principal); });
+  for (const std::function<void()>& revoke : revoked) revoke();
 }
 
 void GrpcServer::ReportNotServing() {

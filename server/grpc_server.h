@@ -38,6 +38,9 @@ class GrpcServer {
   void Janitor();
   // Takes in a changed --auth_tokens_file (the janitor checks once a second).
   void ReloadTokens();
+  // Ends the open Control streams of callers whose token is no longer in the tokens file
+  // (new calls of theirs are refused by authentication).
+  void RevokeStreamsWithoutAccess();
 
   std::unique_ptr<ServerState> state_;
   std::unique_ptr<MpcServiceImpl> service_;

@@ -118,6 +118,18 @@ std::optional<Principal> TokenStore::Authenticate(absl::string_view token) const
   return found;
 }
 
+bool TokenStore::HasPrincipal(absl::string_view principal) const {
+  std::shared_ptr<const std::vector<TokenGrant>> grants;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    grants = grants_;
+  }
+  for (const TokenGrant& grant : *grants) {
+    if (grant.principal.name == principal) return true;
+  }
+  return false;
+}
+
 std::size_t TokenStore::size() const {
   std::lock_guard<std::mutex> lock(mu_);
   return grants_->size();

@@ -43,6 +43,8 @@ class TokenStore {
   // The principal `token` belongs to. Every grant is compared, in constant time each, so
   // the time taken says nothing about which token came close.
   std::optional<Principal> Authenticate(absl::string_view token) const;
+  // Whether some token of the file read last belongs to `principal`.
+  bool HasPrincipal(absl::string_view principal) const;
 
   // Re-reads the file when its modification time, size or inode changed since the last
   // read. Returns whether new tokens took effect; an error when the changed file could not

@@ -205,6 +205,71 @@ TEST_F(AuthTest, AChangedTokensFileTakesEffectWithoutARestart) {
   EXPECT_TRUE(As(kAliceToken)->GetServerInfo().ok());
 }
 
+// Two authorization headers: which would count depends on their order, so neither does.
+TEST_F(AuthTest, TwoAuthorizationHeadersAreRefusedInEitherOrder) {
+  Start();
+  auto channel = grpc::CreateChannel(target_, grpc::InsecureChannelCredentials());
+  auto stub = v1::MpcService::NewStub(channel);
+  for (const auto& [first, second] : {std::pair{kAliceToken, kBobToken}, std::pair{kBobToken, kAliceToken}}) {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", absl::StrCat("Bearer ", first));
+    context.AddMetadata("authorization", absl::StrCat("Bearer ", second));
+    v1::GetServerInfoResponse info;
+    const grpc::Status status = stub->GetServerInfo(&context, v1::GetServerInfoRequest(), &info);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAUTHENTICATED) << first;
+    EXPECT_THAT(status.error_message(), ::testing::HasSubstr("authorization: given more than once")) << first;
+  }
+  EXPECT_TRUE(As(kAliceToken)->GetServerInfo().ok());  // one header is fine
+}
+
+// A principal removed from the tokens file loses its open Control streams too (within the
+// janitor's re-read, about a second), not only its new calls; other principals' streams
+// go on.
+TEST_F(AuthTest, RemovingATokenEndsItsPrincipalsOpenControlStreams) {
+  Start();
+  std::unique_ptr<Client> alice = As(kAliceToken), bob = As(kBobToken);
+  const auto open = [&](Client& client, grpc::ClientContext* context) {
+    auto stream = client.stub().Control(context);
+    v1::ControlRequest first;
+    *first.mutable_spec() = spec_;
+    *first.mutable_step() = StepFrom(inst_.closed_loop->x1[0]);
+    EXPECT_TRUE(stream->Write(first));
+    v1::ControlResponse answer;
+    EXPECT_TRUE(stream->Read(&answer) && answer.result().has_plan());
+    return stream;
+  };
+  grpc::ClientContext alice_context, bob_context;
+  // Should the stream never end, the test fails at this deadline instead of hanging.
+  bob_context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto alice_stream = open(*alice, &alice_context);
+  auto bob_stream = open(*bob, &bob_context);
+
+  const auto removed_at = std::chrono::steady_clock::now();
+  WriteTokens(absl::StrCat(kAliceToken, " alice\n", kOpsToken, " ops admin\n"));
+  v1::ControlResponse answer;
+  while (bob_stream->Read(&answer)) {
+  }
+  const grpc::Status ended = bob_stream->Finish();
+  const double ended_after_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - removed_at).count();
+  EXPECT_EQ(ended.error_code(), grpc::StatusCode::UNAUTHENTICATED) << ended.error_message();
+  EXPECT_THAT(ended.error_message(), ::testing::HasSubstr("principal \"bob\": its token was removed"));
+  EXPECT_LT(ended_after_s, 10.0);  // the janitor looks once a second
+  EXPECT_EQ(bob->GetServerInfo().status().code(), absl::StatusCode::kUnauthenticated);
+
+  // Alice's stream still solves.
+  v1::ControlRequest next;
+  next.set_sequence(2);
+  *next.mutable_step() = StepFrom(inst_.closed_loop->x1[1]);
+  ASSERT_TRUE(alice_stream->Write(next));
+  ASSERT_TRUE(alice_stream->Read(&answer));
+  EXPECT_EQ(answer.sequence(), 2u);
+  EXPECT_TRUE(answer.result().has_plan());
+  alice_stream->WritesDone();
+  while (alice_stream->Read(&answer)) {
+  }
+  EXPECT_TRUE(alice_stream->Finish().ok());
+}
+
 TEST_F(AuthTest, BearerTokensNeedTlsOffLoopback) {
   server::ServerOptions o;
   o.address = "0.0.0.0:0";
