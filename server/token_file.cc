@@ -105,12 +105,13 @@ absl::StatusOr<bool> TokenStore::ReloadIfChanged() {
   return true;
 }
 
+std::shared_ptr<const std::vector<TokenGrant>> TokenStore::Grants() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return grants_;
+}
+
 std::optional<Principal> TokenStore::Authenticate(absl::string_view token) const {
-  std::shared_ptr<const std::vector<TokenGrant>> grants;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    grants = grants_;
-  }
+  const std::shared_ptr<const std::vector<TokenGrant>> grants = Grants();
   std::optional<Principal> found;
   for (const TokenGrant& grant : *grants) {
     if (ConstantTimeEquals(grant.token, token) && !found.has_value()) found = grant.principal;
@@ -119,11 +120,7 @@ std::optional<Principal> TokenStore::Authenticate(absl::string_view token) const
 }
 
 bool TokenStore::HasPrincipal(absl::string_view principal) const {
-  std::shared_ptr<const std::vector<TokenGrant>> grants;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    grants = grants_;
-  }
+  const std::shared_ptr<const std::vector<TokenGrant>> grants = Grants();
   for (const TokenGrant& grant : *grants) {
     if (grant.principal.name == principal) return true;
   }

@@ -63,6 +63,8 @@ class TokenStore {
   explicit TokenStore(std::string path) : path_(std::move(path)) {}
   absl::StatusOr<FileStamp> Stamp() const;
   absl::Status Read(const FileStamp& stamp);
+  // The grants read last (a snapshot: a reload swaps in a new vector).
+  std::shared_ptr<const std::vector<TokenGrant>> Grants() const;
 
   const std::string path_;
   mutable std::mutex mu_;
