@@ -42,7 +42,7 @@ asan_stage() {
                 service_stream_bounds_test service_malformed_bytes_test memory_budget_test auth_test
                 log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
                 hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test
-                listen_probe_test)
+                listen_probe_test http_listener_test metrics_port_hostile_test)
   targets=()
   for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
   cmake --build build-asan -j "$jobs" "${targets[@]}"
@@ -70,7 +70,7 @@ tsan_stage() {
   check_symbolizer thread
   deploy/sanitizer-tree.sh tsan
   tsan_tests=(worker_pool_test session_strand_test control_stream_lifetime_test service_stream_bounds_test
-              service_solve_test service_fleet_test solve_placement_test)
+              service_solve_test service_fleet_test solve_placement_test http_listener_test)
   targets=()
   for t in "${tsan_tests[@]}"; do targets+=(--target "$t"); done
   cmake --build build-tsan -j "$jobs" "${targets[@]}"

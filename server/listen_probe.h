@@ -3,7 +3,7 @@
 
 // Before a listener starts: does its host resolve, and is any address it would bind taken
 // by another process?
-// gRPC (and cpp-httplib) start when at least one of an address's resolved addresses binds:
+// gRPC (and the metrics port's HttpListener) start when at least one of an address's resolved addresses binds:
 // `[::]:P` or `localhost:P` with one family's port held by another server would listen on
 // the other family only, and clients reaching the first would talk to that other server,
 // which does not know their sessions. So a server refuses to start instead.
@@ -32,7 +32,7 @@ std::optional<ListenHostPort> SplitGrpcTcpAddress(absl::string_view address);
 // How a listener binds an unspecified address (0.0.0.0 or ::).
 enum class AnyAddress {
   kBothFamilies,  ///< gRPC: either one means every address of both families
-  kAsGiven,       ///< cpp-httplib: the family written
+  kAsGiven,       ///< HttpListener: the family written
 };
 
 // INVALID_ARGUMENT naming the host when it does not resolve; UNAVAILABLE naming the address

@@ -1,10 +1,7 @@
 #include "server/metrics_http.h"
 
-#include <sys/socket.h>
-
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "httplib.h"
 
 namespace nupmpc::server {
 
@@ -26,39 +23,29 @@ absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(cons
                                                                             std::function<bool()> ready) {
   absl::StatusOr<ListenHostPort> parsed = ParseMetricsAddress(address);
   if (!parsed.ok()) return parsed.status();
-  const std::string& host = parsed->host;
-  const int port = parsed->port;
-
-  std::unique_ptr<MetricsHttpServer> s(new MetricsHttpServer());
-  s->http_ = std::make_unique<httplib::Server>();
-  s->http_->Get("/metrics", [render = std::move(render_metrics)](const httplib::Request&, httplib::Response& res) {
-    res.set_content(render(), "text/plain; version=0.0.4; charset=utf-8");
-  });
-  s->http_->Get("/healthz", [](const httplib::Request&, httplib::Response& res) { res.set_content("ok\n", "text/plain"); });
-  s->http_->Get("/readyz", [ready = std::move(ready)](const httplib::Request&, httplib::Response& res) {
-    const bool is_ready = ready();
-    res.status = is_ready ? 200 : 503;
-    res.set_content(is_ready ? "ready\n" : "not serving\n", "text/plain");
-  });
-  // httplib's default sets SO_REUSEPORT, with which a second server would share the port
-  // and answer some scrapes with its own figures; SO_REUSEADDR alone still allows a
-  // restart while the last run's connections are in TIME_WAIT.
-  s->http_->set_socket_options([](int sock) {
-    const int yes = 1;
-    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
-  });
-  s->port_ = port == 0 ? s->http_->bind_to_any_port(host) : (s->http_->bind_to_port(host, port) ? port : -1);
-  if (s->port_ <= 0) {
-    return absl::UnavailableError(
-        absl::StrCat("--metrics_address \"", address, "\": could not listen (", kListenFailureCauses, ")"));
+  auto route = [render = std::move(render_metrics), ready = std::move(ready)](const HttpRequestHead& request) {
+    HttpResponse response;
+    if (request.path == "/metrics") {
+      response.content_type = "text/plain; version=0.0.4; charset=utf-8";
+      response.body = render();
+    } else if (request.path == "/healthz") {
+      response.body = "ok\n";
+    } else if (request.path == "/readyz") {
+      const bool is_ready = ready();
+      response.status = is_ready ? 200 : 503;
+      response.body = is_ready ? "ready\n" : "not serving\n";
+    } else {
+      response.status = 404;
+      response.body = "not found: this port serves /metrics, /healthz and /readyz\n";
+    }
+    return response;
+  };
+  absl::StatusOr<std::unique_ptr<HttpListener>> listener = HttpListener::Start(*parsed, std::move(route));
+  if (!listener.ok()) {
+    return absl::UnavailableError(absl::StrCat("--metrics_address \"", address, "\": could not listen (",
+                                               listener.status().message(), "; ", kListenFailureCauses, ")"));
   }
-  s->thread_ = std::thread([http = s->http_.get()] { http->listen_after_bind(); });
-  return s;
-}
-
-MetricsHttpServer::~MetricsHttpServer() {
-  if (http_ != nullptr) http_->stop();
-  if (thread_.joinable()) thread_.join();
+  return std::unique_ptr<MetricsHttpServer>(new MetricsHttpServer(*std::move(listener)));
 }
 
 }  // namespace nupmpc::server

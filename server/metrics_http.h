@@ -3,20 +3,17 @@
 
 // The operators' HTTP endpoint (--metrics_address): GET /metrics in the Prometheus text
 // format, /healthz (200 while the process runs) and /readyz (200 while the gRPC health
-// service says SERVING, 503 from SIGTERM on), on a thread of its own (cpp-httplib), so a
-// scrape never waits for a solver worker.
+// service says SERVING, 503 from SIGTERM on), served by an HttpListener on a thread of its
+// own, so a scrape never waits for a solver worker and a slow or hostile peer of this
+// unauthenticated port cannot hold it (the listener's bounds are in http_listener.h).
 
 #include <functional>
 #include <memory>
 #include <string>
-#include <thread>
 
 #include "absl/status/statusor.h"
+#include "server/http_listener.h"
 #include "server/listen_probe.h"
-
-namespace httplib {
-class Server;
-}
 
 namespace nupmpc::server {
 
@@ -30,14 +27,12 @@ class MetricsHttpServer {
   static absl::StatusOr<std::unique_ptr<MetricsHttpServer>> Start(const std::string& address,
                                                                   std::function<std::string()> render_metrics,
                                                                   std::function<bool()> ready);
-  ~MetricsHttpServer();  // stops and joins
-  int port() const { return port_; }
+  int port() const { return listener_->port(); }
+  HttpListenerCounts counts() const { return listener_->counts(); }
 
  private:
-  MetricsHttpServer() = default;
-  std::unique_ptr<httplib::Server> http_;
-  std::thread thread_;
-  int port_ = 0;
+  explicit MetricsHttpServer(std::unique_ptr<HttpListener> listener) : listener_(std::move(listener)) {}
+  std::unique_ptr<HttpListener> listener_;
 };
 
 }  // namespace nupmpc::server

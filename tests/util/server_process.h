@@ -24,6 +24,7 @@ class ServerProcess {
   ServerProcess& operator=(const ServerProcess&) = delete;
 
   std::string target() const { return "127.0.0.1:" + std::to_string(port_); }
+  pid_t pid() const { return pid_; }
   // SIGKILL and reap; nothing if it already stopped.
   void Kill();
   // Sends `signal` without waiting for the process.
