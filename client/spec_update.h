@@ -5,7 +5,7 @@
 // session was created from, so that a client that has to re-create the session (after a
 // server restart) gets the session the server had, not the one it started with.
 //
-// This is the client's mirror of the server's step semantics (server/step_solver.cc
+// This is the client's mirror of the server's step semantics (server/sessions/step_solver.cc
 // SolveStep and what it calls; the proto's Step, PriorUpdate and InputDifferences
 // comments): change one, change the other, and tests/server/reconnect_fidelity_test.cc
 // checks that they still agree. Proto only: the client never includes core/ or server/.

@@ -11,7 +11,7 @@
 #include <cstdlib>
 
 #include "nupmpc/v1/nupmpc.pb.h"
-#include "server/spec_conversion.h"
+#include "server/convert/spec_conversion.h"
 
 namespace nupmpc::fuzz {
 

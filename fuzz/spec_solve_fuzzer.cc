@@ -6,8 +6,8 @@
 #include <cstdint>
 
 #include "fuzz/fuzz_limits.h"
-#include "server/call_context.h"
-#include "server/step_solver.h"
+#include "server/sessions/call_context.h"
+#include "server/sessions/step_solver.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   nupmpc::v1::ProblemSpec spec;

@@ -9,9 +9,9 @@
 
 #include "fuzz/fuzz_limits.h"
 #include "fuzz/seed_problem.h"
-#include "server/call_context.h"
-#include "server/session_factory.h"
-#include "server/step_solver.h"
+#include "server/sessions/call_context.h"
+#include "server/sessions/session_factory.h"
+#include "server/sessions/step_solver.h"
 
 namespace {
 

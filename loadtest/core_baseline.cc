@@ -8,7 +8,7 @@
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/load_stream.h"
 #include "loadtest/step_as_server.h"
-#include "server/session_factory.h"
+#include "server/sessions/session_factory.h"
 
 namespace nupmpc::loadtest {
 

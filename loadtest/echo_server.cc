@@ -9,9 +9,9 @@
 #include "absl/strings/str_cat.h"
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/step_as_server.h"
-#include "server/result_conversion.h"
-#include "server/session_factory.h"
-#include "server/thread_cpu_time.h"
+#include "server/convert/result_conversion.h"
+#include "server/sessions/session_factory.h"
+#include "server/scheduling/thread_cpu_time.h"
 
 namespace nupmpc::loadtest {
 namespace {

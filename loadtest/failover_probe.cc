@@ -16,7 +16,7 @@
 #include "loadtest/core_baseline.h"
 #include "loadtest/instances/benchmark_instance.h"
 #include "nlohmann/json.hpp"
-#include "server/session_factory.h"
+#include "server/sessions/session_factory.h"
 
 namespace nupmpc::loadtest {
 namespace {

@@ -38,7 +38,7 @@
 #include "loadtest/load_level.h"
 #include "loadtest/loadtest_report.h"
 #include "loadtest/transport_floor.h"
-#include "server/cpu_affinity.h"
+#include "server/scheduling/cpu_affinity.h"
 
 ABSL_FLAG(std::string, server, "127.0.0.1:50051", "server address host:port (env NUPMPC_SERVER)");
 ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json",

@@ -8,7 +8,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "nlohmann/json.hpp"
-#include "server/cpu_affinity.h"
+#include "server/scheduling/cpu_affinity.h"
 
 namespace nupmpc::loadtest {
 namespace {

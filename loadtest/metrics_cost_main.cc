@@ -10,8 +10,8 @@
 #include "cli/program_flags.h"
 #include "loadtest/core_baseline.h"
 #include "server/metrics_exposition.h"
-#include "server/server_context.h"
-#include "server/session_factory.h"
+#include "server/state/server_state.h"
+#include "server/sessions/session_factory.h"
 #include "client/problem_file.h"
 
 ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json", "the sessions' problem");

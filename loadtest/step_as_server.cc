@@ -1,7 +1,7 @@
 #include "loadtest/step_as_server.h"
 
-#include "server/call_context.h"
-#include "server/step_conversion.h"
+#include "server/sessions/call_context.h"
+#include "server/convert/step_conversion.h"
 
 namespace nupmpc::loadtest {
 

@@ -10,7 +10,7 @@
 #include "absl/status/statusor.h"
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
-#include "server/session_factory.h"
+#include "server/sessions/session_factory.h"
 
 namespace nupmpc::loadtest {
 

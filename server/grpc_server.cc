@@ -9,11 +9,11 @@
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
-#include "server/grpc_handover.h"
+#include "server/rpc/grpc_handover.h"
 #include "server/listen_probe.h"
 #include "server/metrics_exposition.h"
 #include "server/metrics_http.h"
-#include "server/process_memory.h"
+#include "server/observability/process_memory.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
@@ -164,7 +164,7 @@ void GrpcServer::Shutdown() {
   }
   if (server_ != nullptr) {
     server_->Shutdown(std::chrono::system_clock::now());
-    TakeFromGrpc(state_.get());  // every call's OnDone has run (server/grpc_handover.h)
+    TakeFromGrpc(state_.get());  // every call's OnDone has run (server/rpc/grpc_handover.h)
   }
   state_->pool.Shutdown();
   metrics_.reset();  // last: scrapes see the drain to its end

@@ -9,8 +9,8 @@
 #include "absl/status/statusor.h"
 #include "grpcpp/grpcpp.h"
 #include "server/metrics_http.h"
-#include "server/mpc_service.h"
-#include "server/server_context.h"
+#include "server/rpc/mpc_service.h"
+#include "server/state/server_state.h"
 
 namespace nupmpc::server {
 

@@ -9,9 +9,9 @@
 #include "absl/synchronization/mutex.h"
 #include "cli/program_flags.h"
 #include "server/grpc_server.h"
-#include "server/log_format.h"
+#include "server/observability/log_format.h"
 #include "server/server_flags.h"
-#include "server/version.h"
+#include "server/observability/version.h"
 #include "spdlog/spdlog.h"
 
 int main(int argc, char** argv) {

@@ -6,9 +6,9 @@
 
 #include "absl/strings/ascii.h"
 #include "core/platform/cpu_baseline.h"
-#include "server/process_memory.h"
-#include "server/prometheus_text.h"
-#include "server/version.h"
+#include "server/observability/process_memory.h"
+#include "server/observability/prometheus_text.h"
+#include "server/observability/version.h"
 
 namespace nupmpc::server {
 namespace {

@@ -2,14 +2,14 @@
 #define NUPMPC_SERVER_METRICS_EXPOSITION_H_
 
 // The server's state as Prometheus metrics (GET /metrics, server/metrics_http.h): the
-// counters and histograms of server/metrics.h (the ones GetServerInfo reports), the
+// counters and histograms of server/observability/metrics.h (the ones GetServerInfo reports), the
 // session registry's counts, the worker pool, memory and process gauges, build info.
 // Labels have bounded values (statuses, algorithms, RPC names, status codes): never a
 // session id.
 
 #include <string>
 
-#include "server/server_context.h"
+#include "server/state/server_state.h"
 
 namespace nupmpc::server {
 

@@ -12,7 +12,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
-#include "server/http_listener.h"
+#include "server/http/http_listener.h"
 #include "server/listen_probe.h"
 
 namespace nupmpc::server {

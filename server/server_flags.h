@@ -5,7 +5,7 @@
 
 #include "absl/status/statusor.h"
 #include "cli/program_info.h"
-#include "server/server_context.h"
+#include "server/state/server_options.h"
 
 namespace nupmpc::server {
 

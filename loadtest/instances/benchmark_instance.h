@@ -9,7 +9,7 @@
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/problem.h"
-#include "server/spec_conversion.h"
+#include "server/convert/spec_conversion.h"
 
 namespace nupmpc::bench {
 

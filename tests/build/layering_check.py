@@ -19,8 +19,14 @@ import sys
 
 # Most specific first: a file (or an included path) belongs to the first room whose folder
 # is a prefix of it. "proto" stands for the generated headers nupmpc/v1/*.pb.h.
-ROOMS = ["core/gp", "core/examples", "core", "cli", "proto", "server", "client", "loadtest/instances",
+# The server's folders, lowest first (server/CMakeLists.txt says what each holds).
+SERVER_ROOMS = ["server/convert", "server/scheduling", "server/observability", "server/http", "server/auth",
+                "server/sessions", "server/state", "server/rpc", "server"]
+ROOMS = ["core/gp", "core/examples", "core", "cli", "proto", *SERVER_ROOMS, "client", "loadtest/instances",
          "loadtest/bench/gp", "loadtest/bench", "loadtest", "fuzz", "tests"]
+# What a session is made of: the rooms below the state every RPC shares.
+SESSION_ROOMS = {"server/sessions", "server/convert", "server/scheduling", "server/auth", "server/observability",
+                 "core", "core/gp", "proto"}
 
 ALLOWED = {
     # nupmpc_core: Eigen and Abseil only; never the GP library or the seed applications.
@@ -29,25 +35,39 @@ ALLOWED = {
     # The seed applications: programs on top of the core (their command line from cli/).
     "core/examples": {"core", "core/gp", "core/examples", "cli"},
     "cli": {"cli"},
-    "server": {"server", "core", "core/gp", "proto", "cli"},
+    # Conversion sees the core and the API, never gRPC (EXTERNAL_FORBIDDEN) or sessions.
+    "server/convert": {"server/convert", "core", "core/gp", "proto"},
+    "server/scheduling": {"server/scheduling"},
+    "server/observability": {"server/observability", "proto"},
+    "server/http": {"server/http"},
+    "server/auth": {"server/auth"},
+    "server/sessions": SESSION_ROOMS,
+    "server/state": SESSION_ROOMS | {"server/state"},
+    "server/rpc": SESSION_ROOMS | {"server/state", "server/rpc"},
+    # The process: everything of the server, and the command line.
+    "server": set(SERVER_ROOMS) | {"core", "core/gp", "proto", "cli"},
     # The client library and the nupmpc CLI: proto + gRPC only.
     "client": {"client", "proto", "cli"},
     # nupmpc-loadtest; its core peer builds the session the server builds (server/).
-    "loadtest": {"loadtest", "loadtest/instances", "client", "proto", "cli", "server", "core"},
+    "loadtest": {"loadtest", "loadtest/instances", "client", "proto", "cli", "core", *SERVER_ROOMS},
     # The shared test data: instances through client/'s reader and the server's conversion.
-    "loadtest/instances": {"loadtest/instances", "client", "server", "core", "proto"},
+    "loadtest/instances": {"loadtest/instances", "client", "server/convert", "core", "proto"},
     "loadtest/bench": {"loadtest/bench", "loadtest/instances", "core", "cli"},
     "loadtest/bench/gp": {"loadtest/bench/gp", "core", "core/gp", "core/examples", "cli"},
     # The fuzz targets drive the server's code paths and the client's readers in-process.
-    "fuzz": {"fuzz", "server", "client", "proto", "core"},
+    "fuzz": {"fuzz", "client", "proto", "core", *SERVER_ROOMS},
     "tests": set(ROOMS),
 }
 
 # External headers kept out of a room (prefixes of the included path).
 NOT_IN_CORE = ("grpc", "grpcpp/", "google/protobuf/", "spdlog/", "nlohmann/", "ceres/", "Ip")
+NO_GRPC = ("grpc", "grpcpp/")
 EXTERNAL_FORBIDDEN = {
     "core": NOT_IN_CORE + ("lbfgs.h",),
     "core/gp": NOT_IN_CORE,
+    "server/convert": NO_GRPC,
+    "server/scheduling": NO_GRPC + ("google/protobuf/",),
+    "server/http": NO_GRPC + ("google/protobuf/", "spdlog/"),
     "client": ("Eigen/", "spdlog/", "nlohmann/", "ceres/", "lbfgs.h"),
 }
 

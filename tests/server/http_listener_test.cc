@@ -2,7 +2,7 @@
 // reached in a fraction of a second: slow heads time out with 408, a full listener evicts
 // its oldest connection, bodies are refused unread, and a well-formed request is answered
 // while all of that goes on.
-#include "server/http_listener.h"
+#include "server/http/http_listener.h"
 
 #include <sys/socket.h>
 #include <unistd.h>
@@ -34,7 +34,7 @@ constexpr milliseconds kAnswerTimeout{10000};
 class HttpListenerTest : public ::testing::Test {
  protected:
   void Start(HttpListenerLimits limits) {
-    auto started = HttpListener::Start({"127.0.0.1", 0}, [this](const HttpRequestHead& request) {
+    auto started = HttpListener::Start("127.0.0.1", 0, [this](const HttpRequestHead& request) {
       ++handled_;
       if (request.path == "/throw") throw std::runtime_error("the handler failed");
       HttpResponse response;

@@ -1,6 +1,6 @@
 // The operators' endpoint's request parser, without sockets: what a complete head yields,
 // when it waits for more, and which heads it refuses with which status.
-#include "server/http_request_head.h"
+#include "server/http/http_request_head.h"
 
 #include <string>
 

@@ -16,9 +16,9 @@
 #include "loadtest/load_level.h"
 #include "loadtest/loadtest_report.h"
 #include "loadtest/transport_floor.h"
-#include "server/session_factory.h"
-#include "server/session_registry.h"
-#include "server/step_solver.h"
+#include "server/sessions/session_factory.h"
+#include "server/sessions/session_registry.h"
+#include "server/sessions/step_solver.h"
 #include "service_fixture.h"
 
 namespace nupmpc::testing {

@@ -1,7 +1,7 @@
 // --log_format and what the server logs: JSON lines that parse, with the session and
 // principal of the line as fields; access lines per RPC at debug only; session lifecycle at
 // info; slow solves at warn with dimensions and iterations; nothing per solve at info.
-#include "server/log_format.h"
+#include "server/observability/log_format.h"
 
 #include <fstream>
 #include <sstream>
@@ -9,7 +9,7 @@
 #include "absl/strings/str_split.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
-#include "server/log_context.h"
+#include "server/observability/log_context.h"
 #include "spdlog/sinks/ostream_sink.h"
 #include "tests/server/service_fixture.h"
 

@@ -1,5 +1,5 @@
 // The memory budget's bookkeeping, and exceptions that must end one request, not the server.
-#include "server/memory_budget.h"
+#include "server/sessions/memory_budget.h"
 
 #include <unistd.h>
 
@@ -10,7 +10,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "server/catch_exceptions.h"
+#include "server/rpc/catch_exceptions.h"
 
 namespace nupmpc::server {
 namespace {

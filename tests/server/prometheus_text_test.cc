@@ -1,6 +1,6 @@
 // The Prometheus text writer against the format, read back by the tests' own strict
 // parser (tests/util/prometheus_parse.h), which must also refuse malformed text.
-#include "server/prometheus_text.h"
+#include "server/observability/prometheus_text.h"
 
 #include <limits>
 

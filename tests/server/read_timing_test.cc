@@ -1,7 +1,7 @@
-// When a Control stream reads its next step (server/read_timing.h): ahead of an in-place
+// When a Control stream reads its next step (server/rpc/read_timing.h): ahead of an in-place
 // solve until the client shows it waits for its answers, then after (but for a probe every
 // kProbeSteps steps), and ahead again at the first sign of a step sent before its answer.
-#include "server/read_timing.h"
+#include "server/rpc/read_timing.h"
 
 #include "gtest/gtest.h"
 

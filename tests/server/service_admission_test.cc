@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "gmock/gmock.h"
-#include "server/process_memory.h"
-#include "server/session_cost.h"
+#include "server/observability/process_memory.h"
+#include "server/convert/session_cost.h"
 #include "tests/server/service_fixture.h"
 #include "tests/util/random_problem.h"
 

@@ -14,7 +14,7 @@
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/instances/spec_from_problem.h"
 #include "server/grpc_server.h"
-#include "server/spec_conversion.h"
+#include "server/convert/spec_conversion.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::testing {

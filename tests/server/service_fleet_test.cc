@@ -11,7 +11,7 @@
 
 #include "absl/cleanup/cleanup.h"
 #include "gmock/gmock.h"
-#include "server/session_strand.h"
+#include "server/scheduling/session_strand.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {

@@ -18,8 +18,8 @@
 #include "core/gp/lingp_scp.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "server/gp_conversion.h"
-#include "server/gp_model_cache.h"
+#include "server/convert/gp_conversion.h"
+#include "server/convert/gp_model_cache.h"
 #include "service_fixture.h"
 
 namespace nupmpc::testing {

@@ -8,7 +8,7 @@
 #include "core/session/footprint.h"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
-#include "server/session_cost.h"
+#include "server/convert/session_cost.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {

@@ -9,7 +9,7 @@
 
 #include "core/session/session.h"
 #include "gmock/gmock.h"
-#include "server/read_timing.h"
+#include "server/rpc/read_timing.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {
@@ -320,7 +320,7 @@ TEST_F(ServiceTest, NewestStateWinsWhenTheClientSendsFasterThanTheServerSolves) 
 }
 
 // Steps solved on the reaction thread of a stream that first ran as a closed loop, so that
-// it reads each step after the solve (server/read_timing.h), then sends a burst without
+// it reads each step after the solve (server/rpc/read_timing.h), then sends a burst without
 // reading: the stream notices and reads ahead again, so the burst's steps supersede each
 // other and the newest is solved, as for long solves. masses_N300 (about 1 ms a solve, in
 // place here): a step read ahead of a solve is delivered during it by gRPC's other thread

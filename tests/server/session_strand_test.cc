@@ -1,7 +1,7 @@
 // A session's strand: its tasks run one at a time and in order, a waiting task holds no
 // worker (another session's work runs meanwhile on the second worker), the wait is
 // bounded, and tasks the pool refuses when it is their turn are answered through `fail`.
-#include "server/session_strand.h"
+#include "server/scheduling/session_strand.h"
 
 #include <atomic>
 #include <chrono>

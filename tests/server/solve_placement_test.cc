@@ -14,10 +14,10 @@
 
 #include "gmock/gmock.h"
 #include "loadtest/transport_floor.h"
-#include "server/control_stream.h"
-#include "server/session_factory.h"
-#include "server/session_registry.h"
-#include "server/step_solver.h"
+#include "server/rpc/control_stream.h"
+#include "server/sessions/session_factory.h"
+#include "server/sessions/session_registry.h"
+#include "server/sessions/step_solver.h"
 #include "tests/server/service_fixture.h"
 
 namespace nupmpc::testing {

@@ -1,5 +1,5 @@
 // The tokens file's format and its comparison in constant time.
-#include "server/token_file.h"
+#include "server/auth/token_file.h"
 
 #include <filesystem>
 #include <fstream>

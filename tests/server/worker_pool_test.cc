@@ -1,6 +1,6 @@
 // The worker pool's admission: a bounded queue, and a bound on the estimated wait built
 // from each queued task's expected duration; refused work is RESOURCE_EXHAUSTED.
-#include "server/worker_pool.h"
+#include "server/scheduling/worker_pool.h"
 
 #include <atomic>
 #include <future>
@@ -11,7 +11,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "server/server_context.h"
+#include "server/state/server_state.h"
 
 namespace nupmpc::server {
 namespace {

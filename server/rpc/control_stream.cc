@@ -1,0 +1,540 @@
+#include "server/rpc/control_stream.h"
+
+#include "absl/strings/str_cat.h"
+#include "server/rpc/catch_exceptions.h"
+#include "server/rpc/grpc_handover.h"
+#include "server/observability/log_context.h"
+#include "server/rpc/raw_messages.h"
+#include "server/sessions/session_factory.h"
+#include "server/sessions/step_solver.h"
+#include "spdlog/spdlog.h"
+
+namespace nupmpc::server {
+namespace {
+
+v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& status) {
+  v1::ControlResponse r;
+  r.set_sequence(sequence);
+  r.set_error_code(status.error_code());
+  r.set_error_message(status.error_message());
+  return r;
+}
+
+// The hand-over address of the first-message alarms' callbacks (server/rpc/grpc_handover.h).
+const char kFirstMessageAlarms = 0;
+
+}  // namespace
+
+ControlStream* ControlStream::Start(ServerState* state, grpc::CallbackServerContext* context) {
+  // std::make_shared cannot reach the private constructor.
+  std::shared_ptr<ControlStream> stream(new ControlStream(state, context));
+  stream->grpc_reference_ = stream;
+  stream->Begin();
+  return stream.get();
+}
+
+ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* context)
+    : state_(state), context_(context), caller_(CallerOf(*context)) {}
+
+void ControlStream::Begin() {
+  if (state_->draining.load()) {
+    End(state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down")));
+    return;
+  }
+  counted_ = true;
+  if (state_->control_streams.fetch_add(1) >= state_->options.max_control_streams) {
+    End(state_->ToGrpc(Rpc::kControl, absl::ResourceExhaustedError(
+        absl::StrCat("the server has its maximum of ", state_->options.max_control_streams,
+                     " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
+    return;
+  }
+  std::function<void()> revoke;
+  if (caller_.by_token) {
+    revoke = [weak = weak_from_this()] {
+      if (const std::shared_ptr<ControlStream> self = weak.lock()) self->Revoke();
+    };
+  }
+  if (absl::Status quota = state_->principal_streams.Acquire(caller_.principal, this, std::move(revoke)); !quota.ok()) {
+    End(state_->ToGrpc(Rpc::kControl, quota));
+    return;
+  }
+  counted_for_principal_ = true;
+  const auto timeout = std::chrono::duration_cast<std::chrono::system_clock::duration>(
+      std::chrono::duration<double>(state_->options.first_message_timeout_s));
+  // The callback runs on one of gRPC's threads, after Set. For TSan: handed over through one
+  // address for all streams, as the callback cannot read its captures before it has taken
+  // them over (and the stream may be gone).
+  first_message_timer_.Set(std::chrono::system_clock::now() + timeout, [weak = weak_from_this()](bool fired) {
+    TakeFromGrpc(&kFirstMessageAlarms);
+    if (const std::shared_ptr<ControlStream> self = weak.lock()) self->OnFirstMessageTimeout(fired);
+  });
+  HandToGrpc(&kFirstMessageAlarms);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++reads_starting_;
+  }
+  ReadNext();
+}
+
+void ControlStream::OnFirstMessageTimeout(bool fired) {
+  if (!fired) return;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (done_ || phase_ != Phase::kAwaitingFirst) return;
+    // Through Pump, which finishes only once Begin's read has been started (reads_starting_):
+    // the timer can fire before it is. The pending read then completes with !ok, or with a
+    // late first message that OnReadDone drops.
+    phase_ = Phase::kEnding;
+    final_status_ = state_->ToGrpc(
+        Rpc::kControl,
+        absl::DeadlineExceededError(absl::StrCat("first ControlRequest: none within first_message_timeout_s = ",
+                                                 state_->options.first_message_timeout_s,
+                                                 " s (ServerLimits.first_message_timeout_s); send the attach at once")));
+  }
+  Pump();
+}
+
+void ControlStream::Revoke() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    // While the first message's session is built (kAttaching) the phase is not ours to
+    // change: the janitor revokes again a second later.
+    if (done_ || phase_ == Phase::kAttaching || phase_ == Phase::kEnding || phase_ == Phase::kFinished) return;
+    phase_ = Phase::kEnding;
+    parked_.reset();  // nothing more is solved for a caller whose access is gone
+    final_status_ = state_->ToGrpc(
+        Rpc::kControl, absl::UnauthenticatedError(absl::StrCat("principal \"", caller_.principal,
+                                                               "\": its token was removed from the server's tokens "
+                                                               "file; the stream ends")));
+  }
+  Pump();
+}
+
+bool ControlStream::ShouldReadLocked() {
+  if (phase_ == Phase::kEnding || phase_ == Phase::kFinished || reading_ == Reading::kDone) return false;
+  // The client does not read its answers: stop reading its steps (flow control) until it does.
+  const bool pause = static_cast<int>(writes_.size()) >= state_->options.max_stream_answers;
+  if (pause && reading_ != Reading::kPaused) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
+  reading_ = pause ? Reading::kPaused : Reading::kActive;
+  return !pause;
+}
+
+absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::ControlRequest& first) {
+  std::shared_ptr<SessionEntry> entry;
+  switch (first.attach_case()) {
+    case v1::ControlRequest::kSessionId: {
+      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->registry.Find(first.session_id(), caller_);
+      if (!found.ok()) return found.status();
+      entry = *std::move(found);
+      if (entry->owned_by_stream || entry->attached.exchange(true)) {
+        return absl::FailedPreconditionError(
+            absl::StrCat("session_id ", QuoteSessionId(first.session_id()), ": another Control stream is attached to it"));
+      }
+      break;
+    }
+    case v1::ControlRequest::kSpec: {
+      CallContext call;  // the stream's deadline and cancellation bound a kernel fit on creation
+      call.deadline = SteadyDeadline(*context_);
+      call.cancel = &cancelled_;
+      absl::StatusOr<std::shared_ptr<SessionEntry>> added =
+          CreateAndRegister(first.spec(), state_->options.size_limits, &state_->gp_models, &state_->budget,
+                            &state_->registry, call, /*owned_by_stream=*/true, /*requested_id=*/{},
+                            OwnerFor(caller_));
+      if (!added.ok()) return added.status();
+      entry = *std::move(added);
+      entry->attached.store(true);
+      const LogContext log_context(entry->id, caller_.principal);
+      spdlog::info("session {} created by a Control stream (M={}, L={}, K={}, N={})", entry->id,
+                   entry->dims.num_states(), entry->dims.num_inputs(), entry->dims.num_outputs(),
+                   entry->dims.horizon());
+      break;
+    }
+    case v1::ControlRequest::ATTACH_NOT_SET:
+      return absl::InvalidArgumentError("first ControlRequest: must carry session_id or spec (attach)");
+  }
+  return entry;
+}
+
+void ControlStream::OnReadDone(bool ok) {
+  TakeFromGrpc(this);
+  if (!ok) {  // the client half-closed (or went away)
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      reading_ = Reading::kDone;
+    }
+    Pump();
+    return;
+  }
+  v1::ControlRequest request;
+  const absl::Status parsed = ParseRaw(&read_buffer_, &request);
+  read_buffer_.Clear();
+  // The next read starts only once the first message is handled. Taking the first message
+  // moves the phase on under the lock, so the first-message timer cannot end the stream
+  // while it is handled (and a message that arrives after the timer ended it is dropped).
+  bool first_message;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    // Ending before its first message was handled (its timer fired): drop what arrives.
+    if (phase_ == Phase::kFinished || phase_ == Phase::kEnding) return;
+    first_message = phase_ == Phase::kAwaitingFirst;
+    if (first_message) phase_ = Phase::kAttaching;
+  }
+  if (first_message) first_message_timer_.Cancel();
+  if (first_message && !parsed.ok()) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      final_status_ = state_->ToGrpc(Rpc::kControl, parsed);
+      phase_ = Phase::kEnding;
+    }
+    Pump();
+    return;
+  }
+  if (first_message) {
+    StartAttach(std::move(request));
+    return;
+  }
+  bool read_more;
+  bool read_ahead = true;
+  bool read_after_solve = false;
+  std::optional<v1::ControlRequest> start;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!parsed.ok()) {
+      QueueWriteLocked(ErrorResponse(0, state_->ToGrpc(Rpc::kControl, parsed)));
+    } else if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
+      QueueWriteLocked(ErrorResponse(
+          request.sequence(),
+          state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
+    } else if (!request.has_step()) {
+      QueueWriteLocked(ErrorResponse(
+          request.sequence(), state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
+    } else {
+      read_timing_.StepArrived(solving_, read_after_solve_, Clock::now() - read_started_at_, writing_);
+      start = EnqueueStepLocked(std::move(request));
+      read_ahead = read_timing_.ReadAhead();
+    }
+    read_more = ShouldReadLocked();
+    // Reading on first: a newer step that arrives during the solve supersedes the parked
+    // one; unless the client waits for its answers and the step is solved here (ReadTiming).
+    read_after_solve = read_more && start.has_value() && !read_ahead && SolvesHere();
+    if (read_more && !read_after_solve) ++reads_starting_;
+  }
+  if (read_more && !read_after_solve) ReadNext();
+  if (start.has_value()) StartSolve(*std::move(start), read_after_solve);
+  Pump();
+}
+
+void ControlStream::StartAttach(v1::ControlRequest first) {
+  if (first.attach_case() != v1::ControlRequest::kSpec) {  // a registry lookup: fine in the reaction
+    AttachAndContinue(std::move(first));
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    phase_ = Phase::kAttaching;  // keeps the stream from finishing while the pool builds the session
+  }
+  const absl::Status queued = state_->pool.TrySubmit(
+      [self = shared_from_this(), first = std::move(first)]() mutable { self->AttachAndContinue(std::move(first)); });
+  if (queued.ok()) return;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    final_status_ = state_->ToGrpc(Rpc::kControl, queued);
+    phase_ = Phase::kEnding;
+  }
+  Pump();
+}
+
+void ControlStream::AttachAndContinue(v1::ControlRequest first) {
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry;
+  const absl::Status attached = RunCatchingExceptions("Control (first message)", [&] {
+    entry = Attach(first);
+    return entry.status();
+  });
+  if (!attached.ok()) entry = attached;
+  bool read_more = false;
+  std::optional<v1::ControlRequest> start;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!entry.ok()) {
+      final_status_ = state_->ToGrpc(Rpc::kControl, entry.status());
+      phase_ = Phase::kEnding;
+    } else {
+      entry_ = *std::move(entry);
+      phase_ = Phase::kOpen;
+      if (first.has_step()) {
+        start = EnqueueStepLocked(std::move(first));
+      } else {
+        v1::ControlResponse hello;
+        hello.set_sequence(first.sequence());
+        hello.set_session_id(entry_->id);
+        QueueWriteLocked(std::move(hello));
+      }
+      read_more = ShouldReadLocked();
+      if (read_more) ++reads_starting_;
+    }
+  }
+  if (read_more) ReadNext();
+  if (start.has_value()) StartSolve(*std::move(start), /*read_after_solve=*/false);
+  Pump();
+}
+
+std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
+  if (state_->draining.load()) {
+    QueueWriteLocked(
+        ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
+    return std::nullopt;
+  }
+  if (parked_.has_value()) {
+    v1::ControlResponse superseded;
+    superseded.set_sequence(parked_->sequence());
+    superseded.mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
+    QueueWriteLocked(std::move(superseded));
+  }
+  parked_ = std::move(request);
+  return TakeParkedLocked();
+}
+
+std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
+  if (solving_ || !parked_.has_value()) return std::nullopt;
+  std::optional<v1::ControlRequest> step = std::move(parked_);
+  parked_.reset();
+  SetSolvingLocked(true);
+  return step;
+}
+
+void ControlStream::SetSolvingLocked(bool solving) {
+  if (solving != solving_) state_->work_in_flight.fetch_add(solving ? 1 : -1);
+  solving_ = solving;
+}
+
+bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms) {
+  // A session's first solve (no time known) and long ones go to the pool: a reaction
+  // thread is held at most about inline_solve_max_ms by a solve.
+  const double expected_ms = session.last_solve_cpu_ms.load(std::memory_order_relaxed);
+  return inline_solve_max_ms > 0.0 && expected_ms >= 0.0 && expected_ms <= inline_solve_max_ms;
+}
+
+bool ControlStream::SolvesHere() const { return SolvesInPlace(*entry_, state_->options.inline_solve_max_ms); }
+
+void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve) {
+  for (;;) {
+    const std::uint64_t sequence = request.sequence();
+    const auto queued_at = Clock::now();
+    // Through the session's strand either way: a unary Solve accepted just before this
+    // stream attached runs first, without a worker waiting for it.
+    // In place, the answer is written once the session is given back: the client's next
+    // step, sent as soon as it has the answer, then finds the session free. This thread
+    // keeps the core for up to inline_solve_max_ms more of short steps that arrived
+    // meanwhile (other streams', and this one's next), as a worker would, but without
+    // handing each to another thread.
+    const bool short_solve = SolvesHere();
+    if (short_solve && SessionStrand::TryRunHere(
+                           entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },
+                           [this, read_after_solve] {
+                             Pump();  // the answer first: the read must not start before it left
+                             if (read_after_solve) ReadHeldBack();
+                           },
+                           state_->options.inline_solve_max_ms)) {
+      return;
+    }
+    if (read_after_solve) {  // not solved here after all: read ahead of the solve on the pool
+      read_after_solve = false;
+      ReadHeldBack();
+    }
+    const absl::Status queued = SessionStrand::Submit(
+        entry_->strand, state_->pool,
+        {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
+           self->Solve(std::move(request), queued_at, /*pump=*/true);
+         },
+         [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
+         entry_->last_solve_ms.load(std::memory_order_relaxed),
+         short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker});
+    if (queued.ok()) return;
+    std::optional<v1::ControlRequest> next;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, queued)));
+      SetSolvingLocked(false);
+      next = TakeParkedLocked();  // parked while this one was being handed over
+    }
+    if (!next.has_value()) return;
+    request = *std::move(next);
+  }
+}
+
+void ControlStream::ReadHeldBack() {
+  bool read_more;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    read_more = ShouldReadLocked();
+    if (read_more) ++reads_starting_;
+  }
+  if (read_more) {
+    ReadNext(/*after_solve=*/true);
+  } else {
+    Pump();  // the read the stream waited for will not come: it may finish now
+  }
+}
+
+void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused) {
+  std::optional<v1::ControlRequest> next;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, refused)));
+    SetSolvingLocked(false);
+    next = TakeParkedLocked();
+  }
+  if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
+  Pump();
+}
+
+void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump) {
+  const auto started_at = Clock::now();
+  CallContext call;
+  call.deadline = SteadyDeadline(*context_);
+  call.cancel = &cancelled_;
+  v1::ControlResponse response;
+  response.set_sequence(request.sequence());
+  const absl::Status status = RunCatchingExceptions(
+      "Control", [&] { return SolveStep(*entry_, request.step(), call, response.mutable_result()); });
+  if (status.ok()) {
+    state_->RecordSolve(response.result(), entry_.get(), std::chrono::duration<double>(started_at - queued_at).count(),
+                        std::chrono::duration<double>(Clock::now() - queued_at).count());
+  }
+  std::optional<v1::ControlRequest> next;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (status.ok()) {
+      QueueWriteLocked(std::move(response));
+    } else {
+      QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
+    }
+    SetSolvingLocked(false);
+    next = TakeParkedLocked();
+  }
+  // Still inside this session's strand task: the next step queues behind it.
+  if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
+  if (pump) Pump();
+}
+
+void ControlStream::QueueWriteLocked(v1::ControlResponse response) {
+  grpc::ByteBuffer bytes;
+  if (!SerializeRaw(response, &bytes).ok()) {  // cannot happen for a message we built; never send nothing
+    (void)SerializeRaw(ErrorResponse(response.sequence(), grpc::Status(grpc::StatusCode::INTERNAL, "unserializable")),
+                       &bytes);
+  }
+  writes_.push_back(bytes);
+}
+
+void ControlStream::Pump() {
+  const grpc::ByteBuffer* to_write = nullptr;
+  bool finish = false;
+  bool close_owned_session = false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (phase_ == Phase::kFinished) return;
+    if (!writing_ && !writes_.empty()) {
+      writing_ = true;
+      to_write = &writes_.front();  // deque: stays valid while other elements are added at the back
+    } else if (!writing_ && !solving_ && reads_starting_ == 0 && phase_ != Phase::kAttaching &&
+               (phase_ == Phase::kEnding || (reading_ == Reading::kDone && !parked_.has_value()))) {
+      phase_ = Phase::kFinished;
+      finish = true;
+      close_owned_session = entry_ != nullptr && entry_->owned_by_stream;  // no solve of it runs: !solving_
+    }
+  }
+  if (to_write != nullptr) Write(to_write);
+  if (close_owned_session) CloseOwnedSession();
+  if (finish) End(final_status_);
+}
+
+void ControlStream::CloseOwnedSession() {
+  if (owned_session_closed_) return;
+  owned_session_closed_ = true;
+  const LogContext log_context(entry_->id, caller_.principal);
+  (void)state_->registry.Close(entry_->id);
+  spdlog::info("session {} closed with its Control stream", entry_->id);
+}
+
+void ControlStream::ReadNext(bool after_solve) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    read_after_solve_ = after_solve;
+    read_started_at_ = Clock::now();
+  }
+  HandToGrpc(this);
+  StartRead(&read_buffer_);
+  // From here the pending read keeps the stream open (its OnReadDone pumps), but a stream
+  // that is ending finishes without waiting for the client: the Finish Pump held back.
+  bool pump;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    --reads_starting_;
+    pump = reads_starting_ == 0 && (phase_ == Phase::kEnding || reading_ == Reading::kDone);
+  }
+  if (pump) Pump();
+}
+
+void ControlStream::Write(const grpc::ByteBuffer* bytes) {
+  HandToGrpc(this);
+  StartWrite(bytes);
+}
+
+void ControlStream::End(const grpc::Status& status) {
+  HandToGrpc(this);
+  Finish(status);
+}
+
+void ControlStream::OnWriteDone(bool ok) {
+  TakeFromGrpc(this);
+  bool resume_reading = false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    writes_.pop_front();
+    writing_ = false;
+    if (!ok) {  // the client is gone: drop what is left
+      writes_.clear();
+      parked_.reset();
+      reading_ = Reading::kDone;
+    }
+    resume_reading = reading_ == Reading::kPaused && ShouldReadLocked();
+    if (resume_reading) ++reads_starting_;
+  }
+  if (resume_reading) ReadNext();
+  Pump();
+}
+
+void ControlStream::OnCancel() {
+  TakeFromGrpc(this);
+  cancelled_.store(true);
+}
+
+void ControlStream::OnDone() {
+  TakeFromGrpc(this);
+  // Deletes this stream on return unless a pool task still holds it.
+  const std::shared_ptr<ControlStream> last_reference_maybe = std::move(grpc_reference_);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    done_ = true;
+  }
+  first_message_timer_.Cancel();
+  if (counted_) state_->control_streams.fetch_sub(1);
+  if (counted_for_principal_) state_->principal_streams.Release(caller_.principal, this);
+  const LogContext log_context(entry_ != nullptr ? absl::string_view(entry_->id) : absl::string_view(),
+                               caller_.principal);
+  if (spdlog::should_log(spdlog::level::debug)) {
+    spdlog::debug("access: Control ended after {:.3f} s peer {}",
+                  std::chrono::duration<double>(Clock::now() - started_at_).count(), caller_.connection);
+  }
+  if (entry_ != nullptr) {
+    if (entry_->owned_by_stream) {
+      CloseOwnedSession();  // unless the stream's end did, before its status
+    } else {
+      entry_->attached.store(false);
+      spdlog::info("session {}: its Control stream detached", entry_->id);
+    }
+  }
+  HandToGrpc(state_);  // before grpc::Server::Shutdown returns (GrpcServer::Shutdown)
+}
+
+}  // namespace nupmpc::server

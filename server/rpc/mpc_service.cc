@@ -1,0 +1,204 @@
+#include "server/rpc/mpc_service.h"
+
+#include "absl/strings/ascii.h"
+#include "core/platform/cpu_baseline.h"
+#include "core/util/status_macros.h"
+#include "server/rpc/control_stream.h"
+#include "server/scheduling/cpu_affinity.h"
+#include "server/rpc/fleet_call.h"
+#include "server/convert/gp_conversion.h"
+#include "server/observability/log_context.h"
+#include "server/observability/process_memory.h"
+#include "server/convert/result_conversion.h"
+#include "server/convert/session_cost.h"
+#include "server/sessions/session_factory.h"
+#include "server/sessions/step_solver.h"
+#include "server/rpc/unary_call.h"
+#include "server/observability/version.h"
+#include "spdlog/spdlog.h"
+
+namespace nupmpc::server {
+
+grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                        Raw* raw_response) {
+  auto* call = UnaryCall<v1::CreateSessionRequest, v1::CreateSessionResponse>::Start(state_, context, raw_request,
+                                                                                    raw_response);
+  if (!call->Parsed()) return call;
+  if (const std::string& requested = call->request().session_id(); !requested.empty()) {
+    if (absl::Status form = CheckRequestedSessionId(requested); !form.ok()) {
+      call->Reply(form);
+      return call;
+    }
+  }
+  ServerState* state = state_;
+  const v1::CreateSessionRequest* request = &call->request();
+  v1::CreateSessionResponse* response = call->response();
+  call->RunOnPool("CreateSession", /*solve_result=*/nullptr,
+                  [state, request, response, owner = OwnerFor(CallerOf(*context))](const CallContext& c) {
+    absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+        CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
+                          &state->registry, c, /*owned_by_stream=*/false, request->session_id(), owner);
+    if (!entry.ok()) return entry.status();
+    response->set_session_id((*entry)->id);
+    *response->mutable_dimensions() = (*entry)->dims;
+    response->set_algorithm(AlgorithmToProto((*entry)->algorithm.load()));
+    state->FillLimits(response->mutable_limits());
+    const LogContext log_context((*entry)->id, (*entry)->owner.principal);
+    spdlog::info("session {} created (M={}, L={}, K={}, N={}); memory budget: {} MiB reserved of {} MiB",
+                 (*entry)->id, response->dimensions().num_states(), response->dimensions().num_inputs(),
+                 response->dimensions().num_outputs(), response->dimensions().horizon(),
+                 state->budget.reserved() >> 20, state->budget.capacity() >> 20);
+    return absl::OkStatus();
+  });
+  return call;
+}
+
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* MpcServiceImpl::Control(
+    grpc::CallbackServerContext* context) {
+  return ControlStream::Start(state_, context);
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                Raw* raw_response) {
+  auto* call = UnaryCall<v1::SolveRequest, v1::SolveResponse>::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+      state_->registry.Find(call->request().session_id(), CallerOf(*context));
+  if (!entry.ok()) {
+    call->Reply(entry.status());
+    return call;
+  }
+  if ((*entry)->attached.load()) {
+    call->Reply(
+        absl::FailedPreconditionError("session_id: a Control stream is attached to this session; send steps there"));
+    return call;
+  }
+  const SessionEntry* session = entry->get();
+  const v1::Step* step = &call->request().step();
+  v1::SolveResult* result = call->response()->mutable_result();
+  call->RunOnPool(
+      "Solve", result,
+      [entry = *std::move(entry), step, result](const CallContext& c) { return SolveStep(*entry, *step, c, result); },
+      session);
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::SolveOnce(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                    Raw* raw_response) {
+  auto* call =
+      UnaryCall<v1::SolveOnceRequest, v1::SolveOnceResponse>::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  ServerState* state = state_;
+  const v1::ProblemSpec* spec = &call->request().spec();
+  v1::SolveResult* result = call->response()->mutable_result();
+  call->RunOnPool("SolveOnce", result, [state, spec, result](const CallContext& c) {
+    return server::SolveOnce(*spec, state->options.size_limits, c, result, &state->gp_models, &state->budget);
+  });
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::GetSession(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                     Raw* raw_response) {
+  auto* call =
+      UnaryCall<v1::GetSessionRequest, v1::GetSessionResponse>::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+      state_->registry.Find(call->request().session_id(), CallerOf(*context));
+  if (entry.ok()) (*entry)->Describe(call->response()->mutable_session());
+  call->Reply(entry.status());
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::ListSessions(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                       Raw* raw_response) {
+  auto* call =
+      UnaryCall<v1::ListSessionsRequest, v1::ListSessionsResponse>::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  for (const auto& entry : state_->registry.ListFor(CallerOf(*context), state_->options.list_all_sessions)) {
+    entry->Describe(call->response()->add_sessions());
+  }
+  call->Reply(absl::OkStatus());
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                       Raw* raw_response) {
+  auto* call =
+      UnaryCall<v1::CloseSessionRequest, v1::CloseSessionResponse>::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  const std::string& id = call->request().session_id();
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(id, CallerOf(*context));
+  if (!entry.ok()) {
+    call->Reply(entry.status());
+    return call;
+  }
+  if ((*entry)->owned_by_stream) {
+    call->Reply(absl::FailedPreconditionError("session_id: the session belongs to a Control stream and closes with it"));
+    return call;
+  }
+  // Answered once the session's memory is given back (after a solve in flight).
+  const absl::Status status = state_->registry.Close(id, [state = state_, call, id, entry = *entry] {
+    const LogContext log_context(id, entry->owner.principal);
+    spdlog::info("session {} closed; memory budget: {} MiB reserved of {} MiB", id, state->budget.reserved() >> 20,
+                 state->budget.capacity() >> 20);
+    call->Reply(absl::OkStatus());
+  });
+  if (!status.ok()) call->Reply(status);
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                        Raw* raw_response) {
+  auto* call = UnaryCall<v1::GetServerInfoRequest, v1::GetServerInfoResponse>::Start(state_, context, raw_request,
+                                                                                    raw_response);
+  if (!call->Parsed()) return call;
+  v1::GetServerInfoResponse* response = call->response();
+  response->set_version(kVersion);
+  response->set_api_version("nupmpc.v1");
+  state_->FillLimits(response->mutable_limits());
+  for (v1::Algorithm a : {v1::ALGORITHM_IAKE, v1::ALGORITHM_IBFFD, v1::ALGORITHM_IFFBDD}) response->add_algorithms(a);
+  state_->metrics.Fill(response);
+  response->set_active_sessions(state_->registry.size());
+  response->set_draining(!state_->serving.load());
+  response->set_resident_memory_bytes(ResidentMemoryBytes());
+  response->set_cpu_baseline(platform::kBuildCpuBaseline);
+  response->set_cpu_features(std::string(absl::StripLeadingAsciiWhitespace(platform::kBuildCpuFeatures)));
+  response->set_memory_reserved_bytes(static_cast<std::uint64_t>(state_->budget.reserved()));
+  response->set_control_streams(static_cast<std::uint32_t>(state_->control_streams.load()));
+  response->set_control_stream_read_pauses(state_->stream_read_pauses.load(std::memory_order_relaxed));
+  response->set_cpus(CallingThreadCpuList());
+  response->set_solves_in_place(state_->pool.run_here());
+  call->Reply(absl::OkStatus());
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::FitGpModel(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                     Raw* raw_response) {
+  auto* call =
+      UnaryCall<v1::FitGpModelRequest, v1::FitGpModelResponse>::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  ServerState* state = state_;
+  const v1::FitGpModelRequest* request = &call->request();
+  v1::FitGpModelResponse* response = call->response();
+  // O(P³) per iteration: on the pool like a solve, never in the reaction; its O(P²)
+  // matrices are reserved in the memory budget first.
+  call->RunOnPool("FitGpModel", /*solve_result=*/nullptr, [state, request, response](const CallContext& c) -> absl::Status {
+    NUPMPC_ASSIGN_OR_RETURN(const gp::FitOptions fit_limits, FitLimits(&c));
+    NUPMPC_ASSIGN_OR_RETURN(const std::int64_t fit_bytes,
+                            GpFitBytes(request->model(), "model", state->options.size_limits));
+    NUPMPC_ASSIGN_OR_RETURN(const MemoryBudget::Reservation reserved,
+                            state->budget.Reserve(fit_bytes, "model (the fit's kernel matrices)"));
+    return server::FitGpModel(*request, state->options.size_limits, fit_limits, response);
+  });
+  return call;
+}
+
+grpc::ServerUnaryReactor* MpcServiceImpl::SolveFleet(grpc::CallbackServerContext* context, const Raw* raw_request,
+                                                     Raw* raw_response) {
+  auto* call = FleetCall::Start(state_, context, raw_request, raw_response);
+  if (!call->Parsed()) return call;
+  StartFleet(call, CallerOf(*context));
+  return call;
+}
+
+}  // namespace nupmpc::server

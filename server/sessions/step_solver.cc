@@ -1,0 +1,81 @@
+#include "server/sessions/step_solver.h"
+
+#include "absl/strings/str_cat.h"
+#include "core/util/status_macros.h"
+#include "server/sessions/model_storage.h"
+#include "server/convert/result_conversion.h"
+#include "server/sessions/session_factory.h"
+#include "server/convert/step_conversion.h"
+#include "server/scheduling/thread_cpu_time.h"
+
+namespace nupmpc::server {
+
+namespace {
+
+// Takes the budget's share the step needs (the scratch an idle session gave back, storage
+// for a model that becomes per-step), then applies the update.
+absl::Status ReserveAndApply(SessionEntry& entry, const core::StepUpdate& update) {
+  if (entry.compacted) {
+    NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(entry.memory.scratch_bytes,
+                                                       "session_id (allocating the idle session's solver scratch again)"));
+  }
+  if (update.changes_model()) NUPMPC_RETURN_IF_ERROR(ReserveModelStorage(*entry.solver, update.model, &entry.memory));
+  return AsStepError(entry.solver->Apply(update));
+}
+
+}  // namespace
+
+absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallContext& call, v1::SolveResult* out) {
+  if (entry.closed) return absl::NotFoundError(absl::StrCat("session_id \"", entry.id, "\": closed"));
+  entry.Touch();
+  core::MpcSession& solver = *entry.solver;
+  NUPMPC_ASSIGN_OR_RETURN(const core::StepUpdate update, StepUpdateFromProto(step, solver.dimensions()));
+  NUPMPC_ASSIGN_OR_RETURN(core::SolveLimits limits, SolveLimitsFor(entry.default_time_limit_ms, &step, call));
+  // A refused step leaves the session as it was, its share of the budget included (the
+  // core checks an update when it applies it, after the storage for it was reserved).
+  const std::int64_t resident_before = entry.memory.resident.bytes();
+  const std::int64_t scratch_before = entry.memory.scratch.bytes();
+  if (absl::Status applied = ReserveAndApply(entry, update); !applied.ok()) {
+    entry.memory.resident.ShrinkTo(resident_before);
+    entry.memory.scratch.ShrinkTo(scratch_before);
+    return applied;
+  }
+  entry.algorithm.store(solver.algorithm());  // other priors may need another algorithm
+
+  switch (step.warm_start()) {
+    case v1::WARM_START_UNSPECIFIED:
+    case v1::WARM_START_SHIFT: solver.ShiftWarmStart(); break;
+    case v1::WARM_START_KEEP: break;
+    case v1::WARM_START_COLD: limits.warm_start = false; break;
+    default: break;
+  }
+  // Read on every solve, short ones included, although the thread CPU clock is a system
+  // call: the reading also brings the scheduler's account of this thread up to date, and
+  // without it p99 at 8 streams on one core doubled (README, "Where a step is solved":
+  // measured on one kernel, cause inferred, not traced).
+  const std::chrono::nanoseconds cpu_before = ThreadCpuTime();
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
+  entry.compacted = false;  // Solve() took its scratch back
+  // Wall time for the pool's admission (a wait it promises in wall time), CPU time for where
+  // the next step is solved: judged by wall time, a solve that shared its core with another
+  // would look long and send its session's next steps to a worker.
+  entry.last_solve_ms.store(summary.solve_seconds * 1e3, std::memory_order_relaxed);
+  entry.last_solve_cpu_ms.store(std::chrono::duration<double, std::milli>(ThreadCpuTime() - cpu_before).count(),
+                                std::memory_order_relaxed);
+  entry.solves.fetch_add(1, std::memory_order_relaxed);
+  ResultToProto(summary, entry.solution, out);
+  entry.Touch();
+  return absl::OkStatus();
+}
+
+absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limits, const CallContext& call,
+                       v1::SolveResult* out, GpModelCache* gp_models, MemoryBudget* budget) {
+  NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits, gp_models, &call, budget));
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveLimits limits, SolveLimitsFor(built.default_time_limit_ms, nullptr, call));
+  core::Solution solution;
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, built.solver->Solve(limits, &solution));
+  ResultToProto(summary, solution, out);
+  return absl::OkStatus();
+}
+
+}  // namespace nupmpc::server

@@ -1,0 +1,67 @@
+#include "server/state/server_state.h"
+
+#include "absl/strings/str_cat.h"
+#include "server/observability/log_context.h"
+#include "spdlog/spdlog.h"
+
+namespace nupmpc::server {
+
+grpc::Status ServerState::ToGrpc(Rpc rpc, const absl::Status& status) {
+  if (status.ok()) return grpc::Status::OK;
+  metrics.RecordError(rpc, status.code());
+  // absl and gRPC share the canonical code numbering.
+  return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
+}
+
+void ServerState::RecordSolve(const v1::SolveResult& result, const SessionEntry* session, double queue_wait_s,
+                              double latency_s) {
+  metrics.RecordSolve(result, queue_wait_s, latency_s);
+  if (options.slow_solve_ms <= 0.0 || !(result.solve_ms() > options.slow_solve_ms)) return;
+  const LogContext context(session != nullptr ? absl::string_view(session->id) : absl::string_view("SolveOnce"),
+                           session != nullptr ? absl::string_view(session->owner.principal) : absl::string_view());
+  const v1::Dimensions* dims = session != nullptr ? &session->dims : nullptr;
+  spdlog::warn("slow solve: {:.3f} ms in the solver (--slow_solve_ms {}), {} iterations, status {}, queue wait {:.3f} ms{}",
+               result.solve_ms(), options.slow_solve_ms, result.iterations(), v1::SolveStatus_Name(result.status()),
+               queue_wait_s * 1e3,
+               dims == nullptr ? std::string()
+                               : absl::StrCat(", M=", dims->num_states(), " L=", dims->num_inputs(),
+                                              " K=", dims->num_outputs(), " N=", dims->horizon()));
+}
+
+void ServerState::FillLimits(v1::ServerLimits* out) const {
+  out->set_max_sessions(options.max_sessions);
+  out->set_max_horizon(options.size_limits.max_horizon);
+  out->set_max_states(options.size_limits.max_states);
+  out->set_max_inputs(options.size_limits.max_inputs);
+  out->set_max_outputs(options.size_limits.max_outputs);
+  out->set_max_iterations(options.size_limits.max_iterations);
+  out->set_max_message_bytes(options.max_message_bytes);
+  out->set_session_idle_timeout_s(options.session_idle_timeout_s);
+  out->set_session_compact_idle_s(options.session_compact_idle_s);
+  out->set_worker_threads(options.worker_threads);
+  out->set_queue_capacity(options.queue_capacity);
+  out->set_max_queue_wait_ms(options.max_queue_wait_ms);
+  out->set_max_gp_points(options.size_limits.max_gp_points);
+  out->set_max_input_levels(options.size_limits.max_input_levels);
+  out->set_max_keep_out_regions(options.size_limits.max_keep_out_regions);
+  out->set_max_session_bytes(options.size_limits.max_session_bytes);
+  out->set_max_pass_flops(options.size_limits.max_pass_flops);
+  out->set_max_spec_scalars(options.size_limits.max_scalars);
+  out->set_memory_budget_bytes(budget.capacity());
+  out->set_max_control_streams(options.max_control_streams);
+  out->set_max_stream_answers(options.max_stream_answers);
+  out->set_max_streams_per_connection(options.max_streams_per_connection);
+  out->set_first_message_timeout_s(options.first_message_timeout_s);
+  out->set_connection_idle_timeout_s(options.connection_idle_timeout_s);
+  out->set_inline_solve_max_ms(options.inline_solve_max_ms);
+  out->set_max_fleet_steps(static_cast<std::uint32_t>(options.max_fleet_steps));
+  out->set_solver_cores(static_cast<std::uint32_t>(pool.cores()));
+}
+
+std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContext& context) {
+  const auto deadline = context.deadline();
+  if (deadline == std::chrono::system_clock::time_point::max()) return std::nullopt;
+  return Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - std::chrono::system_clock::now());
+}
+
+}  // namespace nupmpc::server
