@@ -14,6 +14,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   liblbfgs-dev coinor-libipopt-dev
   clang libclang-rt-14-dev
+  clang-format clang-tidy  # the tree's style and lint (.clang-format, .clang-tidy; tests/build/)
   llvm-14       # llvm-symbolizer: sanitizer stacks are unreadable without it (clang only recommends it)
   openssl       # the TLS tests' certificates (tests/util/test_pki.cc, the Python client's tests)
   prometheus    # promtool: Prometheus' own check of /metrics (metrics_endpoint_test)
@@ -27,6 +28,7 @@ programs=(
   cmake:cmake ninja:ninja-build g++:build-essential pkg-config:pkg-config git:git python3:python3
   protoc:protobuf-compiler grpc_cpp_plugin:protobuf-compiler-grpc grpc_python_plugin:protobuf-compiler-grpc
   clang++:clang llvm-symbolizer-14:llvm-14 nm:binutils c++filt:binutils
+  clang-format-14:clang-format clang-tidy-14:clang-tidy
   openssl:openssl promtool:prometheus haproxy:haproxy yamllint:yamllint
 )
 
