@@ -25,7 +25,8 @@ std::size_t EditDistance(absl::string_view a, absl::string_view b) {
   for (std::size_t i = 1; i <= a.size(); ++i) {
     for (std::size_t j = 1; j <= b.size(); ++j) {
       d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1]) d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1])
+        d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
     }
   }
   return d[a.size()][b.size()];
@@ -71,7 +72,8 @@ ArgumentCheck CheckArguments(const ProgramInfo& program, const std::vector<std::
   ArgumentCheck error;  // kParse until a problem is found
   const auto fail = [&error](std::string what, std::string hint = "") {
     // The first problem is reported; later ones are often its consequence.
-    if (error.outcome == ArgumentCheck::Outcome::kParse) error = {ArgumentCheck::Outcome::kUsageError, std::move(what), std::move(hint)};
+    if (error.outcome == ArgumentCheck::Outcome::kParse)
+      error = {ArgumentCheck::Outcome::kUsageError, std::move(what), std::move(hint)};
   };
   std::vector<absl::string_view> positional;
   for (std::size_t i = 0; i < args.size(); ++i) {
@@ -109,7 +111,8 @@ ArgumentCheck CheckArguments(const ProgramInfo& program, const std::vector<std::
     }
     if (flag == nullptr) {
       const std::string suggestion = SuggestFlag(name);
-      fail(absl::StrCat("unknown flag --", name), suggestion.empty() ? "" : absl::StrCat("did you mean --", suggestion, "?"));
+      fail(absl::StrCat("unknown flag --", name),
+           suggestion.empty() ? "" : absl::StrCat("did you mean --", suggestion, "?"));
       continue;
     }
     if (flag->IsOfType<bool>()) {

@@ -18,7 +18,8 @@ std::string DefaultNote(const absl::CommandLineFlag& flag) {
   const auto show = [quoted](const std::string& v) { return quoted ? absl::StrCat("\"", v, "\"") : v; };
   std::string note = absl::StrCat("(default ", show(flag.DefaultValue()));
   // Our programs set a flag before parsing only from an environment variable.
-  if (flag.CurrentValue() != flag.DefaultValue()) absl::StrAppend(&note, "; from the environment ", show(flag.CurrentValue()));
+  if (flag.CurrentValue() != flag.DefaultValue())
+    absl::StrAppend(&note, "; from the environment ", show(flag.CurrentValue()));
   return absl::StrCat(note, ")");
 }
 

@@ -18,9 +18,8 @@ std::vector<absl::CommandLineFlag*> OwnFlags() {
   for (const auto& [name, flag] : absl::GetAllFlags()) {
     if (!flag->IsRetired() && !IsAbseilFilename(flag->Filename())) flags.push_back(flag);
   }
-  std::sort(flags.begin(), flags.end(), [](const absl::CommandLineFlag* a, const absl::CommandLineFlag* b) {
-    return a->Name() < b->Name();
-  });
+  std::sort(flags.begin(), flags.end(),
+            [](const absl::CommandLineFlag* a, const absl::CommandLineFlag* b) { return a->Name() < b->Name(); });
   return flags;
 }
 
@@ -54,9 +53,9 @@ constexpr FlagType Type(const char* name) {
 // CommandLineFlag has no public type name in Abseil 20220623; ask for the types our
 // programs use.
 constexpr FlagType kTypes[] = {
-    Type<bool>("bool"),     Type<int32_t>("int"),   Type<int64_t>("int64"),      Type<uint32_t>("uint32"),
-    Type<uint64_t>("uint64"), Type<double>("double"), Type<float>("float"),       Type<std::string>("string"),
-    Type<std::vector<std::string>>("list"),
+    Type<bool>("bool"),       Type<int32_t>("int"),        Type<int64_t>("int64"),
+    Type<uint32_t>("uint32"), Type<uint64_t>("uint64"),    Type<double>("double"),
+    Type<float>("float"),     Type<std::string>("string"), Type<std::vector<std::string>>("list"),
 };
 
 const FlagType* TypeOf(const absl::CommandLineFlag& flag) {

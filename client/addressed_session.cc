@@ -16,8 +16,8 @@ namespace {
 absl::Status AsFailoverCause(const grpc::Status& s, const char* what) {
   const auto code = static_cast<absl::StatusCode>(s.error_code());
   if (code == absl::StatusCode::kNotFound) {
-    return absl::UnavailableError(absl::StrCat(what, ": the session is not on the replica that answered (",
-                                               s.error_message(), ")"));
+    return absl::UnavailableError(
+        absl::StrCat(what, ": the session is not on the replica that answered (", s.error_message(), ")"));
   }
   return absl::Status(code, absl::StrCat(what, ": ", s.error_message()));
 }
@@ -61,7 +61,8 @@ absl::Status AddressedSession::CreateLocked(std::chrono::milliseconds timeout) {
   v1::CreateSessionResponse response;
   const grpc::Status s = client_->stub().CreateSession(&context, request, &response);
   if (!s.ok()) {
-    return absl::Status(static_cast<absl::StatusCode>(s.error_code()), absl::StrCat("CreateSession: ", s.error_message()));
+    return absl::Status(static_cast<absl::StatusCode>(s.error_code()),
+                        absl::StrCat("CreateSession: ", s.error_message()));
   }
   if (response.session_id() != request.session_id()) {
     // A server from before CreateSessionRequest.session_id drew its own id: a balancer would
@@ -75,8 +76,7 @@ absl::Status AddressedSession::CreateLocked(std::chrono::milliseconds timeout) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<v1::SolveResult> AddressedSession::SolveLocked(const v1::Step& step,
-                                                              std::chrono::milliseconds timeout) {
+absl::StatusOr<v1::SolveResult> AddressedSession::SolveLocked(const v1::Step& step, std::chrono::milliseconds timeout) {
   if (id_.empty()) return absl::FailedPreconditionError("the session is closed");
   v1::SolveRequest request;
   request.set_session_id(id_);

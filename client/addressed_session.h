@@ -60,7 +60,7 @@ class AddressedSession {
   v1::ProblemSpec spec_;
   ReconnectOptions reconnect_;
   mutable std::mutex mu_;
-  std::string id_;  // empty once closed
+  std::string id_;             // empty once closed
   bool spec_may_lag_ = false;  // a step failed unanswered since the last one with a state
   ReconnectStats stats_;
 };

@@ -84,8 +84,8 @@ absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> ChannelCredentialsFor(
     channel = grpc::SslCredentials(ssl);
   } else if (!security.token.empty()) {
     if (!IsLocalTarget(target)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "token: sent only over TLS to a remote server (", target, "); give tls (or tls_ca_file)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("token: sent only over TLS to a remote server (", target, "); give tls (or tls_ca_file)"));
     }
     const bool unix_socket = absl::StartsWith(target, "unix");
     channel = grpc::experimental::LocalCredentials(unix_socket ? UDS : LOCAL_TCP);
@@ -107,8 +107,7 @@ std::shared_ptr<grpc::Channel> CreateChannel(const std::string& target,
   return grpc::CreateCustomChannel(target, credentials, args);
 }
 
-absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target,
-                                                             const ChannelSecurity& security,
+absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target, const ChannelSecurity& security,
                                                              grpc::ChannelArguments args) {
   absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
   if (!credentials.ok()) return credentials.status();

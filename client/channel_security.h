@@ -36,8 +36,7 @@ std::shared_ptr<grpc::Channel> CreateChannel(const std::string& target,
                                              const std::shared_ptr<grpc::ChannelCredentials>& credentials,
                                              const ChannelSecurity& security, grpc::ChannelArguments args);
 // The same with credentials made here (errors as ChannelCredentialsFor's).
-absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target,
-                                                             const ChannelSecurity& security,
+absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target, const ChannelSecurity& security,
                                                              grpc::ChannelArguments args);
 
 // ChannelSecurity from the environment, for command-line tools and tests: NUPMPC_TLS (1:

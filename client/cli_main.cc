@@ -30,9 +30,9 @@
 #include "absl/strings/str_join.h"
 #include "cli/program_flags.h"
 #include "client/client.h"
-#include "client/security_flags.h"
 #include "client/closed_loop_summary.h"
 #include "client/problem_file.h"
+#include "client/security_flags.h"
 #include "client/server_info_table.h"
 #include "client/solve_status_name.h"
 #include "google/protobuf/util/json_util.h"
@@ -54,20 +54,22 @@ using nupmpc::SolveStatusName;
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc",
-    .summary = "nupmpc: command-line client of nupmpc-server.\n"
-               "  solve FILE        one stateless solve (SolveOnce)\n"
-               "  closed-loop FILE  a receding-horizon run through a Control stream: the instance's recorded\n"
-               "                    closed-loop states if it has them, else the model simulated locally\n"
-               "                    (--noise); ends with a summary (convergence, steps without a plan,\n"
-               "                    reconnects, solve and round-trip times); rides through a server restart\n"
-               "                    (--reconnect_budget_s)\n"
-               "  fit-gp FILE       GP hyper-parameters by maximum likelihood (FitGpModel); FILE is a\n"
-               "                    FitGpModelRequest in proto JSON\n"
-               "  info              server version, CPU baseline, limits, counters\n"
-               "  sessions          open sessions\n"
-               "FILE is an instance in the benchmarks/ format or a ProblemSpec in proto JSON.",
-    .usage = "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
-             "sessions",
+    .summary =
+        "nupmpc: command-line client of nupmpc-server.\n"
+        "  solve FILE        one stateless solve (SolveOnce)\n"
+        "  closed-loop FILE  a receding-horizon run through a Control stream: the instance's recorded\n"
+        "                    closed-loop states if it has them, else the model simulated locally\n"
+        "                    (--noise); ends with a summary (convergence, steps without a plan,\n"
+        "                    reconnects, solve and round-trip times); rides through a server restart\n"
+        "                    (--reconnect_budget_s)\n"
+        "  fit-gp FILE       GP hyper-parameters by maximum likelihood (FitGpModel); FILE is a\n"
+        "                    FitGpModelRequest in proto JSON\n"
+        "  info              server version, CPU baseline, limits, counters\n"
+        "  sessions          open sessions\n"
+        "FILE is an instance in the benchmarks/ format or a ProblemSpec in proto JSON.",
+    .usage =
+        "nupmpc [--server HOST:PORT] [--format table|json] solve FILE | closed-loop FILE | fit-gp FILE | info | "
+        "sessions",
     .environment = {{"NUPMPC_SERVER", "server address when --server is not given"},
                     {"NUPMPC_TOKEN", "the bearer token, when --token_file and NUPMPC_TOKEN_FILE are not given"},
                     {"NUPMPC_TLS, NUPMPC_TLS_CA_FILE, ...", "each --tls* flag's value when the flag is not given"}},
@@ -95,11 +97,11 @@ void PrintResult(const v1::SolveResult& r, int L, bool json) {
   // A result without a plan has no inputs to show (SolveResult.has_plan).
   const std::string u0 = nupmpc::HasPlan(r) ? U0(r, L) : (json ? "null" : "none (no plan)");
   if (json) {
-    std::printf("{\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%s,"
-                "\"has_plan\":%s,\"u0\":%s}\n",
-                SolveStatusName(r.status()).c_str(), JsonNumber(r.objective()).c_str(), r.iterations(), r.solve_ms(),
-                JsonNumber(r.max_violation()).c_str(),
-                nupmpc::HasPlan(r) ? "true" : "false", u0.c_str());
+    std::printf(
+        "{\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,\"solve_ms\":%.6f,\"max_violation\":%s,"
+        "\"has_plan\":%s,\"u0\":%s}\n",
+        SolveStatusName(r.status()).c_str(), JsonNumber(r.objective()).c_str(), r.iterations(), r.solve_ms(),
+        JsonNumber(r.max_violation()).c_str(), nupmpc::HasPlan(r) ? "true" : "false", u0.c_str());
   } else {
     std::printf("status %s, %u iterations, %.4f ms, J = %.12g, max violation %.3g\nu[0] = %s\n",
                 SolveStatusName(r.status()).c_str(), r.iterations(), r.solve_ms(), r.objective(), r.max_violation(),
@@ -144,7 +146,8 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
         "stream or Solve, the past window as Step.state)"));
   }
   nupmpc::ReconnectOptions reconnect;
-  reconnect.budget = std::chrono::milliseconds(std::llround(1e3 * std::max(0.0, absl::GetFlag(FLAGS_reconnect_budget_s))));
+  reconnect.budget =
+      std::chrono::milliseconds(std::llround(1e3 * std::max(0.0, absl::GetFlag(FLAGS_reconnect_budget_s))));
   reconnect.max_backoff = std::chrono::milliseconds(std::max(1, absl::GetFlag(FLAGS_reconnect_max_backoff_ms)));
   reconnect.on_attempt = [](const nupmpc::ReconnectAttempt& a) {
     if (a.attempt == 0) {  // a zero budget: no attempt at all
@@ -156,8 +159,8 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
       std::fprintf(stderr, "nupmpc: the Control stream broke (%s); reconnecting\n", a.cause.ToString().c_str());
     }
     if (a.result.ok()) {
-      std::fprintf(stderr, "nupmpc: reconnected at attempt %d, %.3f s after the break; session re-created\n",
-                   a.attempt, 1e-3 * static_cast<double>(a.elapsed.count()));
+      std::fprintf(stderr, "nupmpc: reconnected at attempt %d, %.3f s after the break; session re-created\n", a.attempt,
+                   1e-3 * static_cast<double>(a.elapsed.count()));
     } else {
       std::fprintf(stderr, "nupmpc: reconnect attempt %d (after %lld ms back-off, %.3f s after the break): %s%s\n",
                    a.attempt, static_cast<long long>(a.waited.count()), 1e-3 * static_cast<double>(a.elapsed.count()),
@@ -174,8 +177,9 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   std::mt19937_64 rng(absl::GetFlag(FLAGS_seed));
   std::normal_distribution<double> noise(0.0, absl::GetFlag(FLAGS_noise));
   std::vector<double> x(problem.spec.initial_state().mean().begin(), problem.spec.initial_state().mean().end());
-  if (!json) std::printf("%5s %-16s %6s %10s %10s %18s %10s  %s\n", "step", "status", "iter", "solve_ms", "rtt_ms",
-                         "objective", "max_viol", "u0");
+  if (!json)
+    std::printf("%5s %-16s %6s %10s %10s %18s %10s  %s\n", "step", "status", "iter", "solve_ms", "rtt_ms", "objective",
+                "max_viol", "u0");
   std::vector<nupmpc::ClosedLoopStep> record;
   // The input applied to the plant: the plan's u[0] when the result has one, else the
   // last one applied (zero before the first plan).
@@ -200,11 +204,12 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
     }
     record.push_back({r->status(), r->solve_ms(), rtt_ms, r->max_violation(), has_plan});
     if (json) {
-      std::printf("{\"step\":%d,\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,\"solve_ms\":%.6f,"
-                  "\"round_trip_ms\":%.6f,\"max_violation\":%s,\"warm_started\":%s,\"has_plan\":%s,\"u0\":%s}\n",
-                  t, SolveStatusName(r->status()).c_str(), JsonNumber(r->objective()).c_str(), r->iterations(),
-                  r->solve_ms(), rtt_ms, JsonNumber(r->max_violation()).c_str(), r->warm_started() ? "true" : "false", has_plan ? "true" : "false",
-                  Vector(u).c_str());
+      std::printf(
+          "{\"step\":%d,\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,\"solve_ms\":%.6f,"
+          "\"round_trip_ms\":%.6f,\"max_violation\":%s,\"warm_started\":%s,\"has_plan\":%s,\"u0\":%s}\n",
+          t, SolveStatusName(r->status()).c_str(), JsonNumber(r->objective()).c_str(), r->iterations(), r->solve_ms(),
+          rtt_ms, JsonNumber(r->max_violation()).c_str(), r->warm_started() ? "true" : "false",
+          has_plan ? "true" : "false", Vector(u).c_str());
     } else {
       std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s%s\n", t, SolveStatusName(r->status()).c_str(),
                   r->iterations(), r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), Vector(u).c_str(),

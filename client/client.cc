@@ -18,8 +18,8 @@ absl::Status FromGrpc(const grpc::Status& s) {
 // subchannel pool with other channels to the same address (and so not sharing their
 // reconnect back-off either).
 std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target,
-                                          const std::shared_ptr<grpc::ChannelCredentials>& credentials,
-                                          const ChannelSecurity& security, bool own_subchannel) {
+                                           const std::shared_ptr<grpc::ChannelCredentials>& credentials,
+                                           const ChannelSecurity& security, bool own_subchannel) {
   grpc::ChannelArguments args;
   // Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
   args.SetMaxReceiveMessageSize(-1);
@@ -39,8 +39,8 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const std::string& targe
                                                         std::chrono::milliseconds default_deadline) {
   absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
   if (!credentials.ok()) return credentials.status();
-  auto client = std::make_unique<Client>(MakeChannel(target, *credentials, security, /*own_subchannel=*/false),
-                                         default_deadline);
+  auto client =
+      std::make_unique<Client>(MakeChannel(target, *credentials, security, /*own_subchannel=*/false), default_deadline);
   client->target_ = target;
   client->credentials_ = *std::move(credentials);
   client->security_ = security;
@@ -59,9 +59,9 @@ void Client::SetDeadline(grpc::ClientContext* context) const {
 }
 
 template <typename Request, typename Response>
-absl::StatusOr<Response> Client::Unary(
-    grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-    const Request& request, const std::string& session_id) {
+absl::StatusOr<Response> Client::Unary(grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*,
+                                                                                    const Request&, Response*),
+                                       const Request& request, const std::string& session_id) {
   grpc::ClientContext context;
   SetDeadline(&context);
   if (!session_id.empty()) RouteToSession(&context, session_id);
@@ -230,8 +230,8 @@ absl::Status Session::BrokenStreamStatusLocked(const char* what) {
   // This session never cancels a live stream: CANCELLED here is the server dropping the
   // call (e.g. shutting down past its grace period), as retryable as a lost connection.
   if (s.error_code() == grpc::StatusCode::CANCELLED) {
-    return absl::UnavailableError(absl::StrCat("the Control stream was cancelled by the server (", what, "): ",
-                                               s.error_message()));
+    return absl::UnavailableError(
+        absl::StrCat("the Control stream was cancelled by the server (", what, "): ", s.error_message()));
   }
   // The server ends every stream with a status; UNKNOWN is gRPC's word for a stream that
   // ended without one ("No status received"): what a balancer does to the streams of a

@@ -10,13 +10,11 @@
 //
 // A Session survives a server restart, and the loss of its replica behind a balancer:
 // when its stream breaks (UNAVAILABLE, a cancellation it did not make, or a stream that
-// ended without a status, as a balancer ends those of a dead replica) it reconnects with exponential back-off and jitter within a budget
-// (ReconnectOptions, default 50 ms doubling to 2 s, ±20 %, 30 s), re-creates the session
-// from the spec it holds (kept current with every answered step by ApplyStepToSpec,
-// client/spec_update.h: state, references, bounds, shifts, GP reference, Δu's u[-1]),
-// and resends the step,
-// so Step() returns that step's result (the warm start is lost, nothing else). Only when
-// the budget is spent does Step() fail, with UNAVAILABLE.
+// ended without a status, as a balancer ends those of a dead replica) it reconnects with exponential back-off and
+// jitter within a budget (ReconnectOptions, default 50 ms doubling to 2 s, ±20 %, 30 s), re-creates the session from
+// the spec it holds (kept current with every answered step by ApplyStepToSpec, client/spec_update.h: state, references,
+// bounds, shifts, GP reference, Δu's u[-1]), and resends the step, so Step() returns that step's result (the warm start
+// is lost, nothing else). Only when the budget is spent does Step() fail, with UNAVAILABLE.
 //
 // Apply a result's inputs only when HasPlan(result): a result without a plan (CANCELLED,
 // SUPERSEDED, or a TIME_LIMIT / NUMERICAL_ERROR before any finite iterate) carries no
@@ -49,8 +47,7 @@ class Client {
  public:
   // `target` is host:port. Calls without an explicit deadline use `default_deadline`
   // (0 = none).
-  explicit Client(const std::string& target,
-                  std::chrono::milliseconds default_deadline = std::chrono::milliseconds(0));
+  explicit Client(const std::string& target, std::chrono::milliseconds default_deadline = std::chrono::milliseconds(0));
   explicit Client(std::shared_ptr<grpc::Channel> channel,
                   std::chrono::milliseconds default_deadline = std::chrono::milliseconds(0));
   // A client of a server with TLS, mTLS or bearer tokens (client/channel_security.h);
@@ -80,8 +77,7 @@ class Client {
   // Opens a Control stream that creates (and owns) a session for `spec`. The first attach
   // is tried once (a wrong address or spec fails at once); `reconnect` governs what
   // happens when the stream breaks later.
-  absl::StatusOr<std::unique_ptr<Session>> OpenSession(const v1::ProblemSpec& spec,
-                                                       ReconnectOptions reconnect = {});
+  absl::StatusOr<std::unique_ptr<Session>> OpenSession(const v1::ProblemSpec& spec, ReconnectOptions reconnect = {});
 
   v1::MpcService::Stub& stub() { return *stub_; }
 
@@ -90,9 +86,9 @@ class Client {
   // One blocking unary call with the default deadline, routed to `session_id`'s replica
   // when not empty.
   template <typename Request, typename Response>
-  absl::StatusOr<Response> Unary(
-      grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-      const Request& request, const std::string& session_id = {});
+  absl::StatusOr<Response> Unary(grpc::Status (v1::MpcService::Stub::*method)(grpc::ClientContext*, const Request&,
+                                                                              Response*),
+                                 const Request& request, const std::string& session_id = {});
   // A new channel to target_ with credentials_ (`own_subchannel`: a connection of its own).
   std::shared_ptr<grpc::Channel> NewChannel(bool own_subchannel) const;
   std::string target_;  // empty when built from a channel

@@ -44,7 +44,8 @@ ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps) 
     round_trip_ms.push_back(step.round_trip_ms);
     s.max_solve_ms = std::max(s.max_solve_ms, step.solve_ms);
     // A result without a plan has no violation to speak of (NaN).
-    if (step.has_plan && std::isfinite(step.max_violation)) s.max_violation = std::max(s.max_violation, step.max_violation);
+    if (step.has_plan && std::isfinite(step.max_violation))
+      s.max_violation = std::max(s.max_violation, step.max_violation);
   }
   s.median_solve_ms = Median(solve_ms);
   s.median_round_trip_ms = Median(round_trip_ms);

@@ -26,8 +26,8 @@ struct ClosedLoopSummary {
   int steps = 0;
   int not_converged = 0;
   std::map<std::string, int> not_converged_by_status;  // status name → steps (with or without a plan)
-  int held = 0;                                // steps without a plan: the last input held
-  std::map<std::string, int> held_by_status;  // status name → such steps
+  int held = 0;                                        // steps without a plan: the last input held
+  std::map<std::string, int> held_by_status;           // status name → such steps
   double median_solve_ms = 0.0, max_solve_ms = 0.0;
   double median_round_trip_ms = 0.0, p90_round_trip_ms = 0.0;
   double max_violation = 0.0;  // over steps with a plan

@@ -59,10 +59,10 @@ absl::Status CompareJacobian(const Vector& given, const Vector& differences, int
     const double error = std::abs(given[e] - differences[e]);
     if (error > tolerance * (1.0 + std::abs(differences[e]))) {
       const std::size_t row = e / cols, col = e % cols;
-      return absl::InvalidArgumentError(absl::StrCat(
-          "NonlinearModel.", field, " (", symbol, ") at t = ", t, ": entry (", row, ", ", col, ") (∂", of, "_", row,
-          "/∂", by, "_", col, ") is ", given[e], ", central differences give ", differences[e], " (tolerance ",
-          tolerance, "·(1 + |", differences[e], "|))"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("NonlinearModel.", field, " (", symbol, ") at t = ", t, ": entry (", row, ", ", col, ") (∂", of,
+                       "_", row, "/∂", by, "_", col, ") is ", given[e], ", central differences give ", differences[e],
+                       " (tolerance ", tolerance, "·(1 + |", differences[e], "|))"));
     }
   }
   return absl::OkStatus();
@@ -81,22 +81,22 @@ absl::StatusOr<Vector> EvalOutput(const NonlinearModel& m, std::int64_t t, const
   return Checked(m.output(t, x), m.num_outputs, "output", "K", t);
 }
 
-absl::StatusOr<Jacobians> TransitionJacobians(const NonlinearModel& m, std::int64_t t, const Vector& x,
-                                              const Vector& u, bool force_differences, double relative_step) {
+absl::StatusOr<Jacobians> TransitionJacobians(const NonlinearModel& m, std::int64_t t, const Vector& x, const Vector& u,
+                                              bool force_differences, double relative_step) {
   const int M = m.num_states, L = m.num_inputs;
   Jacobians j;
   absl::StatusOr<Vector> fx = EvalTransition(m, t, x, u);
   if (!fx.ok()) return fx.status();
   j.fx = *std::move(fx);
-  absl::StatusOr<Vector> A = m.transition_x && !force_differences
-                                 ? Checked(m.transition_x(t, x, u), M * M, "transition_x", "M×M", t)
-                                 : Differences([&](const Vector& v) { return EvalTransition(m, t, v, u); }, x, M,
-                                               relative_step);
+  absl::StatusOr<Vector> A =
+      m.transition_x && !force_differences
+          ? Checked(m.transition_x(t, x, u), M * M, "transition_x", "M×M", t)
+          : Differences([&](const Vector& v) { return EvalTransition(m, t, v, u); }, x, M, relative_step);
   if (!A.ok()) return A.status();
-  absl::StatusOr<Vector> B = m.transition_u && !force_differences
-                                 ? Checked(m.transition_u(t, x, u), M * L, "transition_u", "M×L", t)
-                                 : Differences([&](const Vector& v) { return EvalTransition(m, t, x, v); }, u, M,
-                                               relative_step);
+  absl::StatusOr<Vector> B =
+      m.transition_u && !force_differences
+          ? Checked(m.transition_u(t, x, u), M * L, "transition_u", "M×L", t)
+          : Differences([&](const Vector& v) { return EvalTransition(m, t, x, v); }, u, M, relative_step);
   if (!B.ok()) return B.status();
   j.A = *std::move(A);
   j.B = *std::move(B);
@@ -109,10 +109,10 @@ absl::Status OutputJacobian(const NonlinearModel& m, std::int64_t t, const Vecto
   if (K == 0) return absl::OkStatus();
   absl::StatusOr<Vector> hx = EvalOutput(m, t, x);
   if (!hx.ok()) return hx.status();
-  absl::StatusOr<Vector> C = m.output_x && !force_differences
-                                 ? Checked(m.output_x(t, x), K * M, "output_x", "K×M", t)
-                                 : Differences([&](const Vector& v) { return EvalOutput(m, t, v); }, x, K,
-                                               relative_step);
+  absl::StatusOr<Vector> C =
+      m.output_x && !force_differences
+          ? Checked(m.output_x(t, x), K * M, "output_x", "K×M", t)
+          : Differences([&](const Vector& v) { return EvalOutput(m, t, v); }, x, K, relative_step);
   if (!C.ok()) return C.status();
   j->hx = *std::move(hx);
   j->C = *std::move(C);
@@ -157,8 +157,8 @@ absl::StatusOr<LinearisedStep> Linearise(const NonlinearModel& model, std::int64
   if (x.size() != static_cast<std::size_t>(model.num_states) ||
       u.size() != static_cast<std::size_t>(model.num_inputs)) {
     return absl::InvalidArgumentError(absl::StrCat("Linearise: x has ", x.size(), " values (expected ",
-                                                   model.num_states, "), u ", u.size(), " (expected ",
-                                                   model.num_inputs, ")"));
+                                                   model.num_states, "), u ", u.size(), " (expected ", model.num_inputs,
+                                                   ")"));
   }
   absl::StatusOr<Jacobians> j = TransitionJacobians(model, t, x, u, force_finite_differences, relative_step);
   if (!j.ok()) return j.status();

@@ -19,9 +19,9 @@ namespace nupmpc {
 // plants ignore it.
 struct NonlinearModel {
   using Vector = std::vector<double>;
-  int num_states = 0;   // M ≥ 1
-  int num_inputs = 0;   // L ≥ 1
-  int num_outputs = 0;  // K ≥ 0
+  int num_states = 0;                                                                  // M ≥ 1
+  int num_inputs = 0;                                                                  // L ≥ 1
+  int num_outputs = 0;                                                                 // K ≥ 0
   std::function<Vector(std::int64_t t, const Vector& x, const Vector& u)> transition;  // f: M values
   std::function<Vector(std::int64_t t, const Vector& x)> output;  // h: K values (may be empty when K = 0)
   // Optional analytic Jacobians, row-major: ∂f/∂x (M×M), ∂f/∂u (M×L), ∂h/∂x (K×M). Each one

@@ -126,8 +126,9 @@ absl::Status ValidateSpec(const v1::ProblemSpec& spec, const NonlinearModel& m) 
   }
   if (model.a_size() > 0 || model.b_size() > 0 || model.c_size() > 0 || model.state_offset_size() > 0 ||
       model.output_offset_size() > 0) {
-    return invalid("model: a, b, c, state_offset and output_offset must be empty (NonlinearSession linearises the "
-                   "NonlinearModel into them)");
+    return invalid(
+        "model: a, b, c, state_offset and output_offset must be empty (NonlinearSession linearises the "
+        "NonlinearModel into them)");
   }
   if (spec.initial_state().mean_size() != m.num_states) {
     return invalid(absl::StrCat("initial_state.mean: expected ", m.num_states, " values (num_states), got ",
@@ -211,8 +212,8 @@ absl::StatusOr<std::unique_ptr<NonlinearSession>> NonlinearSession::Create(Clien
     // (a speed, a steering angle) shows at some step more likely than at one.
     for (int n = 0; n < N; ++n) {
       NUPMPC_CLIENT_RETURN_IF_ERROR(nupmpc::CheckJacobians(model, n, Slice(point.states, n, M),
-                                                        Slice(point.inputs, n, L), options.jacobian_tolerance,
-                                                        options.finite_difference_step));
+                                                           Slice(point.inputs, n, L), options.jacobian_tolerance,
+                                                           options.finite_difference_step));
     }
   }
   std::unique_ptr<NonlinearSession> session(new NonlinearSession(std::move(model), std::move(options), spec, N));
@@ -380,8 +381,8 @@ absl::Status NonlinearSession::CheckJacobians() const {
   const int M = model_.num_states, L = model_.num_inputs;
   for (int n = 0; n < horizon_; ++n) {
     NUPMPC_CLIENT_RETURN_IF_ERROR(nupmpc::CheckJacobians(model_, periods_ + n, Slice(next_point_.states, n, M),
-                                                      Slice(next_point_.inputs, n, L), options_.jacobian_tolerance,
-                                                      options_.finite_difference_step));
+                                                         Slice(next_point_.inputs, n, L), options_.jacobian_tolerance,
+                                                         options_.finite_difference_step));
   }
   return absl::OkStatus();
 }

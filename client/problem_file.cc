@@ -95,8 +95,10 @@ absl::StatusOr<std::vector<double>> Diagonal(const Value& v, const std::string& 
   for (int i = 0; i < size; ++i) {
     for (int j = 0; j < size; ++j) {
       const double x = m.data(i * size + j);
-      if (i == j) diagonal[static_cast<std::size_t>(i)] = x;
-      else if (x != 0.0) return Malformed(field, "only diagonal weights are supported");
+      if (i == j)
+        diagonal[static_cast<std::size_t>(i)] = x;
+      else if (x != 0.0)
+        return Malformed(field, "only diagonal weights are supported");
     }
   }
   return diagonal;
@@ -183,9 +185,14 @@ v1::ComponentPrior Component(const std::vector<StepPrior>& steps) {
       out.clear_lower();
       out.clear_upper();
       break;
-    case v1::PRIOR_KIND_AT_LEAST: out.clear_upper(); break;
-    case v1::PRIOR_KIND_AT_MOST: out.clear_lower(); break;
-    default: break;
+    case v1::PRIOR_KIND_AT_LEAST:
+      out.clear_upper();
+      break;
+    case v1::PRIOR_KIND_AT_MOST:
+      out.clear_lower();
+      break;
+    default:
+      break;
   }
   if (out.kind() != v1::PRIOR_KIND_UNSPECIFIED) out.add_slope(kInf);  // hard bounds
   return out;

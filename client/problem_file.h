@@ -18,7 +18,7 @@
 namespace nupmpc {
 
 struct ProblemFile {
-  std::string name;    ///< an instance's "name" and "family" (empty for a ProblemSpec file)
+  std::string name;  ///< an instance's "name" and "family" (empty for a ProblemSpec file)
   std::string family;
   v1::ProblemSpec spec;
   // The instance's recorded closed-loop initial states x1, one per step (empty when the

@@ -69,14 +69,15 @@ absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Statu
     report.gave_up = true;
     options.on_attempt(report);
   }
-  return absl::UnavailableError(absl::StrCat("gave up reconnecting after ", made, " attempt(s) in ",
-                                             elapsed().count(), " ms (budget ", options.budget.count(),
+  return absl::UnavailableError(absl::StrCat("gave up reconnecting after ", made, " attempt(s) in ", elapsed().count(),
+                                             " ms (budget ", options.budget.count(),
                                              " ms); last error: ", last.ToString()));
 }
 
-absl::Status RideOutOutage(const ReconnectOptions& options, const absl::Status& cause,
-                           const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
-                           ReconnectStats* stats) {
+absl::Status RideOutOutage(
+    const ReconnectOptions& options, const absl::Status& cause,
+    const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
+    ReconnectStats* stats) {
   const auto now = [&] { return options.now ? options.now() : std::chrono::steady_clock::now(); };
   const auto start = now();
   int attempts = 0;

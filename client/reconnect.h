@@ -29,19 +29,19 @@ namespace nupmpc {
 
 // One reconnect attempt, as reported to ReconnectOptions::on_attempt.
 struct ReconnectAttempt {
-  int attempt = 0;  // 1, 2, ... within this outage; 0: none was made (a zero budget), gave_up
-  std::chrono::milliseconds waited{0};      // the back-off slept before this attempt
-  std::chrono::milliseconds elapsed{0};     // since the stream broke, after this attempt
-  absl::Status cause;                       // what broke the stream (attempt 1) or the previous attempt
-  absl::Status result;                      // this attempt: OK = reconnected
-  bool gave_up = false;                     // the budget is spent (or the error is not retryable)
+  int attempt = 0;                       // 1, 2, ... within this outage; 0: none was made (a zero budget), gave_up
+  std::chrono::milliseconds waited{0};   // the back-off slept before this attempt
+  std::chrono::milliseconds elapsed{0};  // since the stream broke, after this attempt
+  absl::Status cause;                    // what broke the stream (attempt 1) or the previous attempt
+  absl::Status result;                   // this attempt: OK = reconnected
+  bool gave_up = false;                  // the budget is spent (or the error is not retryable)
 };
 
 struct ReconnectOptions {
   std::chrono::milliseconds initial_backoff{50};
   double multiplier = 2.0;
   std::chrono::milliseconds max_backoff{2000};
-  double jitter = 0.2;                 // each wait is drawn uniformly within ±jitter of d_k
+  double jitter = 0.2;                      // each wait is drawn uniformly within ±jitter of d_k
   std::chrono::milliseconds budget{30000};  // per outage; 0: no reconnect at all
   // One attempt (connect, attach, session created) is cancelled after this long.
   std::chrono::milliseconds attempt_timeout{5000};
@@ -85,9 +85,9 @@ absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Statu
 
 // What a session's reconnects cost so far (nupmpc::Session, AddressedSession).
 struct ReconnectStats {
-  int reconnects = 0;  // outages ridden through (session re-created, step answered)
-  int attempts = 0;    // attempts made, successful or not
-  int failed_outages = 0;  // outages that spent the budget (the step returned UNAVAILABLE)
+  int reconnects = 0;                    // outages ridden through (session re-created, step answered)
+  int attempts = 0;                      // attempts made, successful or not
+  int failed_outages = 0;                // outages that spent the budget (the step returned UNAVAILABLE)
   std::chrono::milliseconds total{0};    // from each break to its step's answer (or giving up)
   std::chrono::milliseconds longest{0};  // the longest such outage
 };
@@ -98,9 +98,10 @@ struct ReconnectStats {
 // result or with an error of the step's own), and returns that call's status. Books the
 // outage into `stats`. Returns OK when the step was answered (the caller holds the
 // answer), else the error that ended the outage.
-absl::Status RideOutOutage(const ReconnectOptions& options, const absl::Status& cause,
-                           const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
-                           ReconnectStats* stats);
+absl::Status RideOutOutage(
+    const ReconnectOptions& options, const absl::Status& cause,
+    const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
+    ReconnectStats* stats);
 
 }  // namespace nupmpc
 

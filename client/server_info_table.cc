@@ -26,7 +26,8 @@ std::string CpuBaseline(const v1::GetServerInfoResponse& info) {
 std::string Algorithms(const v1::GetServerInfoResponse& info) {
   std::vector<std::string> names;
   for (const int a : info.algorithms()) {
-    names.push_back(absl::AsciiStrToLower(absl::StripPrefix(v1::Algorithm_Name(static_cast<v1::Algorithm>(a)), "ALGORITHM_")));
+    names.push_back(
+        absl::AsciiStrToLower(absl::StripPrefix(v1::Algorithm_Name(static_cast<v1::Algorithm>(a)), "ALGORITHM_")));
   }
   return names.empty() ? "(none)" : absl::StrJoin(names, ", ");
 }
@@ -84,9 +85,9 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
       {"solver cores", absl::StrCat(l.solver_cores(), " (solves at once)")},
       {"queue capacity", absl::StrCat(l.queue_capacity())},
       {"max queue wait", l.max_queue_wait_ms() > 0 ? absl::StrFormat("%g ms", l.max_queue_wait_ms()) : "off"},
-      {"solved where received",
-       l.inline_solve_max_ms() > 0 ? absl::StrFormat("steps of sessions solving in ≤%g ms", l.inline_solve_max_ms())
-                                   : "never"},
+      {"solved where received", l.inline_solve_max_ms() > 0
+                                    ? absl::StrFormat("steps of sessions solving in ≤%g ms", l.inline_solve_max_ms())
+                                    : "never"},
       {"max sessions", absl::StrCat(l.max_sessions())},
       {"session idle timeout", Seconds(l.session_idle_timeout_s(), "never")},
       {"session compact idle", Seconds(l.session_compact_idle_s(), "never")},
@@ -109,7 +110,8 @@ std::string ServerInfoTable(const v1::GetServerInfoResponse& info) {
   std::size_t width = 0;
   for (const auto& [key, value] : rows) width = std::max(width, key.size());
   std::string out;
-  for (const auto& [key, value] : rows) absl::StrAppend(&out, key, std::string(width - key.size() + 2, ' '), value, "\n");
+  for (const auto& [key, value] : rows)
+    absl::StrAppend(&out, key, std::string(width - key.size() + 2, ' '), value, "\n");
   return out;
 }
 

@@ -4,7 +4,6 @@
 #include <random>
 
 #include "absl/strings/ascii.h"
-
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
@@ -23,7 +22,7 @@ void RouteToSession(grpc::ClientContext* context, const std::string& session_id)
   // replica gets it, and a long one would overflow gRPC's metadata limit before the
   // server could say why.
   const bool well_formed = session_id.size() == 32 && std::all_of(session_id.begin(), session_id.end(),
-                                                                    [](char c) { return absl::ascii_isxdigit(c); });
+                                                                  [](char c) { return absl::ascii_isxdigit(c); });
   if (well_formed) context->AddMetadata(kSessionHeader, session_id);
 }
 

@@ -5,11 +5,11 @@
 
 #include "absl/status/status.h"
 
-#define NUPMPC_CLIENT_RETURN_IF_ERROR(expr)                                                  \
-  do {                                                                                       \
-    if (::absl::Status nupmpc_client_status_ = (expr); !nupmpc_client_status_.ok()) {        \
-      return nupmpc_client_status_;                                                          \
-    }                                                                                        \
+#define NUPMPC_CLIENT_RETURN_IF_ERROR(expr)                                           \
+  do {                                                                                \
+    if (::absl::Status nupmpc_client_status_ = (expr); !nupmpc_client_status_.ok()) { \
+      return nupmpc_client_status_;                                                   \
+    }                                                                                 \
   } while (false)
 
 #endif  // NUPMPC_CLIENT_STATUS_MACROS_H_

@@ -8,10 +8,14 @@ namespace nupmpc::core {
 
 const char* AlgorithmName(Algorithm algorithm) {
   switch (algorithm) {
-    case Algorithm::kAuto: return "auto";
-    case Algorithm::kIake: return "iake";
-    case Algorithm::kIbffd: return "ibffd";
-    case Algorithm::kIffbdd: return "iffbdd";
+    case Algorithm::kAuto:
+      return "auto";
+    case Algorithm::kIake:
+      return "iake";
+    case Algorithm::kIbffd:
+      return "ibffd";
+    case Algorithm::kIffbdd:
+      return "iffbdd";
   }
   return "unknown";
 }
@@ -46,11 +50,11 @@ absl::Status Fraction(const char* field, double value) {
 }  // namespace
 
 absl::Status Validate(const SolverOptions& o) {
-  for (const auto& [field, value] : {std::pair{"objective_tolerance", o.objective_tolerance},
-                                     std::pair{"violation_tolerance", o.violation_tolerance},
-                                     std::pair{"iake_hard_slope", o.iake_hard_slope},
-                                     std::pair{"ibffd_initial_halfspace_slope", o.ibffd_initial_halfspace_slope},
-                                     std::pair{"ibffd_initial_box_slope", o.ibffd_initial_box_slope}}) {
+  for (const auto& [field, value] :
+       {std::pair{"objective_tolerance", o.objective_tolerance},
+        std::pair{"violation_tolerance", o.violation_tolerance}, std::pair{"iake_hard_slope", o.iake_hard_slope},
+        std::pair{"ibffd_initial_halfspace_slope", o.ibffd_initial_halfspace_slope},
+        std::pair{"ibffd_initial_box_slope", o.ibffd_initial_box_slope}}) {
     if (absl::Status s = Positive(field, value); !s.ok()) return s;
   }
   if (!(o.iake_variance_floor >= 0.0) || !std::isfinite(o.iake_variance_floor)) {
@@ -63,7 +67,8 @@ absl::Status Validate(const SolverOptions& o) {
         absl::StrCat("SolverOptions.elastic_slope = ", o.elastic_slope, "; must be finite and >= 0 (0: off)"));
   }
   if (absl::Status s = AtLeast("elastic_after_iterations", o.elastic_after_iterations, 1); !s.ok()) return s;
-  if (absl::Status s = AtLeast("polish_after_stable_iterations", o.polish_after_stable_iterations, 0); !s.ok()) return s;
+  if (absl::Status s = AtLeast("polish_after_stable_iterations", o.polish_after_stable_iterations, 0); !s.ok())
+    return s;
   if (absl::Status s = AtLeast("polish_rounds", o.polish_rounds, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("discrete_fixing_passes", o.discrete_fixing_passes, 0); !s.ok()) return s;
   if (absl::Status s = AtLeast("discrete_fixing_blocks", o.discrete_fixing_blocks, 1); !s.ok()) return s;
@@ -77,7 +82,8 @@ absl::Status Validate(const SolverOptions& o) {
 
 absl::Status Validate(const SolveLimits& l) {
   if (l.max_iterations < 0) {
-    return absl::InvalidArgumentError(absl::StrCat("SolveLimits.max_iterations = ", l.max_iterations, "; must be >= 0"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("SolveLimits.max_iterations = ", l.max_iterations, "; must be >= 0"));
   }
   if (!(l.time_limit_seconds >= 0.0) || std::isnan(l.time_limit_seconds)) {
     return absl::InvalidArgumentError(

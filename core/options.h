@@ -119,21 +119,21 @@ absl::Status Validate(const SolverOptions& options);
 struct PassTrace {
   enum class Kind { kIterate, kPolish };
   Kind kind = Kind::kIterate;
-  int pass = 0;                 ///< passes of this solve so far, this one included
-  int changed = -1;             ///< kIterate: scalars whose region changed (-1: not tracked)
-  double objective = NAN;       ///< kIterate: the iterate's objective
-  double max_violation = NAN;   ///< kIterate: and its largest constraint violation
-  double residual = NAN;        ///< kPolish: the deciding residual (0: the candidate is optimal)
+  int pass = 0;                ///< passes of this solve so far, this one included
+  int changed = -1;            ///< kIterate: scalars whose region changed (-1: not tracked)
+  double objective = NAN;      ///< kIterate: the iterate's objective
+  double max_violation = NAN;  ///< kIterate: and its largest constraint violation
+  double residual = NAN;       ///< kPolish: the deciding residual (0: the candidate is optimal)
 };
 
 // Per-solve limits and control.
 struct SolveLimits {
-  int max_iterations = 0;                ///< 0: use SolverOptions.max_iterations
+  int max_iterations = 0;  ///< 0: use SolverOptions.max_iterations
   // Both are polled between passes and inside them, every few time steps (a Session
   // returns within about one time step of a pass: core/algorithms/interrupt.h).
-  double time_limit_seconds = 0.0;       ///< 0: none; wall time for the whole solve (Solve() to return)
+  double time_limit_seconds = 0.0;            ///< 0: none; wall time for the whole solve (Solve() to return)
   const std::atomic<bool>* cancel = nullptr;  ///< may be null; a cancelled solve returns no plan
-  bool warm_start = true;                ///< start from the session's carried state if any
+  bool warm_start = true;                     ///< start from the session's carried state if any
   // Called after every pass whose result was evaluated (null: none): how the active set
   // and the objective converge, for studies of the pass counts (nupmpc-bench --trace).
   // Not for the service.

@@ -14,33 +14,31 @@ std::string Indexed(const char* field, int index) {
   return index < 0 ? std::string(field) : absl::StrCat(field, "[", index, "]");
 }
 
-absl::Status CheckMatrices(const std::vector<Eigen::MatrixXd>& matrices, const char* field,
-                           std::size_t per_step_count, int rows, int cols) {
+absl::Status CheckMatrices(const std::vector<Eigen::MatrixXd>& matrices, const char* field, std::size_t per_step_count,
+                           int rows, int cols) {
   if (matrices.size() != 1 && matrices.size() != per_step_count) {
     return absl::InvalidArgumentError(absl::StrCat("Problem.", field, ": expected 1 (time-invariant) or ",
-                                                   per_step_count, " (per step) matrices, got ",
-                                                   matrices.size()));
+                                                   per_step_count, " (per step) matrices, got ", matrices.size()));
   }
   for (std::size_t i = 0; i < matrices.size(); ++i) {
     const Eigen::MatrixXd& m = matrices[i];
     if (m.rows() != rows || m.cols() != cols) {
-      return absl::InvalidArgumentError(absl::StrCat("Problem.", field, "[", i, "]: expected ", rows, "x",
-                                                     cols, ", got ", m.rows(), "x", m.cols()));
+      return absl::InvalidArgumentError(
+          absl::StrCat("Problem.", field, "[", i, "]: expected ", rows, "x", cols, ", got ", m.rows(), "x", m.cols()));
     }
     if (!m.allFinite()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("Problem.", field, "[", i, "]: contains a non-finite number"));
+      return absl::InvalidArgumentError(absl::StrCat("Problem.", field, "[", i, "]: contains a non-finite number"));
     }
   }
   return absl::OkStatus();
 }
 
-absl::Status CheckOffsets(const std::vector<Eigen::VectorXd>& offsets, const char* field,
-                          std::size_t per_step_count, int size) {
+absl::Status CheckOffsets(const std::vector<Eigen::VectorXd>& offsets, const char* field, std::size_t per_step_count,
+                          int size) {
   if (offsets.empty()) return absl::OkStatus();
   if (offsets.size() != 1 && offsets.size() != per_step_count) {
-    return absl::InvalidArgumentError(absl::StrCat("Problem.", field, ": expected 0, 1 or ", per_step_count,
-                                                   " vectors, got ", offsets.size()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("Problem.", field, ": expected 0, 1 or ", per_step_count, " vectors, got ", offsets.size()));
   }
   for (std::size_t i = 0; i < offsets.size(); ++i) {
     if (offsets[i].size() != size) {
@@ -48,8 +46,7 @@ absl::Status CheckOffsets(const std::vector<Eigen::VectorXd>& offsets, const cha
           absl::StrCat("Problem.", field, "[", i, "]: expected size ", size, ", got ", offsets[i].size()));
     }
     if (!offsets[i].allFinite()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("Problem.", field, "[", i, "]: contains a non-finite number"));
+      return absl::InvalidArgumentError(absl::StrCat("Problem.", field, "[", i, "]: contains a non-finite number"));
     }
   }
   return absl::OkStatus();
@@ -64,31 +61,40 @@ bool IsSymmetric(const Eigen::MatrixXd& m) {
 
 const char* PriorKindName(PriorKind kind) {
   switch (kind) {
-    case PriorKind::kNone: return "none";
-    case PriorKind::kL1: return "l1";
-    case PriorKind::kHuber: return "huber";
-    case PriorKind::kAtLeast: return "at_least";
-    case PriorKind::kAtMost: return "at_most";
-    case PriorKind::kBox: return "box";
-    case PriorKind::kPlainNuv: return "plain_nuv";
-    case PriorKind::kSmoothedNuv: return "smoothed_nuv";
-    case PriorKind::kLp: return "lp";
-    case PriorKind::kBinary: return "binary";
+    case PriorKind::kNone:
+      return "none";
+    case PriorKind::kL1:
+      return "l1";
+    case PriorKind::kHuber:
+      return "huber";
+    case PriorKind::kAtLeast:
+      return "at_least";
+    case PriorKind::kAtMost:
+      return "at_most";
+    case PriorKind::kBox:
+      return "box";
+    case PriorKind::kPlainNuv:
+      return "plain_nuv";
+    case PriorKind::kSmoothedNuv:
+      return "smoothed_nuv";
+    case PriorKind::kLp:
+      return "lp";
+    case PriorKind::kBinary:
+      return "binary";
   }
   return "unknown";
 }
 
 absl::Status ValidatePrior(const ScalarPrior& p, const char* field, int index) {
   const auto bad = [&](const char* member, double value, const char* rule) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(Indexed(field, index), ".", member, " = ", value, "; ", rule));
+    return absl::InvalidArgumentError(absl::StrCat(Indexed(field, index), ".", member, " = ", value, "; ", rule));
   };
   if (!std::isfinite(p.mean)) return bad("mean", p.mean, "must be finite");
   // NaN is rejected in every field, also in those the kind does not use.
-  for (const auto& [member, value] : {std::pair{"lower", p.lower}, std::pair{"upper", p.upper},
-                                      std::pair{"slope", p.slope}, std::pair{"radius", p.radius},
-                                      std::pair{"exponent", p.exponent},
-                                      std::pair{"initial_variance", p.initial_variance}}) {
+  for (const auto& [member, value] :
+       {std::pair{"lower", p.lower}, std::pair{"upper", p.upper}, std::pair{"slope", p.slope},
+        std::pair{"radius", p.radius}, std::pair{"exponent", p.exponent},
+        std::pair{"initial_variance", p.initial_variance}}) {
     if (std::isnan(value)) return bad(member, value, "must not be NaN");
   }
   if (!(p.variance > 0.0)) return bad("variance", p.variance, "must be > 0 (use +inf for no Gaussian part)");
@@ -99,8 +105,8 @@ absl::Status ValidatePrior(const ScalarPrior& p, const char* field, int index) {
   if (uses_lower && !std::isfinite(p.lower)) return bad("lower", p.lower, "must be finite");
   if (uses_upper && !std::isfinite(p.upper)) return bad("upper", p.upper, "must be finite");
   if (two_sided && !(p.lower < p.upper)) {
-    return absl::InvalidArgumentError(absl::StrCat(Indexed(field, index), ": lower = ", p.lower,
-                                                   " must be < upper = ", p.upper));
+    return absl::InvalidArgumentError(
+        absl::StrCat(Indexed(field, index), ": lower = ", p.lower, " must be < upper = ", p.upper));
   }
   const bool uses_slope = p.kind != PriorKind::kNone && p.kind != PriorKind::kPlainNuv &&
                           p.kind != PriorKind::kSmoothedNuv && p.kind != PriorKind::kBinary;
@@ -143,12 +149,12 @@ absl::Status ValidatePriors(const Problem& p) {
   const int L = p.num_inputs, K = p.num_outputs;
   const std::size_t N = static_cast<std::size_t>(p.horizon);
   if (p.input_priors.size() != N * L) {
-    return absl::InvalidArgumentError(absl::StrCat("Problem.input_priors: expected N*L = ", N * L,
-                                                   " entries, got ", p.input_priors.size()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("Problem.input_priors: expected N*L = ", N * L, " entries, got ", p.input_priors.size()));
   }
   if (p.output_priors.size() != (N + 1) * K) {
-    return absl::InvalidArgumentError(absl::StrCat("Problem.output_priors: expected (N+1)*K = ",
-                                                   (N + 1) * K, " entries, got ", p.output_priors.size()));
+    return absl::InvalidArgumentError(absl::StrCat("Problem.output_priors: expected (N+1)*K = ", (N + 1) * K,
+                                                   " entries, got ", p.output_priors.size()));
   }
   for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
     NUPMPC_RETURN_IF_ERROR(ValidatePrior(p.input_priors[i], "Problem.input_priors", static_cast<int>(i)));
@@ -210,8 +216,8 @@ absl::Status Validate(const Problem& p) {
   if (p.initial_covariance.size() != 0) {
     const Eigen::MatrixXd& V0 = p.initial_covariance;
     if (V0.rows() != M || V0.cols() != M) {
-      return absl::InvalidArgumentError(absl::StrCat("Problem.initial_covariance: expected ", M, "x", M,
-                                                     ", got ", V0.rows(), "x", V0.cols()));
+      return absl::InvalidArgumentError(
+          absl::StrCat("Problem.initial_covariance: expected ", M, "x", M, ", got ", V0.rows(), "x", V0.cols()));
     }
     if (!V0.allFinite()) {
       return absl::InvalidArgumentError("Problem.initial_covariance: contains a non-finite number");
@@ -237,8 +243,8 @@ absl::Status Validate(const Problem& p) {
           absl::StrCat("Problem.terminal.target: expected size ", M, ", got ", t.target.size()));
     }
     if (t.weight.rows() != M || t.weight.cols() != M) {
-      return absl::InvalidArgumentError(absl::StrCat("Problem.terminal.weight: expected ", M, "x", M,
-                                                     ", got ", t.weight.rows(), "x", t.weight.cols()));
+      return absl::InvalidArgumentError(absl::StrCat("Problem.terminal.weight: expected ", M, "x", M, ", got ",
+                                                     t.weight.rows(), "x", t.weight.cols()));
     }
     if (!t.target.allFinite() || !t.weight.allFinite()) {
       return absl::InvalidArgumentError("Problem.terminal: contains a non-finite number");

@@ -47,9 +47,7 @@ struct Problem {
   };
   std::optional<Terminal> terminal;
 
-  bool initial_state_fixed() const {
-    return initial_covariance.size() == 0 || initial_covariance.isZero(0.0);
-  }
+  bool initial_state_fixed() const { return initial_covariance.size() == 0 || initial_covariance.isZero(0.0); }
   const Eigen::MatrixXd& A_at(int n) const { return A.size() == 1 ? A[0] : A[n]; }
   const Eigen::MatrixXd& B_at(int n) const { return B.size() == 1 ? B[0] : B[n]; }
   const Eigen::MatrixXd& C_at(int n) const { return C.size() == 1 ? C[0] : C[n]; }

@@ -12,22 +12,28 @@ std::optional<SolveStatus> LimitReached(const SolveLimits& limits, double elapse
 
 const char* SolveStatusName(SolveStatus status) {
   switch (status) {
-    case SolveStatus::kConverged: return "converged";
-    case SolveStatus::kIterationLimit: return "iteration_limit";
-    case SolveStatus::kTimeLimit: return "time_limit";
-    case SolveStatus::kNumericalError: return "numerical_error";
-    case SolveStatus::kCancelled: return "cancelled";
-    case SolveStatus::kInfeasible: return "infeasible";
+    case SolveStatus::kConverged:
+      return "converged";
+    case SolveStatus::kIterationLimit:
+      return "iteration_limit";
+    case SolveStatus::kTimeLimit:
+      return "time_limit";
+    case SolveStatus::kNumericalError:
+      return "numerical_error";
+    case SolveStatus::kCancelled:
+      return "cancelled";
+    case SolveStatus::kInfeasible:
+      return "infeasible";
   }
   return "unknown";
 }
 
 std::string SolveSummary::Describe() const {
   return absl::StrCat(AlgorithmName(algorithm), ": ", SolveStatusName(status), " after ", iterations, " iterations",
-                      polished ? " (polished)" : "", elastic ? " (elastic)" : "", warm_started ? ", warm" : "", ", J = ", objective,
-                      ", max violation = ", max_violation,
-                      linearisations > 0 ? absl::StrCat(", ", linearisations, " linearisations, nonlinear violation = ",
-                                                        nonlinear_violation)
+                      polished ? " (polished)" : "", elastic ? " (elastic)" : "", warm_started ? ", warm" : "",
+                      ", J = ", objective, ", max violation = ", max_violation,
+                      linearisations > 0 ? absl::StrCat(", ", linearisations,
+                                                        " linearisations, nonlinear violation = ", nonlinear_violation)
                                          : "");
 }
 

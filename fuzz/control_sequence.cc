@@ -26,8 +26,8 @@ ControlSequence DecodeControlSequence(const std::uint8_t* data, std::size_t size
 }
 
 std::string EncodeControlSequence(const ControlSequence& sequence) {
-  std::string bytes(1, static_cast<char>((sequence.cancel_at_end ? kCancelAtEnd : 0) |
-                                         (sequence.lock_step ? kLockStep : 0)));
+  std::string bytes(
+      1, static_cast<char>((sequence.cancel_at_end ? kCancelAtEnd : 0) | (sequence.lock_step ? kLockStep : 0)));
   for (const v1::ControlRequest& request : sequence.requests) {
     const std::string frame = request.SerializeAsString();
     if (frame.size() > 0xFFFF) continue;  // not representable; the seeds stay far below

@@ -39,8 +39,8 @@ GrpcServer& Server() {
 }
 
 nupmpc::v1::MpcService::Stub& Stub() {
-  static std::unique_ptr<nupmpc::v1::MpcService::Stub> stub = nupmpc::v1::MpcService::NewStub(grpc::CreateChannel(
-      "127.0.0.1:" + std::to_string(Server().port()), grpc::InsecureChannelCredentials()));
+  static std::unique_ptr<nupmpc::v1::MpcService::Stub> stub = nupmpc::v1::MpcService::NewStub(
+      grpc::CreateChannel("127.0.0.1:" + std::to_string(Server().port()), grpc::InsecureChannelCredentials()));
   return *stub;
 }
 

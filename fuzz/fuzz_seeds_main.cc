@@ -71,7 +71,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   const std::filesystem::path dir = argv[1];
-  for (const char* sub : {"spec_solve", "step", "control_stream", "problem_file"}) std::filesystem::create_directories(dir / sub);
+  for (const char* sub : {"spec_solve", "step", "control_stream", "problem_file"})
+    std::filesystem::create_directories(dir / sub);
   const nupmpc::v1::ProblemSpec seed = nupmpc::fuzz::SeedSpec();
   Write(dir / "spec_solve" / "seed", seed.SerializeAsString());
   std::string json;

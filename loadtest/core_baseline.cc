@@ -88,7 +88,8 @@ absl::StatusOr<FleetCoreBaseline> MeasureFleetCore(const v1::ProblemSpec& spec,
       start = std::chrono::steady_clock::now();
     }
     for (int s = 0; s < sessions; ++s) {
-      const std::vector<double>& x = states[(static_cast<std::size_t>(period) + 7 * static_cast<std::size_t>(s)) % states.size()];
+      const std::vector<double>& x =
+          states[(static_cast<std::size_t>(period) + 7 * static_cast<std::size_t>(s)) % states.size()];
       message.mutable_state()->Assign(x.begin(), x.end());
       message.set_warm_start(period == cold ? v1::WARM_START_COLD : v1::WARM_START_UNSPECIFIED);
       absl::StatusOr<core::SolveSummary> summary =

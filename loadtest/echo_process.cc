@@ -13,12 +13,14 @@
 namespace nupmpc::loadtest {
 namespace {
 
-absl::Status Errno(const std::string& what) { return absl::InternalError(absl::StrCat(what, ": ", std::strerror(errno))); }
+absl::Status Errno(const std::string& what) {
+  return absl::InternalError(absl::StrCat(what, ": ", std::strerror(errno)));
+}
 
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<EchoProcess>> EchoProcess::Spawn(const std::vector<std::string>& argv,
-                                                                 const cpu_set_t* cpus) {
+                                                                const cpu_set_t* cpus) {
   int to_child[2], from_child[2];
   if (pipe(to_child) != 0) return Errno("pipe");
   if (pipe(from_child) != 0) {

@@ -10,8 +10,8 @@
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/step_as_server.h"
 #include "server/convert/result_conversion.h"
-#include "server/sessions/session_factory.h"
 #include "server/scheduling/thread_cpu_time.h"
+#include "server/sessions/session_factory.h"
 
 namespace nupmpc::loadtest {
 namespace {
@@ -114,7 +114,7 @@ class EchoStream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::Contro
 
   const v1::SolveResult* const answer_;
   const std::vector<std::chrono::nanoseconds>* const busy_;
-  std::size_t steps_ = 0;  ///< steps read (reads are one at a time)
+  std::size_t steps_ = 0;                        ///< steps read (reads are one at a time)
   std::optional<server::BuiltSession> session_;  ///< the bare peer's
   core::Solution solution_;
   v1::ControlRequest incoming_;
@@ -159,7 +159,8 @@ absl::StatusOr<std::unique_ptr<EchoControlServer>> EchoControlServer::Listen(std
   builder.RegisterService(s->service_.get());
   builder.SetMaxReceiveMessageSize(-1);
   s->server_ = builder.BuildAndStart();
-  if (s->server_ == nullptr || s->port_ == 0) return absl::UnavailableError("echo server: could not listen on 127.0.0.1");
+  if (s->server_ == nullptr || s->port_ == 0)
+    return absl::UnavailableError("echo server: could not listen on 127.0.0.1");
   return s;
 }
 

@@ -32,7 +32,7 @@ class EchoControlServer {
   // nupmpc-loadtest passes the core's own time for each closed-loop state, in the order
   // its streams send them.
   static absl::StatusOr<std::unique_ptr<EchoControlServer>> Start(v1::SolveResult answer,
-                                                                   std::vector<std::chrono::nanoseconds> busy = {});
+                                                                  std::vector<std::chrono::nanoseconds> busy = {});
   // The bare peer: a server reduced to the real work, in the reaction. Each stream's first
   // message builds its session from the spec it carries; each step is solved right there as
   // nupmpc-server's SolveStep does (converted, applied, warm start shifted, solved, the

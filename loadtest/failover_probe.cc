@@ -163,7 +163,8 @@ absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work
   std::vector<std::unique_ptr<AddressedSession>> opened;
   for (int i = 0; i < sessions; ++i) {
     absl::StatusOr<std::unique_ptr<AddressedSession>> s = AddressedSession::Create(&client, work.spec);
-    if (!s.ok()) return absl::Status(s.status().code(), absl::StrCat("creating session ", i + 1, ": ", s.status().message()));
+    if (!s.ok())
+      return absl::Status(s.status().code(), absl::StrCat("creating session ", i + 1, ": ", s.status().message()));
     opened.push_back(*std::move(s));
   }
   // Round by round, so consecutive calls of one session are far apart and interleaved
@@ -209,8 +210,8 @@ std::string ToJson(const StreamsProbeReport& r) {
 }
 
 std::string ToJson(const AddressedProbeReport& r) {
-  nlohmann::json j = {{"probe", "addressed"}, {"sessions", r.sessions}, {"solves", r.solves},
-                      {"failed", r.failed},   {"errors", r.errors},     {"recreated", r.recreated},
+  nlohmann::json j = {{"probe", "addressed"},      {"sessions", r.sessions}, {"solves", r.solves},
+                      {"failed", r.failed},        {"errors", r.errors},     {"recreated", r.recreated},
                       {"miscounted", r.miscounted}};
   return j.dump();
 }

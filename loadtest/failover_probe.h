@@ -34,16 +34,16 @@ struct StreamsProbeConfig {
 
 struct StreamsProbeReport {
   int streams = 0;
-  std::uint64_t steps = 0;         ///< answered with a result
-  std::uint64_t failed_steps = 0;  ///< returned as errors
-  std::uint64_t no_plan = 0;       ///< results without a plan
+  std::uint64_t steps = 0;                      ///< answered with a result
+  std::uint64_t failed_steps = 0;               ///< returned as errors
+  std::uint64_t no_plan = 0;                    ///< results without a plan
   std::map<std::string, std::uint64_t> errors;  ///< by code name
-  int affected_streams = 0;        ///< streams that re-created their session or had a failed step
+  int affected_streams = 0;                     ///< streams that re-created their session or had a failed step
   std::uint64_t max_failed_per_affected = 0;
-  int reconnects = 0;              ///< sessions re-created, over all streams
+  int reconnects = 0;  ///< sessions re-created, over all streams
   double longest_outage_s = 0.0;
-  std::uint64_t verified = 0;      ///< plans compared with the core
-  std::uint64_t mismatched = 0;    ///< of those, differing by more than 1e-9 (relative)
+  std::uint64_t verified = 0;    ///< plans compared with the core
+  std::uint64_t mismatched = 0;  ///< of those, differing by more than 1e-9 (relative)
   double max_plan_difference = 0.0;
   double solves_per_s = 0.0;
   double p50_ms = 0.0, p99_ms = 0.0;  ///< round trip of answered steps
@@ -53,11 +53,11 @@ absl::StatusOr<StreamsProbeReport> RunStreamsProbe(const ProbeWorkload& work, co
 
 struct AddressedProbeReport {
   int sessions = 0;
-  std::uint64_t solves = 0;         ///< answered
-  std::uint64_t failed = 0;         ///< returned as errors
+  std::uint64_t solves = 0;  ///< answered
+  std::uint64_t failed = 0;  ///< returned as errors
   std::map<std::string, std::uint64_t> errors;
-  int recreated = 0;                ///< sessions re-created (a call missed its session)
-  int miscounted = 0;               ///< sessions whose server-side solve count is not R
+  int recreated = 0;   ///< sessions re-created (a call missed its session)
+  int miscounted = 0;  ///< sessions whose server-side solve count is not R
 };
 
 absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work, int sessions, int solves_each);

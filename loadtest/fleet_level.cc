@@ -84,7 +84,8 @@ absl::StatusOr<FleetReport> StepSlice(FleetSlice& slice, const StreamPlan& plan,
 // Quantiles, the rate and the mean iterations of a report whose counts are summed.
 void Summarise(FleetReport& report) {
   if (report.measured_s > 0.0) report.steps_per_s = static_cast<double>(report.answered) / report.measured_s;
-  if (report.solved > 0) report.mean_iterations = static_cast<double>(report.iterations) / static_cast<double>(report.solved);
+  if (report.solved > 0)
+    report.mean_iterations = static_cast<double>(report.iterations) / static_cast<double>(report.solved);
   report.call_p50_ms = Quantile(report.call_ms, 0.5);
   report.call_p99_ms = Quantile(report.call_ms, 0.99);
 }
@@ -105,8 +106,8 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
                                           const StreamPlan& plan, int sessions, int calls_in_flight, double duration_s,
                                           double warmup_s) {
   if (calls_in_flight < 1 || calls_in_flight > sessions) {
-    return absl::InvalidArgumentError(absl::StrCat("calls in flight: ", calls_in_flight, ", not within 1 to the ",
-                                                   sessions, " sessions"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("calls in flight: ", calls_in_flight, ", not within 1 to the ", sessions, " sessions"));
   }
   std::vector<FleetSlice> slices;
   absl::Status failed;
@@ -121,10 +122,10 @@ absl::StatusOr<FleetReport> RunFleetLevel(const std::string& target, const Chann
   }
   std::vector<absl::StatusOr<FleetReport>> stepped(slices.size(), absl::UnknownError("not run"));
   if (failed.ok()) {
-    const Clock::time_point measure_from = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                                              std::chrono::duration<double>(warmup_s));
-    const Clock::time_point end = measure_from + std::chrono::duration_cast<Clock::duration>(
-                                                     std::chrono::duration<double>(duration_s));
+    const Clock::time_point measure_from =
+        Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(warmup_s));
+    const Clock::time_point end =
+        measure_from + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(duration_s));
     std::vector<std::thread> callers;
     for (std::size_t k = 0; k < slices.size(); ++k) {
       callers.emplace_back([&, k] { stepped[k] = StepSlice(slices[k], plan, measure_from, end); });

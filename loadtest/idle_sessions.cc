@@ -52,8 +52,8 @@ absl::StatusOr<IdleSessionsReport> RunIdleSessions(const std::string& target, co
     ids.push_back(created->session_id());
     if (absl::StatusOr<v1::SolveResult> solved = client.Solve(ids.back(), step); !solved.ok()) {
       for (const std::string& id : ids) (void)client.CloseSession(id);
-      return absl::Status(solved.status().code(), absl::StrCat("solving on session ", i + 1, ": ",
-                                                               solved.status().message()));
+      return absl::Status(solved.status().code(),
+                          absl::StrCat("solving on session ", i + 1, ": ", solved.status().message()));
     }
   }
   report.create_s = std::chrono::duration<double>(Clock::now() - create_start).count();
@@ -73,8 +73,8 @@ absl::StatusOr<IdleSessionsReport> RunIdleSessions(const std::string& target, co
       if (info = client.GetServerInfo(); !info.ok()) return info.status();
       if (info->active_sessions() <= sessions_before) break;
       if (Clock::now() > give_up) {
-        return absl::DeadlineExceededError(absl::StrCat("sessions did not expire within the server's idle timeout (",
-                                                        idle_timeout_s, " s) + 30 s"));
+        return absl::DeadlineExceededError(
+            absl::StrCat("sessions did not expire within the server's idle timeout (", idle_timeout_s, " s) + 30 s"));
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(200));
     }

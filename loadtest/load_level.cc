@@ -17,7 +17,7 @@ namespace {
 // Every simulated controller gets its own TCP connection, as separate plant computers
 // would (gRPC would otherwise share one connection between channels to the same target).
 absl::StatusOr<std::shared_ptr<grpc::Channel>> OwnConnection(const std::string& target,
-                                                            const ChannelSecurity& security) {
+                                                             const ChannelSecurity& security) {
   grpc::ChannelArguments args;
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   args.SetMaxReceiveMessageSize(-1);
@@ -63,10 +63,10 @@ absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan
   }
 
   const Clock::time_point start = Clock::now();
-  const Clock::time_point measure_from = start + std::chrono::duration_cast<Clock::duration>(
-                                                     std::chrono::duration<double>(config.warmup_s));
-  const Clock::time_point end = measure_from + std::chrono::duration_cast<Clock::duration>(
-                                                   std::chrono::duration<double>(config.duration_s));
+  const Clock::time_point measure_from =
+      start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config.warmup_s));
+  const Clock::time_point end =
+      measure_from + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config.duration_s));
   for (auto& s : streams) s->BeginMeasuring(measure_from, end);
 
   std::mt19937_64 rng(config.seed);
@@ -113,8 +113,8 @@ absl::StatusOr<LevelReport> RunLevel(const std::string& target, const StreamPlan
     answered.push_back(static_cast<double>(tally.latency_ms.size()));
     report.tally.MergeFrom(tally);
   }
-  const double mean_answered =
-      std::accumulate(answered.begin(), answered.end(), 0.0) / static_cast<double>(std::max<std::size_t>(1, answered.size()));
+  const double mean_answered = std::accumulate(answered.begin(), answered.end(), 0.0) /
+                               static_cast<double>(std::max<std::size_t>(1, answered.size()));
   if (mean_answered > 0.0) {
     report.stream_min_share = *std::min_element(answered.begin(), answered.end()) / mean_answered;
     report.stream_max_share = *std::max_element(answered.begin(), answered.end()) / mean_answered;

@@ -24,7 +24,7 @@ struct LevelConfig {
   std::uint64_t requests = 0;  ///< > 0: stop once this many solves were answered
   bool progress = false;       ///< a status line on stderr every second
   std::uint64_t seed = 1;
-  ChannelSecurity security;    ///< TLS / token of the server under test
+  ChannelSecurity security;  ///< TLS / token of the server under test
 };
 
 // The core alone on a level's steps, with as many sessions stepped in turn as the level
@@ -33,7 +33,7 @@ struct LevelCore {
   double median_ms = 0.0;
   double mean_ms = 0.0;
   double busy_mean_ms = 0.0;  ///< what the inline peer spins per step on average (per-state medians)
-  int sessions = 0;  ///< 0: not measured
+  int sessions = 0;           ///< 0: not measured
 };
 
 struct LevelReport {
@@ -43,7 +43,7 @@ struct LevelReport {
   double solves_per_s = 0.0;
   double p50_ms = 0.0, p90_ms = 0.0, p99_ms = 0.0, p999_ms = 0.0, max_ms = 0.0;
   double service_p50_ms = 0.0, service_p99_ms = 0.0;  ///< from the hand-over to gRPC
-  double solve_p50_ms = 0.0;  ///< the server's own solver time, median
+  double solve_p50_ms = 0.0;                          ///< the server's own solver time, median
   double mean_iterations = 0.0;
   // Answered solves of the least and the most served stream over the mean of all streams
   // (1 and 1 when every stream got the same): how evenly the server shared its cores.

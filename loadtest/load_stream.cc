@@ -54,7 +54,8 @@ grpc::Status LoadStream::Open() {
   StartCall();
   std::unique_lock<std::mutex> lock(mu_);
   changed_.wait(lock, [&] { return session_ready_ || done_; });
-  if (!session_ready_) return final_status_.ok() ? grpc::Status(grpc::StatusCode::UNKNOWN, "stream ended") : final_status_;
+  if (!session_ready_)
+    return final_status_.ok() ? grpc::Status(grpc::StatusCode::UNKNOWN, "stream ended") : final_status_;
   return grpc::Status::OK;
 }
 

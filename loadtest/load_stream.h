@@ -36,8 +36,8 @@ struct StreamTally {
   // an open-loop generator falls behind its schedule (then the generator, not the server,
   // is the bottleneck).
   std::vector<double> service_ms;
-  std::vector<double> solve_ms;    ///< the server's solver time of the same solves
-  std::uint64_t iterations = 0;    ///< summed over answered solves
+  std::vector<double> solve_ms;  ///< the server's solver time of the same solves
+  std::uint64_t iterations = 0;  ///< summed over answered solves
   std::uint64_t sent = 0;
   std::uint64_t superseded = 0;
   // Answers without SolveResult.has_plan (superseded ones aside): a controller holds its

@@ -29,8 +29,8 @@
 #include "absl/synchronization/mutex.h"
 #include "cli/program_flags.h"
 #include "client/client.h"
-#include "client/security_flags.h"
 #include "client/problem_file.h"
+#include "client/security_flags.h"
 #include "loadtest/core_baseline.h"
 #include "loadtest/echo_process.h"
 #include "loadtest/echo_server.h"
@@ -44,7 +44,8 @@ ABSL_FLAG(std::string, server, "127.0.0.1:50051", "server address host:port (env
 ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json",
           "benchmark instance or ProblemSpec JSON every stream solves");
 ABSL_FLAG(int, concurrency, 1, "concurrent streams (sessions)");
-ABSL_FLAG(std::string, sweep, "", "comma-separated concurrency levels, run one after another (overrides --concurrency)");
+ABSL_FLAG(std::string, sweep, "",
+          "comma-separated concurrency levels, run one after another (overrides --concurrency)");
 ABSL_FLAG(std::string, mode, "closed", "closed: next state when the answer arrives; open: Poisson arrivals");
 ABSL_FLAG(double, rate, 0.0, "open loop: total arrivals per second");
 ABSL_FLAG(double, rate_x, 0.0,
@@ -91,7 +92,8 @@ ABSL_FLAG(int, fleet_calls_in_flight, 1,
           "connection (1: one call per period, as one supervisory controller; 2: the server has the next call while "
           "a caller handles its answer, which measures the server's throughput)");
 ABSL_FLAG(bool, json, false, "print one JSON document instead of the table");
-ABSL_FLAG(std::string, progress, "auto", "status line every second on stderr: on, off, auto (when stderr is a terminal)");
+ABSL_FLAG(std::string, progress, "auto",
+          "status line every second on stderr: on, off, auto (when stderr is a terminal)");
 ABSL_FLAG(int, idle_sessions, 0, "memory mode: create this many idle sessions, release them, report server RSS");
 ABSL_FLAG(std::string, idle_release, "close", "memory mode: close (CloseSession) or expire (wait for idle expiry)");
 ABSL_FLAG(uint64_t, seed, 1, "open-loop arrival seed");
@@ -102,14 +104,16 @@ namespace lt = nupmpc::loadtest;
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-loadtest",
-    .summary = "nupmpc-loadtest: drives a running nupmpc-server with concurrent Control streams and reports "
-               "throughput and latency next to the core's own solve time for the same steps (and, with --echo, "
-               "the transport floor of a zero-work server at the same load). Every stream creates its own "
-               "session from --instance and cycles through the instance's recorded closed-loop states (or its "
-               "initial state). --idle_sessions N instead measures the server's memory per idle session. Exit "
-               "status 3: a closed-loop level starved a stream (one served under half or over twice the mean).",
-    .usage = "nupmpc-loadtest [--server HOST:PORT] [--instance FILE] [--concurrency C | --sweep 1,2,8,64] "
-             "[--mode closed|open [--rate R | --rate_x X]] [--duration_s T] [--json] | --idle_sessions N",
+    .summary =
+        "nupmpc-loadtest: drives a running nupmpc-server with concurrent Control streams and reports "
+        "throughput and latency next to the core's own solve time for the same steps (and, with --echo, "
+        "the transport floor of a zero-work server at the same load). Every stream creates its own "
+        "session from --instance and cycles through the instance's recorded closed-loop states (or its "
+        "initial state). --idle_sessions N instead measures the server's memory per idle session. Exit "
+        "status 3: a closed-loop level starved a stream (one served under half or over twice the mean).",
+    .usage =
+        "nupmpc-loadtest [--server HOST:PORT] [--instance FILE] [--concurrency C | --sweep 1,2,8,64] "
+        "[--mode closed|open [--rate R | --rate_x X]] [--duration_s T] [--json] | --idle_sessions N",
     .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
     .max_arguments = 0,
 };
@@ -201,8 +205,8 @@ bool ShowProgress() {
 }
 
 // The child process of an echo peer: the real server's plan for the spec is its answer.
-int ServeEcho(const std::string& target, const nupmpc::ChannelSecurity& security,
-              const nupmpc::v1::ProblemSpec& spec, const std::string& busy_us) {
+int ServeEcho(const std::string& target, const nupmpc::ChannelSecurity& security, const nupmpc::v1::ProblemSpec& spec,
+              const std::string& busy_us) {
   std::vector<std::chrono::nanoseconds> busy;
   for (absl::string_view part : absl::StrSplit(busy_us, ',')) {
     double us = 0.0;
@@ -210,7 +214,8 @@ int ServeEcho(const std::string& target, const nupmpc::ChannelSecurity& security
       return Fail("--serve_echo_busy_us", absl::InvalidArgumentError(absl::StrCat("\"", part, "\" is not a duration")));
     }
     if (us > 0.0) {
-      busy.push_back(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double, std::micro>(us)));
+      busy.push_back(
+          std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double, std::micro>(us)));
     }
   }
   absl::StatusOr<std::unique_ptr<nupmpc::Client>> connected =
@@ -271,7 +276,8 @@ absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const n
                                               const std::optional<cpu_set_t>& server_cpus) {
   const int rounds = std::max(1, absl::GetFlag(FLAGS_rounds));
   const double duration_s = absl::GetFlag(FLAGS_duration_s) / rounds;
-  const int all_periods = std::max(absl::GetFlag(FLAGS_baseline_rounds), static_cast<int>(file.closed_loop_states.size()));
+  const int all_periods =
+      std::max(absl::GetFlag(FLAGS_baseline_rounds), static_cast<int>(file.closed_loop_states.size()));
   const int periods = std::max(1, (all_periods + rounds - 1) / rounds);
   std::vector<lt::FleetReport> fleet;
   std::vector<lt::LevelReport> separate;
@@ -282,8 +288,9 @@ absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const n
       if (run == 0) {
         absl::StatusOr<lt::FleetReport> stepped =
             lt::RunFleetLevel(target, security, plan, sessions, absl::GetFlag(FLAGS_fleet_calls_in_flight), duration_s,
-                             absl::GetFlag(FLAGS_warmup_s));
-        if (!stepped.ok()) return absl::Status(stepped.status().code(), absl::StrCat("fleet: ", stepped.status().message()));
+                              absl::GetFlag(FLAGS_warmup_s));
+        if (!stepped.ok())
+          return absl::Status(stepped.status().code(), absl::StrCat("fleet: ", stepped.status().message()));
         fleet.push_back(*std::move(stepped));
       } else if (run == 1) {
         lt::LevelConfig config;
@@ -301,7 +308,8 @@ absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const n
           return lt::MeasureFleetCore(file.spec, file.closed_loop_states, sessions, periods, 1 + round * periods);
         });
         if (!in_turn.ok()) {
-          return absl::Status(in_turn.status().code(), absl::StrCat("fleet core baseline: ", in_turn.status().message()));
+          return absl::Status(in_turn.status().code(),
+                              absl::StrCat("fleet core baseline: ", in_turn.status().message()));
         }
         core.push_back(*in_turn);
       }
@@ -363,8 +371,8 @@ int main(int argc, char** argv) {
   if (mode != "closed" && mode != "open") return Fail("--mode", absl::InvalidArgumentError("must be closed or open"));
   if (const int fleet = absl::GetFlag(FLAGS_fleet), in_flight = absl::GetFlag(FLAGS_fleet_calls_in_flight);
       in_flight != 1 && (in_flight < 1 || in_flight > fleet)) {
-    return Fail("--fleet_calls_in_flight", absl::InvalidArgumentError(
-                                               absl::StrCat(in_flight, ": from 1 to the --fleet sessions (", fleet, ")")));
+    return Fail("--fleet_calls_in_flight",
+                absl::InvalidArgumentError(absl::StrCat(in_flight, ": from 1 to the --fleet sessions (", fleet, ")")));
   }
 
   absl::StatusOr<std::unique_ptr<nupmpc::Client>> client =
@@ -379,13 +387,14 @@ int main(int argc, char** argv) {
   });
   if (!baseline.ok()) return Fail("core baseline", baseline.status());
   // A server without ServerLimits.solver_cores runs at most its workers' solves at once.
-  const int solver_cores = static_cast<int>(
-      info->limits().solver_cores() > 0 ? info->limits().solver_cores() : info->limits().worker_threads());
+  const int solver_cores = static_cast<int>(info->limits().solver_cores() > 0 ? info->limits().solver_cores()
+                                                                              : info->limits().worker_threads());
   const int solve_cores = lt::UsableCores(solver_cores, info->cpus());
   const int fleet_cores = lt::UsableCores(static_cast<int>(info->limits().worker_threads()), info->cpus());
   const double capacity_per_s = solve_cores / (baseline->median_ms * 1e-3);
 
-  absl::StatusOr<lt::TransportFloor> transport = lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls), *security);
+  absl::StatusOr<lt::TransportFloor> transport =
+      lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls), *security);
   if (!transport.ok()) return Fail("transport floor", transport.status());
 
   // The peers are echo servers in child processes (this program with --serve_echo_busy_us),
@@ -405,9 +414,9 @@ int main(int argc, char** argv) {
   }
   std::unique_ptr<lt::EchoProcess> bare;
   if (absl::GetFlag(FLAGS_bare_solve)) {
-    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started = lt::EchoProcess::Spawn(
-        {std::filesystem::read_symlink("/proc/self/exe").string(), "--serve_bare"},
-        server_cpus->has_value() ? &**server_cpus : nullptr);
+    absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started =
+        lt::EchoProcess::Spawn({std::filesystem::read_symlink("/proc/self/exe").string(), "--serve_bare"},
+                               server_cpus->has_value() ? &**server_cpus : nullptr);
     if (!started.ok()) return Fail("bare server", started.status());
     bare = *std::move(started);
   }
@@ -451,7 +460,8 @@ int main(int argc, char** argv) {
                              .generator_cpus = generator_cpus,
                              .rounds = std::max(1, absl::GetFlag(FLAGS_rounds))};
   if (!json) lt::PrintHeader(header);
-  const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed", absl::GetFlag(FLAGS_new_references)};
+  const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed",
+                            absl::GetFlag(FLAGS_new_references)};
   if (const int fleet = absl::GetFlag(FLAGS_fleet); fleet > 0) {
     absl::StatusOr<FleetRuns> runs = RunFleetInterleaved(target, *security, plan, *file, fleet, *server_cpus);
     if (!runs.ok()) return Fail("fleet level", runs.status());
@@ -494,9 +504,8 @@ int main(int argc, char** argv) {
     for (const auto& [peer, slot, label, busy_ms] :
          {std::tuple{&runs->peers[0], &report.echo, "echo", 0.0},
           std::tuple{&runs->peers[1], &report.inline_solve, "inline", report.inline_core.median_ms},
-          std::tuple{&runs->peers[2], &report.bare, "bare", report.inline_core.sessions > 0
-                                                                 ? report.inline_core.median_ms
-                                                                 : header.baseline.median_ms}}) {
+          std::tuple{&runs->peers[2], &report.bare, "bare",
+                     report.inline_core.sessions > 0 ? report.inline_core.median_ms : header.baseline.median_ms}}) {
       if (!peer->has_value()) continue;
       if (!json) lt::PrintPeerLevel(label, **peer, busy_ms);
       *slot = std::make_shared<const lt::LevelReport>(**std::move(peer));

@@ -15,16 +15,23 @@ namespace {
 
 std::string Errors(const StreamTally& t) {
   if (t.errors.empty()) return "none";
-  return absl::StrJoin(t.errors, " ", [](std::string* out, const auto& e) { absl::StrAppend(out, e.first, ":", e.second); });
+  return absl::StrJoin(t.errors, " ",
+                       [](std::string* out, const auto& e) { absl::StrAppend(out, e.first, ":", e.second); });
 }
 
 // Round trip above the core's own median: what the network, gRPC and the server add.
 double OverheadUs(const RunHeader& h, const LevelReport& l) { return (l.p50_ms - h.baseline.median_ms) * 1e3; }
 
 nlohmann::json PeerJson(const LevelReport& e) {
-  return {{"solves_per_s", e.solves_per_s}, {"p50_ms", e.p50_ms},   {"p90_ms", e.p90_ms},
-          {"p99_ms", e.p99_ms},             {"p999_ms", e.p999_ms}, {"max_ms", e.max_ms},
-          {"superseded", e.tally.superseded}, {"no_plan", e.tally.no_plan}, {"errors", e.tally.errors}};
+  return {{"solves_per_s", e.solves_per_s},
+          {"p50_ms", e.p50_ms},
+          {"p90_ms", e.p90_ms},
+          {"p99_ms", e.p99_ms},
+          {"p999_ms", e.p999_ms},
+          {"max_ms", e.max_ms},
+          {"superseded", e.tally.superseded},
+          {"no_plan", e.tally.no_plan},
+          {"errors", e.tally.errors}};
 }
 
 // The server's level against a peer's run of it.
@@ -61,41 +68,49 @@ void PrintHeader(const RunHeader& h) {
   std::printf("nupmpc-loadtest: %s against %s (nupmpc-server %s, %u workers, %u solver cores, queue %u)\n",
               h.instance.c_str(), h.target.c_str(), h.server.version().c_str(), h.server.limits().worker_threads(),
               h.server.limits().solver_cores(), h.server.limits().queue_capacity());
-  std::printf("core alone, same steps: median %.4f ms, mean %.4f ms, p99 %.4f ms, %.2f iterations/step over %d "
-              "solves; capacity %d cores / median = %.0f solves/s (solver cores on the server's CPUs)\n",
-              h.baseline.median_ms, h.baseline.mean_ms, h.baseline.p99_ms, h.baseline.mean_iterations, h.baseline.solves,
-              h.solve_cores, h.capacity_per_s);
-  std::printf("transport alone (grpc.health.v1 Check, answered inside gRPC): p50 %.0f \xc2\xb5s, p99 %.0f \xc2\xb5s "
-              "over %d calls\n",
-              h.transport.p50_us, h.transport.p99_us, h.transport.calls);
+  std::printf(
+      "core alone, same steps: median %.4f ms, mean %.4f ms, p99 %.4f ms, %.2f iterations/step over %d "
+      "solves; capacity %d cores / median = %.0f solves/s (solver cores on the server's CPUs)\n",
+      h.baseline.median_ms, h.baseline.mean_ms, h.baseline.p99_ms, h.baseline.mean_iterations, h.baseline.solves,
+      h.solve_cores, h.capacity_per_s);
+  std::printf(
+      "transport alone (grpc.health.v1 Check, answered inside gRPC): p50 %.0f \xc2\xb5s, p99 %.0f \xc2\xb5s "
+      "over %d calls\n",
+      h.transport.p50_us, h.transport.p99_us, h.transport.calls);
   std::printf("CPUs: nupmpc-server %s (as it reports), echo peers and core baseline %s, load generator %s\n",
               h.server.cpus().empty() ? "?" : h.server.cpus().c_str(),
               h.peer_cpus.empty() ? "not pinned" : h.peer_cpus.c_str(), h.generator_cpus.c_str());
   if (h.rounds > 1 && (h.echo || h.inline_solve || h.bare)) {
-    std::printf("(each level: %d rounds against nupmpc and each peer in turn, the order reversed every round, "
-                "merged per server)\n",
-                h.rounds);
+    std::printf(
+        "(each level: %d rounds against nupmpc and each peer in turn, the order reversed every round, "
+        "merged per server)\n",
+        h.rounds);
   }
-  std::printf("(latency is request sent, or open-loop arrival scheduled, to answer received; svc: from the "
-              "hand-over to gRPC)\n");
+  std::printf(
+      "(latency is request sent, or open-loop arrival scheduled, to answer received; svc: from the "
+      "hand-over to gRPC)\n");
   if (h.echo) {
-    std::printf("(echo rows: the same level against a zero-work server, a process of its own, that answers every "
-                "step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
+    std::printf(
+        "(echo rows: the same level against a zero-work server, a process of its own, that answers every "
+        "step at once with a real plan: the transport floor at that load, overhead = its p50)\n");
   }
   if (h.bare) {
-    std::printf("(bare rows: a bare server, a process of its own, that builds each stream's session from its spec "
-                "and solves each step in its reaction as nupmpc-server's SolveStep does, with nothing else: no "
-                "worker pool, session registry, admission, deadlines, metrics; overhead = its p50 - the core "
-                "median)\n");
+    std::printf(
+        "(bare rows: a bare server, a process of its own, that builds each stream's session from its spec "
+        "and solves each step in its reaction as nupmpc-server's SolveStep does, with nothing else: no "
+        "worker pool, session registry, admission, deadlines, metrics; overhead = its p50 - the core "
+        "median)\n");
   }
   if (h.inline_solve) {
-    std::printf("(inline rows: the same echo, busy inside its reaction before it answers, for each step the core's "
-                "own time for that step (measured with as many sessions stepped in turn as the level has streams): a "
-                "server that solves where the request arrives, with no hand-over and nothing else; overhead = its "
-                "p50 - that core median)\n");
+    std::printf(
+        "(inline rows: the same echo, busy inside its reaction before it answers, for each step the core's "
+        "own time for that step (measured with as many sessions stepped in turn as the level has streams): a "
+        "server that solves where the request arrives, with no hand-over and nothing else; overhead = its "
+        "p50 - that core median)\n");
   }
-  std::printf("(no plan: answers without SolveResult.has_plan, whose inputs a controller must not apply; the load "
-              "test sends recorded states and applies no input)\n");
+  std::printf(
+      "(no plan: answers without SolveResult.has_plan, whose inputs a controller must not apply; the load "
+      "test sends recorded states and applies no input)\n");
   std::printf("%5s %-6s %10s %10s %8s %8s %8s %8s %8s %8s %6s %10s %7s %10s %9s  %s\n", "C", "mode", "offered/s",
               "solves/s", "p50 ms", "p90 ms", "p99 ms", "p99.9 ms", "max ms", "svc p99", "iter", "superseded",
               "no plan", "overhead", "capacity", "errors");
@@ -138,12 +153,9 @@ void PrintJson(const RunHeader& h, const std::vector<LevelReport>& levels) {
                    {"inline_solve_max_ms", h.server.limits().inline_solve_max_ms()}};
   out["peer_cpus"] = h.peer_cpus;
   out["generator_cpus"] = h.generator_cpus;
-  out["core_baseline"] = {{"median_ms", h.baseline.median_ms},
-                          {"mean_ms", h.baseline.mean_ms},
-                          {"p99_ms", h.baseline.p99_ms},
-                          {"mean_iterations", h.baseline.mean_iterations},
-                          {"solves", h.baseline.solves},
-                          {"capacity_cores", h.solve_cores},
+  out["core_baseline"] = {{"median_ms", h.baseline.median_ms}, {"mean_ms", h.baseline.mean_ms},
+                          {"p99_ms", h.baseline.p99_ms},       {"mean_iterations", h.baseline.mean_iterations},
+                          {"solves", h.baseline.solves},       {"capacity_cores", h.solve_cores},
                           {"capacity_per_s", h.capacity_per_s}};
   out["transport"] = {{"p50_us", h.transport.p50_us}, {"p99_us", h.transport.p99_us}, {"calls", h.transport.calls}};
   out["levels"] = nlohmann::json::array();
@@ -220,18 +232,20 @@ void PrintFleet(const RunHeader& h, const FleetReport& f, const LevelReport& sep
     std::printf("%s\n", out.dump(2).c_str());
     return;
   }
-  const std::string calls =
-      f.calls_in_flight == 1 ? "per SolveFleet call"
-                             : absl::StrCat("in ", f.calls_in_flight, " SolveFleet calls in flight at once");
-  std::printf("fleet: %d sessions %s: %.0f steps/s (%.0f%% of capacity %d workers / median = "
-              "%.0f/s), %.2f iterations/step, call p50 %.3f ms, p99 %.3f ms, %llu step errors\n",
-              f.sessions, calls.c_str(), f.steps_per_s, 100.0 * of_capacity, h.fleet_cores, worker_capacity,
-              f.mean_iterations, f.call_p50_ms, f.call_p99_ms, static_cast<unsigned long long>(f.step_errors));
-  std::printf("       the core alone stepping the %d sessions in turn (warm, as the fleet's calls after warm-up): "
-              "mean %.4f ms per step, %.2f iterations/step, capacity %d workers / mean = %.0f steps/s; the fleet "
-              "call reaches %.0f%% of it\n",
-              f.sessions, core_in_turn.mean_ms, core_in_turn.mean_iterations, h.fleet_cores, fleet_capacity,
-              100.0 * of_fleet_capacity);
+  const std::string calls = f.calls_in_flight == 1
+                                ? "per SolveFleet call"
+                                : absl::StrCat("in ", f.calls_in_flight, " SolveFleet calls in flight at once");
+  std::printf(
+      "fleet: %d sessions %s: %.0f steps/s (%.0f%% of capacity %d workers / median = "
+      "%.0f/s), %.2f iterations/step, call p50 %.3f ms, p99 %.3f ms, %llu step errors\n",
+      f.sessions, calls.c_str(), f.steps_per_s, 100.0 * of_capacity, h.fleet_cores, worker_capacity, f.mean_iterations,
+      f.call_p50_ms, f.call_p99_ms, static_cast<unsigned long long>(f.step_errors));
+  std::printf(
+      "       the core alone stepping the %d sessions in turn (warm, as the fleet's calls after warm-up): "
+      "mean %.4f ms per step, %.2f iterations/step, capacity %d workers / mean = %.0f steps/s; the fleet "
+      "call reaches %.0f%% of it\n",
+      f.sessions, core_in_turn.mean_ms, core_in_turn.mean_iterations, h.fleet_cores, fleet_capacity,
+      100.0 * of_fleet_capacity);
   std::printf("       %d separate Control streams: %.0f solves/s, p50 %.3f ms; fleet / streams = %.2fx\n",
               separate.config.concurrency, separate.solves_per_s, separate.p50_ms, vs_streams);
   std::fflush(stdout);

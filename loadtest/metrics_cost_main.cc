@@ -8,11 +8,11 @@
 
 #include "absl/flags/flag.h"
 #include "cli/program_flags.h"
+#include "client/problem_file.h"
 #include "loadtest/core_baseline.h"
 #include "server/metrics_exposition.h"
-#include "server/state/server_state.h"
 #include "server/sessions/session_factory.h"
-#include "client/problem_file.h"
+#include "server/state/server_state.h"
 
 ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json", "the sessions' problem");
 ABSL_FLAG(int, sessions, 10000, "open sessions while /metrics is rendered");
@@ -69,12 +69,14 @@ int main(int argc, char** argv) {
   for (int i = 0; i < kRenders; ++i) bytes = nupmpc::server::RenderPrometheusMetrics(state).size();
   const double render_us = Seconds(Clock::now() - render_start) / kRenders * 1e6;
 
-  std::printf("core median closed-loop step (%s): %.1f us\n", absl::GetFlag(FLAGS_instance).c_str(), baseline->median_ms * 1e3);
+  std::printf("core median closed-loop step (%s): %.1f us\n", absl::GetFlag(FLAGS_instance).c_str(),
+              baseline->median_ms * 1e3);
   std::printf("RecordSolve: %.1f ns per solve = %.4f %% of a solve\n", record_ns,
               100.0 * record_ns * 1e-9 / (baseline->median_ms * 1e-3));
-  std::printf("/metrics with %d sessions: %.1f us per scrape (%zu bytes) = %.4f %% of one core at one scrape per "
-              "second\n",
-              absl::GetFlag(FLAGS_sessions), render_us, bytes, 100.0 * render_us * 1e-6);
+  std::printf(
+      "/metrics with %d sessions: %.1f us per scrape (%zu bytes) = %.4f %% of one core at one scrape per "
+      "second\n",
+      absl::GetFlag(FLAGS_sessions), render_us, bytes, 100.0 * render_us * 1e-6);
   state.pool.Shutdown();
   return 0;
 }

@@ -25,11 +25,12 @@ namespace {
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-scaleout-probe",
-    .summary = "nupmpc-scaleout-probe: drives replicas behind a balancer through the client library and reports, "
-               "as one JSON object, what a controller would have seen: steps answered and failed, sessions "
-               "re-created after a replica was lost, and a sample of plans checked against the core solving the "
-               "same state (--probe streams); or whether calls addressed by session id all reached their session "
-               "(--probe addressed). Used by deploy/scaleout-test.sh.",
+    .summary =
+        "nupmpc-scaleout-probe: drives replicas behind a balancer through the client library and reports, "
+        "as one JSON object, what a controller would have seen: steps answered and failed, sessions "
+        "re-created after a replica was lost, and a sample of plans checked against the core solving the "
+        "same state (--probe streams); or whether calls addressed by session id all reached their session "
+        "(--probe addressed). Used by deploy/scaleout-test.sh.",
     .usage = "nupmpc-scaleout-probe --server HOST:PORT [--probe streams|addressed] [--instance FILE] ...",
     .environment = {{"NUPMPC_SERVER", "address when --server is not given"}},
     .max_arguments = 0,

@@ -1,7 +1,7 @@
 #include "loadtest/step_as_server.h"
 
-#include "server/sessions/call_context.h"
 #include "server/convert/step_conversion.h"
+#include "server/sessions/call_context.h"
 
 namespace nupmpc::loadtest {
 
@@ -15,9 +15,14 @@ absl::StatusOr<core::SolveSummary> StepAsTheServerDoes(server::BuiltSession& ses
   if (!limits.ok()) return limits.status();
   if (absl::Status applied = server::AsStepError(solver.Apply(*step)); !applied.ok()) return applied;
   switch (message.warm_start()) {
-    case v1::WARM_START_KEEP: break;
-    case v1::WARM_START_COLD: limits->warm_start = false; break;
-    default: solver.ShiftWarmStart(); break;
+    case v1::WARM_START_KEEP:
+      break;
+    case v1::WARM_START_COLD:
+      limits->warm_start = false;
+      break;
+    default:
+      solver.ShiftWarmStart();
+      break;
   }
   return solver.Solve(*limits, solution);
 }

@@ -50,8 +50,8 @@ absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, 
     const grpc::Status status = Check(stub, cq);
     const double took = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - start).count();
     if (!status.ok()) {
-      return absl::UnavailableError(absl::StrCat("grpc.health.v1.Health/Check on ", target, ": ",
-                                                 status.error_message()));
+      return absl::UnavailableError(
+          absl::StrCat("grpc.health.v1.Health/Check on ", target, ": ", status.error_message()));
     }
     if (i >= kWarmUpCalls) micros.push_back(took);
   }

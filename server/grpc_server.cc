@@ -9,11 +9,11 @@
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
-#include "server/rpc/grpc_handover.h"
 #include "server/listen_probe.h"
 #include "server/metrics_exposition.h"
 #include "server/metrics_http.h"
 #include "server/observability/process_memory.h"
+#include "server/rpc/grpc_handover.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
@@ -42,10 +42,11 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
       ServerCredentialsFor(options.tls, options.address, state.auth);
   if (!credentials.ok()) return credentials.status();
   if (!options.tls.enabled() && !IsLocalAddress(options.address)) {
-    spdlog::warn("listening on {} WITHOUT TLS: anyone who reaches this address can read and drive every session's "
-                 "traffic; give --tls_cert_file and --tls_key_file (and --auth_tokens_file or --tls_client_ca_file) "
-                 "outside a trusted network",
-                 options.address);
+    spdlog::warn(
+        "listening on {} WITHOUT TLS: anyone who reaches this address can read and drive every session's "
+        "traffic; give --tls_cert_file and --tls_key_file (and --auth_tokens_file or --tls_client_ca_file) "
+        "outside a trusted network",
+        options.address);
   }
   // gRPC and the metrics listener start when any one of an address's resolved addresses
   // binds; a port another process holds on one of them is refused here instead.
@@ -133,8 +134,8 @@ void GrpcServer::ReloadTokens() {
 void GrpcServer::RevokeStreamsWithoutAccess() {
   if (state_->tokens == nullptr) return;
   const TokenStore& tokens = *state_->tokens;
-  const std::vector<std::function<void()>> revoked =
-      state_->principal_streams.Revoked([&tokens](const std::string& principal) { return tokens.HasPrincipal(principal); });
+  const std::vector<std::function<void()>> revoked = state_->principal_streams.Revoked(
+      [&tokens](const std::string& principal) { return tokens.HasPrincipal(principal); });
   for (const std::function<void()>& revoke : revoked) revoke();
 }
 
@@ -158,7 +159,8 @@ void GrpcServer::Shutdown() {
   // their next step get UNAVAILABLE, idle connections are closed. (gRPC's own Shutdown
   // with a deadline waits for open streams until the deadline, and on idle connections
   // for up to seconds even when no call is open.)
-  const auto grace_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(state_->options.grace_period_s);
+  const auto grace_end =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(state_->options.grace_period_s);
   while (state_->work_in_flight.load() > 0 && std::chrono::steady_clock::now() < grace_end) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }

@@ -73,8 +73,8 @@ absl::Status CheckNotInUse(const ListenHostPort& address, AnyAddress any, const 
   // A null host gives the unspecified address of each family.
   const bool both_families = any == AnyAddress::kBothFamilies && IsUnspecified(address.host);
   addrinfo* found = nullptr;
-  const int resolved = getaddrinfo(both_families ? nullptr : address.host.c_str(),
-                                   std::to_string(address.port).c_str(), &hints, &found);
+  const int resolved =
+      getaddrinfo(both_families ? nullptr : address.host.c_str(), std::to_string(address.port).c_str(), &hints, &found);
   if (resolved != 0) {
     // gRPC would fail with a message that names neither the host nor the cause (a minimal
     // container has no /etc/hosts, so not even "localhost" resolves there).
@@ -87,8 +87,8 @@ absl::Status CheckNotInUse(const ListenHostPort& address, AnyAddress any, const 
   for (const addrinfo* a = found; a != nullptr; a = a->ai_next) {
     if (a->ai_family != AF_INET && a->ai_family != AF_INET6) continue;
     if (BindErrno(a->ai_addr, a->ai_addrlen) == EADDRINUSE) {
-      return absl::UnavailableError(
-          absl::StrCat("could not listen on ", what, ": ", Numeric(a->ai_addr, a->ai_addrlen), " is in use by another process"));
+      return absl::UnavailableError(absl::StrCat("could not listen on ", what, ": ", Numeric(a->ai_addr, a->ai_addrlen),
+                                                 " is in use by another process"));
     }
   }
   return absl::OkStatus();

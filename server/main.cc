@@ -10,8 +10,8 @@
 #include "cli/program_flags.h"
 #include "server/grpc_server.h"
 #include "server/observability/log_format.h"
-#include "server/server_flags.h"
 #include "server/observability/version.h"
+#include "server/server_flags.h"
 #include "spdlog/spdlog.h"
 
 int main(int argc, char** argv) {
@@ -39,7 +39,9 @@ int main(int argc, char** argv) {
   const nupmpc::server::ServerOptions& o = flags->options;
   spdlog::info("nupmpc-server {} listening on port {} ({}{}; {} workers, queue {}, max {} sessions)",
                nupmpc::server::kVersion, (*server)->port(),
-               !o.tls.enabled() ? "plaintext" : o.tls.mutual() ? "mTLS" : "TLS",
+               !o.tls.enabled() ? "plaintext"
+               : o.tls.mutual() ? "mTLS"
+                                : "TLS",
                o.auth_tokens_file.empty() ? "" : ", bearer tokens", o.worker_threads, o.queue_capacity, o.max_sessions);
   int signal = 0;
   sigwait(&stop_signals, &signal);

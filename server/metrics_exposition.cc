@@ -1,10 +1,10 @@
 #include "server/metrics_exposition.h"
 
 #include <filesystem>
-#include "absl/strings/string_view.h"
 #include <system_error>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/string_view.h"
 #include "core/platform/cpu_baseline.h"
 #include "server/observability/process_memory.h"
 #include "server/observability/prometheus_text.h"
@@ -52,7 +52,8 @@ void WriteSolves(PrometheusText& out, const Metrics& m) {
 }
 
 void WriteErrors(PrometheusText& out, const Metrics& m) {
-  out.Family("nupmpc_rpc_errors_total", "counter", "RPCs (or Control stream messages) answered with an error, by method and code.");
+  out.Family("nupmpc_rpc_errors_total", "counter",
+             "RPCs (or Control stream messages) answered with an error, by method and code.");
   for (int r = 0; r < kRpcCount; ++r) {
     for (int c = 1; c < Metrics::kCodeCount; ++c) {
       const std::uint64_t n = m.errors(static_cast<Rpc>(r), static_cast<absl::StatusCode>(c));
@@ -130,8 +131,7 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
 
   out.Family("nupmpc_build_info", "gauge", "Always 1; the labels describe the build.");
   out.Sample("nupmpc_build_info",
-             {{"version", kVersion}, {"api_version", "nupmpc.v1"}, {"cpu_baseline", platform::kBuildCpuBaseline}},
-             1.0);
+             {{"version", kVersion}, {"api_version", "nupmpc.v1"}, {"cpu_baseline", platform::kBuildCpuBaseline}}, 1.0);
   return out.text();
 }
 

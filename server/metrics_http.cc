@@ -40,7 +40,8 @@ absl::StatusOr<std::unique_ptr<MetricsHttpServer>> MetricsHttpServer::Start(cons
     }
     return response;
   };
-  absl::StatusOr<std::unique_ptr<HttpListener>> listener = HttpListener::Start(parsed->host, parsed->port, std::move(route));
+  absl::StatusOr<std::unique_ptr<HttpListener>> listener =
+      HttpListener::Start(parsed->host, parsed->port, std::move(route));
   if (!listener.ok()) {
     return absl::UnavailableError(absl::StrCat("--metrics_address \"", address, "\": could not listen (",
                                                listener.status().message(), "; ", kListenFailureCauses, ")"));

@@ -35,9 +35,10 @@ ABSL_FLAG(double, grace_period_s, 5, "on SIGTERM/SIGINT: time for in-flight solv
 ABSL_FLAG(double, drain_delay_s, 0,
           "on SIGTERM/SIGINT: report NOT_SERVING on grpc.health.v1 this long while still serving, so load balancers "
           "move new calls away, before draining; a second signal ends the delay (env NUPMPC_DRAIN_DELAY_S)");
-ABSL_FLAG(int, memory_budget_mb, 0,
-          "memory all sessions and calls in flight may reserve, by estimate, before requests are refused with "
-          "RESOURCE_EXHAUSTED; 0: 3/4 of the smaller of physical memory and the cgroup limit (env NUPMPC_MEMORY_BUDGET_MB)");
+ABSL_FLAG(
+    int, memory_budget_mb, 0,
+    "memory all sessions and calls in flight may reserve, by estimate, before requests are refused with "
+    "RESOURCE_EXHAUSTED; 0: 3/4 of the smaller of physical memory and the cgroup limit (env NUPMPC_MEMORY_BUDGET_MB)");
 ABSL_FLAG(int, max_session_memory_mb, 2048,
           "estimated memory one session, SolveOnce or GP fit may need (env NUPMPC_MAX_SESSION_MEMORY_MB)");
 ABSL_FLAG(double, max_pass_gflop, 1000,
@@ -48,9 +49,10 @@ ABSL_FLAG(int, max_stream_answers, 16,
           "(env NUPMPC_MAX_STREAM_ANSWERS)");
 ABSL_FLAG(int, max_streams_per_connection, 100,
           "concurrent calls on one client connection (env NUPMPC_MAX_STREAMS_PER_CONNECTION)");
-ABSL_FLAG(double, first_message_timeout_s, 10,
-          "a new connection's handshake and a new Control stream's first message must arrive within this long, "
-          "else the connection is closed / the stream ended with DEADLINE_EXCEEDED (env NUPMPC_FIRST_MESSAGE_TIMEOUT_S)");
+ABSL_FLAG(
+    double, first_message_timeout_s, 10,
+    "a new connection's handshake and a new Control stream's first message must arrive within this long, "
+    "else the connection is closed / the stream ended with DEADLINE_EXCEEDED (env NUPMPC_FIRST_MESSAGE_TIMEOUT_S)");
 ABSL_FLAG(double, connection_idle_timeout_s, 600,
           "close client connections without calls for this long (env NUPMPC_CONNECTION_IDLE_TIMEOUT_S)");
 ABSL_FLAG(std::string, metrics_address, "",
@@ -69,8 +71,9 @@ ABSL_FLAG(std::string, auth_tokens_file, "",
           "bearer tokens: one line per token, TOKEN PRINCIPAL [admin], # comments; calls must send "
           "'authorization: Bearer TOKEN'; sessions belong to their creator's principal; re-read when it changes. "
           "Needs TLS unless the address is loopback or a Unix socket (env NUPMPC_AUTH_TOKENS_FILE)");
-ABSL_FLAG(int, max_sessions_per_principal, 0,
-          "sessions one authenticated principal may hold; 0: only --max_sessions (env NUPMPC_MAX_SESSIONS_PER_PRINCIPAL)");
+ABSL_FLAG(
+    int, max_sessions_per_principal, 0,
+    "sessions one authenticated principal may hold; 0: only --max_sessions (env NUPMPC_MAX_SESSIONS_PER_PRINCIPAL)");
 ABSL_FLAG(int, max_streams_per_principal, 0,
           "Control streams one authenticated principal may have open; 0: only --max_control_streams "
           "(env NUPMPC_MAX_STREAMS_PER_PRINCIPAL)");
@@ -80,7 +83,8 @@ ABSL_FLAG(bool, list_all_sessions, false,
 ABSL_FLAG(double, slow_solve_ms, 0,
           "solves slower than this are logged at warn with their dimensions and iterations; 0: none "
           "(env NUPMPC_SLOW_SOLVE_MS)");
-ABSL_FLAG(std::string, log_format, "text", "text|json: one JSON object per line for log collectors (env NUPMPC_LOG_FORMAT)");
+ABSL_FLAG(std::string, log_format, "text",
+          "text|json: one JSON object per line for log collectors (env NUPMPC_LOG_FORMAT)");
 ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error|off (env NUPMPC_LOG_LEVEL)");
 
 namespace nupmpc::server {
@@ -103,12 +107,14 @@ absl::Status ApplyEnvironment(const char* name) {
 // Written as !(value >= bound) so that NaN is refused too.
 template <typename T>
 absl::Status RequireAtLeast(const char* name, T value, T minimum) {
-  if (!(value >= minimum)) return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be >= ", minimum));
+  if (!(value >= minimum))
+    return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be >= ", minimum));
   return absl::OkStatus();
 }
 template <typename T>
 absl::Status RequireAtMost(const char* name, T value, T maximum) {
-  if (!(value <= maximum)) return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be <= ", maximum));
+  if (!(value <= maximum))
+    return absl::InvalidArgumentError(absl::StrCat("--", name, " = ", value, ": must be <= ", maximum));
   return absl::OkStatus();
 }
 
@@ -117,9 +123,10 @@ absl::Status RequireAtMost(const char* name, T value, T maximum) {
 const cli::ProgramInfo& ServerProgram() {
   static const cli::ProgramInfo program{
       .name = "nupmpc-server",
-      .summary = "nupmpc-server: model-predictive control over gRPC (nupmpc.v1.MpcService: sessions, the "
-                 "Control stream, one-off solves, GP fits), with grpc.health.v1 and server reflection. "
-                 "SIGTERM/SIGINT drain (in-flight solves get --grace_period_s) and exit 0.",
+      .summary =
+          "nupmpc-server: model-predictive control over gRPC (nupmpc.v1.MpcService: sessions, the "
+          "Control stream, one-off solves, GP fits), with grpc.health.v1 and server reflection. "
+          "SIGTERM/SIGINT drain (in-flight solves get --grace_period_s) and exit 0.",
       .usage = "nupmpc-server [--address HOST:PORT] [--threads N] [FLAGS]",
       .environment = {{"NUPMPC_<FLAG>",
                        "every flag above, its name in upper case (NUPMPC_ADDRESS, NUPMPC_THREADS, ...): the "
@@ -130,14 +137,41 @@ const cli::ProgramInfo& ServerProgram() {
 }
 
 absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
-  for (const char* name : {"address", "threads", "inline_solve_max_ms", "max_fleet_steps", "queue_capacity", "max_sessions", "session_idle_timeout_s",
-                           "session_compact_idle_s", "max_queue_wait_ms", "max_message_bytes", "max_horizon", "max_states",
-                           "max_iterations", "grace_period_s", "drain_delay_s", "memory_budget_mb", "max_session_memory_mb",
-                           "max_pass_gflop", "max_control_streams", "max_stream_answers", "max_streams_per_connection",
-                           "first_message_timeout_s", "connection_idle_timeout_s",
-                           "metrics_address", "tls_cert_file", "tls_key_file", "tls_client_ca_file",
-                           "tls_reload_interval_s", "auth_tokens_file", "max_sessions_per_principal",
-                           "max_streams_per_principal", "list_all_sessions", "slow_solve_ms", "log_format", "log_level"}) {
+  for (const char* name : {"address",
+                           "threads",
+                           "inline_solve_max_ms",
+                           "max_fleet_steps",
+                           "queue_capacity",
+                           "max_sessions",
+                           "session_idle_timeout_s",
+                           "session_compact_idle_s",
+                           "max_queue_wait_ms",
+                           "max_message_bytes",
+                           "max_horizon",
+                           "max_states",
+                           "max_iterations",
+                           "grace_period_s",
+                           "drain_delay_s",
+                           "memory_budget_mb",
+                           "max_session_memory_mb",
+                           "max_pass_gflop",
+                           "max_control_streams",
+                           "max_stream_answers",
+                           "max_streams_per_connection",
+                           "first_message_timeout_s",
+                           "connection_idle_timeout_s",
+                           "metrics_address",
+                           "tls_cert_file",
+                           "tls_key_file",
+                           "tls_client_ca_file",
+                           "tls_reload_interval_s",
+                           "auth_tokens_file",
+                           "max_sessions_per_principal",
+                           "max_streams_per_principal",
+                           "list_all_sessions",
+                           "slow_solve_ms",
+                           "log_format",
+                           "log_level"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
   cli::ParseProgramFlags(ServerProgram(), argc, argv);
@@ -185,32 +219,36 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
     return absl::InvalidArgumentError(absl::StrCat("--log_format = ", out.log_format, ": must be text or json"));
   }
   out.drain_delay_s = absl::GetFlag(FLAGS_drain_delay_s);
-  for (const absl::Status& s :
-       {RequireAtLeast("threads", o.worker_threads, 1), RequireAtLeast("queue_capacity", o.queue_capacity, 1),
-        RequireAtLeast("max_sessions", o.max_sessions, 1), RequireAtLeast("session_idle_timeout_s", o.session_idle_timeout_s, 0.001),
-        RequireAtLeast("max_message_bytes", o.max_message_bytes, 1024), RequireAtLeast("max_horizon", o.size_limits.max_horizon, 1),
-        RequireAtLeast("max_states", o.size_limits.max_states, 1), RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
-        RequireAtLeast("grace_period_s", o.grace_period_s, 0.0), RequireAtLeast("drain_delay_s", out.drain_delay_s, 0.0),
-        RequireAtMost("drain_delay_s", out.drain_delay_s, 3600.0),
-        RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
-        RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0),
-        RequireAtLeast("inline_solve_max_ms", o.inline_solve_max_ms, 0.0),
-        RequireAtMost("inline_solve_max_ms", o.inline_solve_max_ms, 1000.0),
-        RequireAtLeast("max_fleet_steps", o.max_fleet_steps, 1),
-        RequireAtLeast("memory_budget_mb", absl::GetFlag(FLAGS_memory_budget_mb), 0),
-        RequireAtLeast("max_session_memory_mb", absl::GetFlag(FLAGS_max_session_memory_mb), 1),
-        RequireAtLeast("max_pass_gflop", absl::GetFlag(FLAGS_max_pass_gflop), 1e-6),
-        RequireAtLeast("max_control_streams", o.max_control_streams, 1),
-        RequireAtLeast("max_stream_answers", o.max_stream_answers, 2),
-        RequireAtLeast("max_streams_per_connection", o.max_streams_per_connection, 1),
-        RequireAtLeast("first_message_timeout_s", o.first_message_timeout_s, 0.001),
-        RequireAtMost("first_message_timeout_s", o.first_message_timeout_s, 86400.0),
-        RequireAtLeast("connection_idle_timeout_s", o.connection_idle_timeout_s, 0.001),
-        RequireAtMost("connection_idle_timeout_s", o.connection_idle_timeout_s, 1e9),
-        RequireAtLeast("tls_reload_interval_s", o.tls.reload_interval_s, 1),
-        RequireAtLeast("max_sessions_per_principal", o.max_sessions_per_principal, 0),
-        RequireAtLeast("max_streams_per_principal", o.max_streams_per_principal, 0),
-        RequireAtLeast("slow_solve_ms", o.slow_solve_ms, 0.0)}) {
+  for (const absl::Status& s : {RequireAtLeast("threads", o.worker_threads, 1),
+                                RequireAtLeast("queue_capacity", o.queue_capacity, 1),
+                                RequireAtLeast("max_sessions", o.max_sessions, 1),
+                                RequireAtLeast("session_idle_timeout_s", o.session_idle_timeout_s, 0.001),
+                                RequireAtLeast("max_message_bytes", o.max_message_bytes, 1024),
+                                RequireAtLeast("max_horizon", o.size_limits.max_horizon, 1),
+                                RequireAtLeast("max_states", o.size_limits.max_states, 1),
+                                RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
+                                RequireAtLeast("grace_period_s", o.grace_period_s, 0.0),
+                                RequireAtLeast("drain_delay_s", out.drain_delay_s, 0.0),
+                                RequireAtMost("drain_delay_s", out.drain_delay_s, 3600.0),
+                                RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
+                                RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0),
+                                RequireAtLeast("inline_solve_max_ms", o.inline_solve_max_ms, 0.0),
+                                RequireAtMost("inline_solve_max_ms", o.inline_solve_max_ms, 1000.0),
+                                RequireAtLeast("max_fleet_steps", o.max_fleet_steps, 1),
+                                RequireAtLeast("memory_budget_mb", absl::GetFlag(FLAGS_memory_budget_mb), 0),
+                                RequireAtLeast("max_session_memory_mb", absl::GetFlag(FLAGS_max_session_memory_mb), 1),
+                                RequireAtLeast("max_pass_gflop", absl::GetFlag(FLAGS_max_pass_gflop), 1e-6),
+                                RequireAtLeast("max_control_streams", o.max_control_streams, 1),
+                                RequireAtLeast("max_stream_answers", o.max_stream_answers, 2),
+                                RequireAtLeast("max_streams_per_connection", o.max_streams_per_connection, 1),
+                                RequireAtLeast("first_message_timeout_s", o.first_message_timeout_s, 0.001),
+                                RequireAtMost("first_message_timeout_s", o.first_message_timeout_s, 86400.0),
+                                RequireAtLeast("connection_idle_timeout_s", o.connection_idle_timeout_s, 0.001),
+                                RequireAtMost("connection_idle_timeout_s", o.connection_idle_timeout_s, 1e9),
+                                RequireAtLeast("tls_reload_interval_s", o.tls.reload_interval_s, 1),
+                                RequireAtLeast("max_sessions_per_principal", o.max_sessions_per_principal, 0),
+                                RequireAtLeast("max_streams_per_principal", o.max_streams_per_principal, 0),
+                                RequireAtLeast("slow_solve_ms", o.slow_solve_ms, 0.0)}) {
     if (!s.ok()) return s;
   }
   return out;

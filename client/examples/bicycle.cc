@@ -92,16 +92,28 @@ NonlinearModel BicycleModel(const BicycleScenario& scenario, bool analytic_jacob
   };
   model.transition_u = [dt, ell](std::int64_t, const std::vector<double>& x, const std::vector<double>& u) {
     const double t = std::tan(u[1]);
-    return std::vector<double>{0, 0,  //
-                               0, 0,  //
-                               0, dt * x[3] * (1 + t * t) / ell,
+    return std::vector<double>{0,  0,  //
+                               0,  0,  //
+                               0,  dt * x[3] * (1 + t * t) / ell,
                                dt, 0};
   };
   model.output_x = [scenario](std::int64_t, const std::vector<double>& x) {
-    return std::vector<double>{1, 0, 0, 0,  //
-                               0, 1, 0, 0,  //
-                               -PathSlope(scenario, x[0]), 1, 0, 0,
-                               0, 0, 0, 1};
+    return std::vector<double>{1,
+                               0,
+                               0,
+                               0,  //
+                               0,
+                               1,
+                               0,
+                               0,  //
+                               -PathSlope(scenario, x[0]),
+                               1,
+                               0,
+                               0,
+                               0,
+                               0,
+                               0,
+                               1};
   };
   return model;
 }
@@ -153,8 +165,8 @@ absl::StatusOr<BicycleRun> RunBicycle(Client& client, const BicycleScenario& sce
     absl::StatusOr<NonlinearPlan> plan = (*session)->Step(x);
     if (!plan.ok()) return plan.status();
     if (!plan->has_plan) {
-      return absl::InternalError(absl::StrCat("period ", period, ": no plan (status ",
-                                              v1::SolveStatus_Name(plan->result.status()), ")"));
+      return absl::InternalError(
+          absl::StrCat("period ", period, ": no plan (status ", v1::SolveStatus_Name(plan->result.status()), ")"));
     }
     BicyclePeriod p;
     p.period = period;

@@ -41,16 +41,16 @@ double Clearance(const Obstacle& obstacle, double x, double y);
 std::vector<Obstacle> DefaultObstacles(double path_amplitude, double path_wavelength);
 
 struct BicycleScenario {
-  double dt = 0.1;         // s
-  double wheelbase = 2.5;  // m
-  int horizon = 30;        // 3 s of look-ahead
-  double path_amplitude = 1.5;   // m
-  double path_wavelength = 50.0;  // m
-  double speed_reference = 5.5;  // m/s, what the driver asks for
-  double speed_limit = 5.0;      // m/s, hard
-  double max_steering = 0.6;     // rad
+  double dt = 0.1;                                         // s
+  double wheelbase = 2.5;                                  // m
+  int horizon = 30;                                        // 3 s of look-ahead
+  double path_amplitude = 1.5;                             // m
+  double path_wavelength = 50.0;                           // m
+  double speed_reference = 5.5;                            // m/s, what the driver asks for
+  double speed_limit = 5.0;                                // m/s, hard
+  double max_steering = 0.6;                               // rad
   double min_acceleration = -3.0, max_acceleration = 2.0;  // m/s²
-  double margin = 0.3;           // m kept from every obstacle beyond its size
+  double margin = 0.3;                                     // m kept from every obstacle beyond its size
   // Weights (½·w·(v − target)²) of the soft goals and of the inputs' effort.
   double lateral_weight = 1.0;
   double speed_weight = 1.0;
@@ -72,13 +72,13 @@ v1::ProblemSpec BicycleSpec(const BicycleScenario& scenario);
 
 struct BicyclePeriod {
   int period = 0;
-  std::vector<double> state;      // x[0], measured
-  std::vector<double> input;      // u[0], applied
-  double lateral_error = 0.0;     // e of x[0]
-  double clearance = 0.0;         // of x[0]'s position to the nearest obstacle (its true shape)
-  double plan_clearance = 0.0;    // the least over the plan's positions at steps 1..N
+  std::vector<double> state;    // x[0], measured
+  std::vector<double> input;    // u[0], applied
+  double lateral_error = 0.0;   // e of x[0]
+  double clearance = 0.0;       // of x[0]'s position to the nearest obstacle (its true shape)
+  double plan_clearance = 0.0;  // the least over the plan's positions at steps 1..N
   v1::SolveStatus status = v1::SOLVE_STATUS_UNSPECIFIED;
-  double max_violation = 0.0;     // of the plan's hard bounds (SolveResult.max_violation)
+  double max_violation = 0.0;  // of the plan's hard bounds (SolveResult.max_violation)
   PeriodReport report;
 };
 

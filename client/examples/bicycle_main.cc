@@ -23,11 +23,12 @@ namespace {
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-api-example-bicycle",
-    .summary = "nupmpc-api-example-bicycle: a kinematic bicycle follows a curved path past three obstacles in "
-               "closed loop through a running nupmpc-server: each period the client linearises the car along the "
-               "previous plan (NonlinearSession, real-time iteration) and the server plans with the obstacles as "
-               "keep-out regions. Prints per period the linearisations, passes and times, then runs the same loop "
-               "solved cold every period and compares passes and time per period.",
+    .summary =
+        "nupmpc-api-example-bicycle: a kinematic bicycle follows a curved path past three obstacles in "
+        "closed loop through a running nupmpc-server: each period the client linearises the car along the "
+        "previous plan (NonlinearSession, real-time iteration) and the server plans with the obstacles as "
+        "keep-out regions. Prints per period the linearisations, passes and times, then runs the same loop "
+        "solved cold every period and compares passes and time per period.",
     .usage = "nupmpc-api-example-bicycle [--server HOST:PORT] [--periods P] [--finite_differences]",
     .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
     .max_arguments = 0,

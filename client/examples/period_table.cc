@@ -25,8 +25,8 @@ PeriodSummary Summarise(const std::vector<PeriodReport>& reports, int skip) {
     s.median_passes = passes.size() % 2 == 1 ? passes[middle] : 0.5 * (passes[middle - 1] + passes[middle]);
   }
   if (s.periods > 0) {
-    for (double* mean : {&s.passes_per_period, &s.linearisations_per_period, &s.period_ms, &s.solve_ms,
-                         &s.linearise_ms}) {
+    for (double* mean :
+         {&s.passes_per_period, &s.linearisations_per_period, &s.period_ms, &s.solve_ms, &s.linearise_ms}) {
       *mean /= s.periods;
     }
   }
@@ -34,8 +34,8 @@ PeriodSummary Summarise(const std::vector<PeriodReport>& reports, int skip) {
 }
 
 void PrintPeriodHeader(std::FILE* out) {
-  std::fprintf(out, "%6s %5s %7s %7s %9s %10s %9s %9s  %s\n", "period", "lin", "passes", "ko_lin", "lin_ms",
-               "solve_ms", "period_ms", "defect", "");
+  std::fprintf(out, "%6s %5s %7s %7s %9s %10s %9s %9s  %s\n", "period", "lin", "passes", "ko_lin", "lin_ms", "solve_ms",
+               "period_ms", "defect", "");
 }
 
 void PrintPeriod(std::FILE* out, int period, const PeriodReport& r, const std::string& extra) {

@@ -15,9 +15,9 @@ namespace nupmpc::api_examples {
 // Means over the periods from `skip` on (the first periods of a warm run are still
 // settling: the first is always cold).
 struct PeriodSummary {
-  int skip = 0;                     // periods left out at the start
-  int periods = 0;                  // counted
-  int first_passes = 0;             // of period 0, whatever `skip`
+  int skip = 0;          // periods left out at the start
+  int periods = 0;       // counted
+  int first_passes = 0;  // of period 0, whatever `skip`
   double passes_per_period = 0.0;
   // The median is what a typical period costs: a rare degenerate solve that runs to the
   // iteration cap (thousands of passes) moves the mean, not the median.

@@ -176,8 +176,8 @@ InitialGuess RaceGuess(const Track& track, const Vehicle& vehicle, int steps, do
   InitialGuess guess;
   guess.inputs.assign(static_cast<std::size_t>(steps) * kInputs, 0.0);
   for (int n = 0; n <= steps; ++n) {
-    const double state[kStates] = {0.0, 0.0, start_speed, 0.0, std::atan(vehicle.length * track.curvature_at(n * ds)),
-                                   n * ds / start_speed};
+    const double state[kStates] = {
+        0.0, 0.0, start_speed, 0.0, std::atan(vehicle.length * track.curvature_at(n * ds)), n * ds / start_speed};
     guess.states.insert(guess.states.end(), state, state + kStates);
   }
   return guess;

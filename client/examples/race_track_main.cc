@@ -24,11 +24,12 @@ namespace {
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-api-example-race-track",
-    .summary = "nupmpc-api-example-race-track: [KL] §V-E, one minimal-time lap of the demo track through a running "
-               "nupmpc-server: the client linearises the vehicle's spatial model along each plan and sends it as a "
-               "time-varying model (NonlinearSession, SQP), the server solves. Prints lap time, bound violation, "
-               "linearisations, passes (the first, cold solve against the warm ones after it) and time per "
-               "linearisation. nupmpc-example-race-track solves the same lap in the core alone.",
+    .summary =
+        "nupmpc-api-example-race-track: [KL] §V-E, one minimal-time lap of the demo track through a running "
+        "nupmpc-server: the client linearises the vehicle's spatial model along each plan and sends it as a "
+        "time-varying model (NonlinearSession, SQP), the server solves. Prints lap time, bound violation, "
+        "linearisations, passes (the first, cold solve against the warm ones after it) and time per "
+        "linearisation. nupmpc-example-race-track solves the same lap in the core alone.",
     .usage = "nupmpc-api-example-race-track [--server HOST:PORT] [--steps K] [--max_linearisations L]",
     .environment = {{"NUPMPC_SERVER", "server address when --server is not given"}},
     .max_arguments = 0,
@@ -72,7 +73,7 @@ int main(int argc, char** argv) {
       steps, track.length(), run->lap_time, r.converged, r.linearisations, r.rejected, r.passes,
       run->max_output_violation, r.model_defect, r.last_step, r.period_ms / 1000, r.period_ms / r.linearisations,
       r.linearise_ms / r.linearisations, r.solve_ms / r.linearisations);
-  std::printf("passes: first (cold) solve %d, later (warm) solves %.1f on average\n",
-              passes.empty() ? 0 : passes[0], warm);
+  std::printf("passes: first (cold) solve %d, later (warm) solves %.1f on average\n", passes.empty() ? 0 : passes[0],
+              warm);
   return 0;
 }

@@ -13,8 +13,7 @@ absl::Status Iake::CheckApplicable(const Problem& p) {
     const ScalarPrior& prior = p.input_priors[i];
     if (prior.kind == PriorKind::kNone && !prior.has_gaussian()) {
       return absl::FailedPreconditionError(absl::StrCat(
-          "iake needs a prior on every input (its forward filter has no free inputs); input_priors[", i,
-          "] is free"));
+          "iake needs a prior on every input (its forward filter has no free inputs); input_priors[", i, "] is free"));
     }
   }
   return absl::OkStatus();
@@ -72,15 +71,23 @@ void Iake::ColdStart() {
     const ScalarPrior& p = graph_.input_prior[i];
     double centre = 0.0;
     switch (p.kind) {
-      case PriorKind::kNone: input_nup_[i] = {}; continue;
-      case PriorKind::kBox: centre = 0.5 * (p.lower + p.upper); break;
+      case PriorKind::kNone:
+        input_nup_[i] = {};
+        continue;
+      case PriorKind::kBox:
+        centre = 0.5 * (p.lower + p.upper);
+        break;
       case PriorKind::kBinary:  // [KL] §V-A: N(0.5, 1) for {0, 1}, i.e. undecided
         input_nup_[i] = {0.5 * (p.lower + p.upper),
-                         p.initial_variance > 0.0 ? p.initial_variance : (p.upper - p.lower) * (p.upper - p.lower),
-                         0.0, 0.0};
+                         p.initial_variance > 0.0 ? p.initial_variance : (p.upper - p.lower) * (p.upper - p.lower), 0.0,
+                         0.0};
         continue;
-      case PriorKind::kAtMost: centre = p.upper; break;
-      default: centre = p.lower; break;
+      case PriorKind::kAtMost:
+        centre = p.upper;
+        break;
+      default:
+        centre = p.lower;
+        break;
     }
     input_nup_[i] = {centre, 1.0, 0.0, 0.0};
   }
@@ -108,7 +115,7 @@ ScalarFactor Iake::Update(const ScalarPrior& prior, double estimate, double post
 int Iake::Iterate(PrimalIterate* out) {
   for (std::size_t i = 0; i < input_nup_.size(); ++i) {
     input_factor_[i] = std::isnan(pinned_value_[i]) ? WithGaussianPart(graph_.input_prior[i], input_nup_[i])
-                                                     : ScalarFactor::Pinned(pinned_value_[i]);
+                                                    : ScalarFactor::Pinned(pinned_value_[i]);
   }
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], row_nup_[r]);
   RunForwardFilter(graph_, input_factor_.data(), row_factor_.data(), /*keep_edges=*/true, &fw_, interrupt_);

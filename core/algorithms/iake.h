@@ -54,7 +54,7 @@ class Iake final : public OuterIteration, public InputPinning {
   bool workspace_held_ = false;
   std::vector<ScalarFactor> input_nup_, row_nup_;        ///< carried NUP parts
   std::vector<ScalarFactor> input_factor_, row_factor_;  ///< with Gaussian parts
-  std::vector<double> pinned_value_;  ///< per input scalar: NaN, or the value it is pinned to
+  std::vector<double> pinned_value_;                     ///< per input scalar: NaN, or the value it is pinned to
   double variance_floor_ = 0.0;
   bool needs_variances_ = false;  ///< an EM prior is present: the smoother computes variances
 };

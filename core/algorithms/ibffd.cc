@@ -7,16 +7,15 @@ namespace nupmpc::core {
 absl::Status Ibffd::CheckApplicable(const Problem& p) {
   for (std::size_t i = 0; i < p.input_priors.size(); ++i) {
     if (IsNonconvex(p.input_priors[i].kind)) {
-      return absl::FailedPreconditionError(absl::StrCat("ibffd decides convex priors only; input_priors[", i,
-                                                        "] is ", PriorKindName(p.input_priors[i].kind),
-                                                        " (iake handles it)"));
+      return absl::FailedPreconditionError(absl::StrCat("ibffd decides convex priors only; input_priors[", i, "] is ",
+                                                        PriorKindName(p.input_priors[i].kind), " (iake handles it)"));
     }
   }
   for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
     if (p.output_priors[i].kind != PriorKind::kNone) {
-      return absl::FailedPreconditionError(absl::StrCat(
-          "ibffd decides inputs only; output_priors[", i, "] has a ", PriorKindName(p.output_priors[i].kind),
-          " prior (use iffbdd or iake for output constraints)"));
+      return absl::FailedPreconditionError(absl::StrCat("ibffd decides inputs only; output_priors[", i, "] has a ",
+                                                        PriorKindName(p.output_priors[i].kind),
+                                                        " prior (use iffbdd or iake for output constraints)"));
     }
   }
   return absl::OkStatus();

@@ -167,7 +167,7 @@ class IbffdPolicy {
                                 ///< integrated out, z = W b, bᵀz and bᵀξ (RecordInput);
                                 ///< written by every backward sweep for the forward pass
                                 ///< after it, so not part of the carried policy
-  Eigen::MatrixXd x_pred_;   ///< M × (N+1): states of the warm start's prediction sweep
+  Eigen::MatrixXd x_pred_;      ///< M × (N+1): states of the warm start's prediction sweep
   bool has_policy_ = false;
   // The regions the policy's backward filter integrated, and how often it was shifted
   // since. ReleaseWorkspace drops the policy; AcquireWorkspace recomputes it from these:

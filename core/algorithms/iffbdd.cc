@@ -26,14 +26,14 @@ absl::Status Iffbdd::CheckApplicable(const Problem& p) {
           "iffbdd needs a Gaussian part (input weight R > 0) on every input; input_priors[", i, "] has none"));
     }
     if (!RowKindSupported(prior.kind)) {
-      return absl::FailedPreconditionError(absl::StrCat("iffbdd has no dual rule for input_priors[", i,
-                                                        "] of kind ", PriorKindName(prior.kind)));
+      return absl::FailedPreconditionError(
+          absl::StrCat("iffbdd has no dual rule for input_priors[", i, "] of kind ", PriorKindName(prior.kind)));
     }
   }
   for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
     if (!RowKindSupported(p.output_priors[i].kind)) {
-      return absl::FailedPreconditionError(absl::StrCat("iffbdd has no dual rule for output_priors[", i,
-                                                        "] of kind ", PriorKindName(p.output_priors[i].kind)));
+      return absl::FailedPreconditionError(absl::StrCat("iffbdd has no dual rule for output_priors[", i, "] of kind ",
+                                                        PriorKindName(p.output_priors[i].kind)));
     }
   }
   return absl::OkStatus();

@@ -87,8 +87,10 @@ void InteriorPointRows::AimCentrality(double trial, double sigma_mu, ScalarFacto
       const double v = (s.t + trial * s.dt) * (s.lam + trial * s.dlam);
       // Products below the box are pulled up to it, those above pulled down (at most by
       // `high`: a large product is a variable far from its bound, harmless to the step).
-      if (v < low) s.target += low - v;
-      else if (v > high) s.target += std::max(high - v, -high);
+      if (v < low)
+        s.target += low - v;
+      else if (v > high)
+        s.target += std::max(high - v, -high);
     });
     row_factor[r] = Factor(r);
   }

@@ -47,8 +47,8 @@ class Interrupt {
       : cancel_(limits.cancel),
         has_deadline_(limits.time_limit_seconds > 0.0 && limits.time_limit_seconds < kNeverSeconds) {
     if (has_deadline_) {
-      deadline_ = start + std::chrono::duration_cast<Clock::duration>(
-                              std::chrono::duration<double>(limits.time_limit_seconds));
+      deadline_ =
+          start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(limits.time_limit_seconds));
     }
     armed_ = has_deadline_ || cancel_ != nullptr;
     pass_interval_ = IntervalFor(flops_per_step);

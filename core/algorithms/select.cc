@@ -10,10 +10,14 @@ namespace {
 
 absl::Status CheckApplicable(const Problem& p, Algorithm a) {
   switch (a) {
-    case Algorithm::kIake: return Iake::CheckApplicable(p);
-    case Algorithm::kIbffd: return Ibffd::CheckApplicable(p);
-    case Algorithm::kIffbdd: return Iffbdd::CheckApplicable(p);
-    case Algorithm::kAuto: break;
+    case Algorithm::kIake:
+      return Iake::CheckApplicable(p);
+    case Algorithm::kIbffd:
+      return Ibffd::CheckApplicable(p);
+    case Algorithm::kIffbdd:
+      return Iffbdd::CheckApplicable(p);
+    case Algorithm::kAuto:
+      break;
   }
   return absl::InternalError("CheckApplicable(kAuto)");
 }
@@ -33,14 +37,17 @@ absl::StatusOr<Algorithm> SelectAlgorithm(const Problem& p, Algorithm requested)
       "constraint (give every input a prior, e.g. a weight R > 0)");
 }
 
-absl::StatusOr<std::unique_ptr<OuterIteration>> MakeOuterIteration(const Problem& p,
-                                                                    const SolverOptions& options) {
+absl::StatusOr<std::unique_ptr<OuterIteration>> MakeOuterIteration(const Problem& p, const SolverOptions& options) {
   NUPMPC_ASSIGN_OR_RETURN(const Algorithm a, SelectAlgorithm(p, options.algorithm));
   switch (a) {
-    case Algorithm::kIake: return std::unique_ptr<OuterIteration>(new Iake(p, options));
-    case Algorithm::kIbffd: return std::unique_ptr<OuterIteration>(new Ibffd(p, options));
-    case Algorithm::kIffbdd: return std::unique_ptr<OuterIteration>(new Iffbdd(p, options));
-    case Algorithm::kAuto: break;
+    case Algorithm::kIake:
+      return std::unique_ptr<OuterIteration>(new Iake(p, options));
+    case Algorithm::kIbffd:
+      return std::unique_ptr<OuterIteration>(new Ibffd(p, options));
+    case Algorithm::kIffbdd:
+      return std::unique_ptr<OuterIteration>(new Iffbdd(p, options));
+    case Algorithm::kAuto:
+      break;
   }
   return absl::InternalError("SelectAlgorithm returned kAuto");
 }

@@ -17,7 +17,7 @@ namespace nupmpc::core {
 absl::StatusOr<Algorithm> SelectAlgorithm(const Problem& problem, Algorithm requested);
 
 absl::StatusOr<std::unique_ptr<OuterIteration>> MakeOuterIteration(const Problem& problem,
-                                                                    const SolverOptions& options);
+                                                                   const SolverOptions& options);
 
 }  // namespace nupmpc::core
 

@@ -10,9 +10,10 @@ namespace {
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-example-corridor",
-    .summary = "nupmpc-example-corridor: [KL] §V-B / Fig. 20, the five input versions on one corridor. Prints "
-               "the corridor violation and each version's structural counts and writes corridor.csv into "
-               "--out_dir.",
+    .summary =
+        "nupmpc-example-corridor: [KL] §V-B / Fig. 20, the five input versions on one corridor. Prints "
+        "the corridor violation and each version's structural counts and writes corridor.csv into "
+        "--out_dir.",
     .usage = "nupmpc-example-corridor [--out_dir DIR]",
     .max_arguments = 0,
 };

@@ -15,11 +15,12 @@ using nupmpc::examples::CsvColumns;
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-example-dac",
-    .summary = "nupmpc-example-dac: [KL] §V-A, Figs. 2, 18, 19, the digital-to-analogue converter. Writes into "
-               "--out_dir dac_long_2hz.csv and dac_long_40hz.csv (K = 450, one plan each, EM with a 2000-pass "
-               "budget, rounded), dac_online.csv (receding horizon 8: IAKE-EM vs exhaustive search, 300 steps) "
-               "and dac_fig18.csv (one K = 300 plan vs the exhaustive horizon-8 controller on a 5 Hz target); "
-               "prints MSE, passes and times, and the Fig. 18 comparison at 2, 5 and 8 Hz.",
+    .summary =
+        "nupmpc-example-dac: [KL] §V-A, Figs. 2, 18, 19, the digital-to-analogue converter. Writes into "
+        "--out_dir dac_long_2hz.csv and dac_long_40hz.csv (K = 450, one plan each, EM with a 2000-pass "
+        "budget, rounded), dac_online.csv (receding horizon 8: IAKE-EM vs exhaustive search, 300 steps) "
+        "and dac_fig18.csv (one K = 300 plan vs the exhaustive horizon-8 controller on a 5 Hz target); "
+        "prints MSE, passes and times, and the Fig. 18 comparison at 2, 5 and 8 Hz.",
     .usage = "nupmpc-example-dac [--out_dir DIR]",
     .max_arguments = 0,
 };
@@ -64,8 +65,8 @@ int main(int argc, char** argv) {
     auto long300 = ex::DacLongPlan(kSteps, kOnlineVariance, hz, kBudget, true);
     if (!long300.ok()) return 1;
     const ex::DacExhaustiveRun exhaustive = ex::RunDacExhaustive(kWindow, kSteps, hz);
-    std::printf("Fig. 18 at %.0f Hz: long plan K=%d MSE %.4e vs exhaustive K=%d online %.4e (ratio %.3f)\n", hz,
-                kSteps, long300->mse, kWindow, exhaustive.mse, long300->mse / exhaustive.mse);
+    std::printf("Fig. 18 at %.0f Hz: long plan K=%d MSE %.4e vs exhaustive K=%d online %.4e (ratio %.3f)\n", hz, kSteps,
+                long300->mse, kWindow, exhaustive.mse, long300->mse / exhaustive.mse);
     if (hz != kFig18Hz) continue;
     const absl::Status written =
         ex::WriteCsv(dir + "/dac_fig18.csv", {{"step", Steps(kSteps, 1)},
@@ -74,11 +75,8 @@ int main(int argc, char** argv) {
                                               {"exhaustive_output", exhaustive.outputs}});
     if (!written.ok()) return 1;
   }
-  const CsvColumns columns = {{"step", Steps(kSteps, 1)},
-                              {"target", online->target},
-                              {"nup_output", online->nup_outputs},
-                              {"exhaustive_output", online->exhaustive_outputs},
-                              {"nup_input", online->nup_inputs},
-                              {"exhaustive_input", online->exhaustive_inputs}};
+  const CsvColumns columns = {{"step", Steps(kSteps, 1)},          {"target", online->target},
+                              {"nup_output", online->nup_outputs}, {"exhaustive_output", online->exhaustive_outputs},
+                              {"nup_input", online->nup_inputs},   {"exhaustive_input", online->exhaustive_inputs}};
   return ex::WriteCsv(dir + "/dac_online.csv", columns).ok() ? 0 : 1;
 }

@@ -11,9 +11,10 @@ namespace {
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-example-flappy-bird",
-    .summary = "nupmpc-example-flappy-bird: [KL] §V-C / Fig. 21, K = 300 with five double-slit walls. Flies "
-               "eight random layouts, prints each one's slit violation and passes, and writes layout 1 into "
-               "--out_dir as flappy_bird.csv (height and flaps) and flappy_walls.csv.",
+    .summary =
+        "nupmpc-example-flappy-bird: [KL] §V-C / Fig. 21, K = 300 with five double-slit walls. Flies "
+        "eight random layouts, prints each one's slit violation and passes, and writes layout 1 into "
+        "--out_dir as flappy_bird.csv (height and flaps) and flappy_walls.csv.",
     .usage = "nupmpc-example-flappy-bird [--out_dir DIR]",
     .max_arguments = 0,
 };
@@ -48,8 +49,8 @@ int main(int argc, char** argv) {
     }
     const bool ok =
         ex::WriteCsv(dir + "/flappy_bird.csv", {{"step", Eigen::VectorXd::LinSpaced(kSteps + 1, 0, kSteps)},
-                                               {"height", run->height},
-                                               {"flap", run->flaps}})
+                                                {"height", run->height},
+                                                {"flap", run->flaps}})
             .ok() &&
         ex::WriteCsv(dir + "/flappy_walls.csv",
                      {{"first_step", first}, {"width", width}, {"upper_low", low}, {"separation", separation}})

@@ -11,9 +11,10 @@ namespace {
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-example-obstacle-avoidance",
-    .summary = "nupmpc-example-obstacle-avoidance: [KL] §V-D / Fig. 23, planning around keep-out regions (one "
-               "circle; mixed shapes). Prints clearance, goal error, linearisations and time, and writes "
-               "obstacles_single.csv, obstacles_mixed.csv and obstacles_regions.csv into --out_dir.",
+    .summary =
+        "nupmpc-example-obstacle-avoidance: [KL] §V-D / Fig. 23, planning around keep-out regions (one "
+        "circle; mixed shapes). Prints clearance, goal error, linearisations and time, and writes "
+        "obstacles_single.csv, obstacles_mixed.csv and obstacles_regions.csv into --out_dir.",
     .usage = "nupmpc-example-obstacle-avoidance [--out_dir DIR]",
     .max_arguments = 0,
 };

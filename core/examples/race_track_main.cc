@@ -17,10 +17,11 @@ namespace {
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-example-race-track",
-    .summary = "nupmpc-example-race-track: [KL] §V-E / Fig. 25, one minimal-time lap of the demo track. Writes "
-               "race_track.csv into --out_dir (the race line and the track's edges in the plane, the speed and "
-               "the constrained outputs along s) and prints lap time, linearisations, passes, constraint and "
-               "model errors, the centre-line reference lap and the solve time.",
+    .summary =
+        "nupmpc-example-race-track: [KL] §V-E / Fig. 25, one minimal-time lap of the demo track. Writes "
+        "race_track.csv into --out_dir (the race line and the track's edges in the plane, the speed and "
+        "the constrained outputs along s) and prints lap time, linearisations, passes, constraint and "
+        "model errors, the centre-line reference lap and the solve time.",
     .usage = "nupmpc-example-race-track [--out_dir DIR] [--steps K]",
     .max_arguments = 0,
 };
@@ -47,8 +48,7 @@ int main(int argc, char** argv) {
       "race track K=%d length=%.3f: lap=%.4f s (centre-line point mass %.4f s) converged=%d linearisations=%d "
       "(rejected %d) passes=%d max_output_violation=%.1e model_defect=%.1e last_step=%.1e time=%.2f s\n",
       steps, track.length(), run->lap_time, centre_line, summary.converged, summary.linearisations, summary.rejected,
-      summary.inner_iterations, run->max_output_violation, run->model_defect, summary.last_step,
-      summary.solve_seconds);
+      summary.inner_iterations, run->max_output_violation, run->model_defect, summary.last_step, summary.solve_seconds);
   const Eigen::MatrixXd& x = run->plan.states;
   const int rows = steps + 1;
   Eigen::VectorXd s(rows), px(rows), py(rows), lx(rows), ly(rows), rx(rows), ry(rows), a_total(rows);
@@ -69,20 +69,19 @@ int main(int argc, char** argv) {
     model.output(n, x.row(n).transpose(), &y, &C);
     a_total(n) = nupmpc::examples::TotalAccelerationSquared(y);
   }
-  const absl::Status written = nupmpc::examples::WriteCsv(
-      dir + "/race_track.csv", {{"s", s},
-                                {"x", px},
-                                {"y", py},
-                                {"left_x", lx},
-                                {"left_y", ly},
-                                {"right_x", rx},
-                                {"right_y", ry},
-                                {"z", x.col(0)},
-                                {"speed", x.col(2)},
-                                {"a", x.col(3)},
-                                {"delta", x.col(4)},
-                                {"t", x.col(5)},
-                                {"a_total_sq", a_total}});
+  const absl::Status written = nupmpc::examples::WriteCsv(dir + "/race_track.csv", {{"s", s},
+                                                                                    {"x", px},
+                                                                                    {"y", py},
+                                                                                    {"left_x", lx},
+                                                                                    {"left_y", ly},
+                                                                                    {"right_x", rx},
+                                                                                    {"right_y", ry},
+                                                                                    {"z", x.col(0)},
+                                                                                    {"speed", x.col(2)},
+                                                                                    {"a", x.col(3)},
+                                                                                    {"delta", x.col(4)},
+                                                                                    {"t", x.col(5)},
+                                                                                    {"a_total_sq", a_total}});
   if (!written.ok()) {
     std::fprintf(stderr, "%s\n", written.ToString().c_str());
     return 1;

@@ -15,7 +15,9 @@ constexpr Index kBlock = kCholeskyBlock;
 
 absl::Status BlockedCholesky(Eigen::Ref<Eigen::MatrixXd> a, const Interrupt& stop, absl::string_view what) {
   const Index n = a.rows();
-  const auto where = [&](Index column) { return absl::StrCat("factorising ", what, " (column ", column, " of ", n, ")"); };
+  const auto where = [&](Index column) {
+    return absl::StrCat("factorising ", what, " (column ", column, " of ", n, ")");
+  };
   for (Index j = 0; j < n; j += kBlock) {
     if (stop.Requested()) return stop.Stopped(where(j));
     const Index b = std::min(kBlock, n - j), rest = n - j - b;
@@ -34,7 +36,8 @@ absl::Status BlockedCholesky(Eigen::Ref<Eigen::MatrixXd> a, const Interrupt& sto
       const Index w = std::min(kBlock, rest - s), below = rest - s - w;
       const auto strip = panel.middleRows(s, w);
       a.block(j + b + s, j + b + s, w, w).selfadjointView<Eigen::Lower>().rankUpdate(strip, -1.0);
-      if (below > 0) a.block(j + b + s + w, j + b + s, below, w).noalias() -= panel.bottomRows(below) * strip.transpose();
+      if (below > 0)
+        a.block(j + b + s + w, j + b + s, below, w).noalias() -= panel.bottomRows(below) * strip.transpose();
     }
   }
   return absl::OkStatus();
@@ -45,8 +48,8 @@ absl::Status InverseFromCholesky(Eigen::Ref<Eigen::MatrixXd> a, Eigen::MatrixXd*
   const Index n = a.rows();
   Eigen::MatrixXd& t = *row_block;
   if (t.rows() < kBlock || t.cols() < n + kBlock) {
-    return absl::InternalError(absl::StrCat("InverseFromCholesky: scratch is ", t.rows(), "x", t.cols(), ", needs ",
-                                            kBlock, "x", n + kBlock));
+    return absl::InternalError(
+        absl::StrCat("InverseFromCholesky: scratch is ", t.rows(), "x", t.cols(), ", needs ", kBlock, "x", n + kBlock));
   }
   const auto where = [&](const char* step, Index row) {
     return absl::StrCat("inverting ", what, " (", step, ", row ", row, " of ", n, ")");

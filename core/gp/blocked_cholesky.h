@@ -8,10 +8,9 @@
 // kBlock × kBlock × P multiply-adds, with an Interrupt check between blocks, so that a
 // worker is free within one such block after the deadline.
 
-#include "absl/strings/string_view.h"
-
 #include "Eigen/Core"
 #include "absl/status/status.h"
+#include "absl/strings/string_view.h"
 #include "core/gp/interrupt.h"
 
 namespace nupmpc::gp {

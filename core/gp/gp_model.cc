@@ -32,9 +32,7 @@ absl::Status Validate(const SeArdKernel& kernel, int dimension) {
   return absl::OkStatus();
 }
 
-double LinGp::Mean(const Eigen::VectorXd& delta) const {
-  return mean(0) + mean.tail(mean.size() - 1).dot(delta);
-}
+double LinGp::Mean(const Eigen::VectorXd& delta) const { return mean(0) + mean.tail(mean.size() - 1).dot(delta); }
 
 double LinGp::Variance(const Eigen::VectorXd& delta) const {
   const Eigen::Index d = delta.size();
@@ -289,8 +287,7 @@ void GpModel::PivotCrossCovariances(const Eigen::VectorXd& x, Eigen::MatrixXd* g
   g->resize(num_pivots(), d + 1);
   PivotKernelValues(x, g->col(0));
   for (int i = 0; i < d; ++i) {
-    g->col(1 + i) =
-        (-inverse_squared_lengths_(i) * g->col(0).array() * (x(i) - pivot_inputs_.col(i).array())).matrix();
+    g->col(1 + i) = (-inverse_squared_lengths_(i) * g->col(0).array() * (x(i) - pivot_inputs_.col(i).array())).matrix();
   }
 }
 
@@ -323,15 +320,13 @@ void GpModel::Predict(const Eigen::VectorXd& x, double* mean, double* variance) 
   *variance = std::max(0.0, kernel_.signal_variance - z.squaredNorm());
 }
 
-int GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
-                       LinearisationScratch* scratch) const {
+int GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out, LinearisationScratch* scratch) const {
   const int d = dimension(), c = d + 1;
   out->resize(points.rows());
   std::vector<int>& full = scratch->full_path;
   full.clear();
   for (int p = 0; p < static_cast<int>(points.rows()); ++p) {
-    if (num_pivots() == 0 ||
-        !LineariseFromPivots(points.row(p).transpose(), &(*out)[p], scratch)) {
+    if (num_pivots() == 0 || !LineariseFromPivots(points.row(p).transpose(), &(*out)[p], scratch)) {
       full.push_back(p);
     }
   }
@@ -348,8 +343,8 @@ int GpModel::Linearise(const Eigen::MatrixXd& points, std::vector<LinGp>* out,
   const bool low_rank = basis_.cols() > 0;
   double inverse_noise = 1.0;
   if (low_rank) {
-    projection.noalias() = basis_.transpose() * w;                     // A = Qᵀ W
-    w.noalias() -= basis_ * projection;                                // W⊥ = W - Q A
+    projection.noalias() = basis_.transpose() * w;                          // A = Qᵀ W
+    w.noalias() -= basis_ * projection;                                     // W⊥ = W - Q A
     basis_factor_.triangularView<Eigen::Lower>().solveInPlace(projection);  // L_G⁻¹ A
     inverse_noise = 1.0 / kernel_.noise_variance;
   } else {

@@ -25,9 +25,9 @@
 namespace nupmpc::gp {
 
 struct SeArdKernel {
-  double signal_variance = 1.0;  ///< σ_f² > 0
+  double signal_variance = 1.0;   ///< σ_f² > 0
   Eigen::VectorXd length_scales;  ///< ℓ_i > 0, one per regressor
-  double noise_variance = 1e-2;  ///< σ_n² > 0
+  double noise_variance = 1e-2;   ///< σ_n² > 0
 };
 absl::Status Validate(const SeArdKernel& kernel, int dimension);
 
@@ -38,13 +38,13 @@ struct LinearisationScratch {
   Eigen::MatrixXd pivot_cross;     ///< the fast path's [k, ∇k](Z, x) columns, then Φ: m × (d+1)
   Eigen::MatrixXd pivot_weighted;  ///< M Φ
   Eigen::VectorXd means;           ///< [μ; ∇μ] of the O(N r) path's points, stacked
-  std::vector<int> full_path;   ///< the points that need the O(N r) path
+  std::vector<int> full_path;      ///< the points that need the O(N r) path
 };
 
 // The linGP at one point: m̂ (size d+1) and V̂ ((d+1)×(d+1), symmetric PSD).
 struct LinGp {
-  Eigen::VectorXd mean;        ///< m̂ = [μ(x); ∇μ(x)]
-  Eigen::MatrixXd covariance;  ///< V̂; V̂(0,0) = σ²(x), the exact predictive variance
+  Eigen::VectorXd mean;                                 ///< m̂ = [μ(x); ∇μ(x)]
+  Eigen::MatrixXd covariance;                           ///< V̂; V̂(0,0) = σ²(x), the exact predictive variance
   double Mean(const Eigen::VectorXd& delta) const;      ///< m̂ᵀ[1; Δ]
   double Variance(const Eigen::VectorXd& delta) const;  ///< [1; Δ]ᵀ V̂ [1; Δ]
 };
@@ -153,8 +153,7 @@ class GpModel {
   Eigen::MatrixXd pivot_inputs_;             ///< Z: m × d
   Eigen::MatrixXd pivot_factor_;             ///< L_Z: the factor's rows at Z, lower triangular m × m
   Eigen::VectorXd pivot_mean_weights_;       ///< Lᵀ α
-  Eigen::MatrixXd pivot_data_term_;          ///< M = Lᵀ (L Lᵀ + σ_n² I)⁻¹ L = I - σ_n² (LᵀL + σ_n² I)⁻¹
-
+  Eigen::MatrixXd pivot_data_term_;  ///< M = Lᵀ (L Lᵀ + σ_n² I)⁻¹ L = I - σ_n² (LᵀL + σ_n² I)⁻¹
 };
 
 // The covariance matrix K(X, X) (without noise) of a kernel on the rows of `inputs`.

@@ -12,8 +12,8 @@ GpMpcSession::GpMpcSession(std::shared_ptr<const GpModel> model, GpMpcProblem pr
     : model_(std::move(model)), problem_(std::move(problem)) {}
 
 absl::StatusOr<std::unique_ptr<GpMpcSession>> GpMpcSession::Create(std::shared_ptr<const GpModel> model,
-                                                                    GpMpcProblem problem, ScpOptions options,
-                                                                    const Eigen::VectorXd& reference) {
+                                                                   GpMpcProblem problem, ScpOptions options,
+                                                                   const Eigen::VectorXd& reference) {
   if (model == nullptr) return absl::InvalidArgumentError("model: must not be null");
   NUPMPC_RETURN_IF_ERROR(Validate(problem));
   const int H = problem.horizon, l = problem.layout.output_lags, m = problem.layout.input_lags;
@@ -68,7 +68,8 @@ absl::Status GpMpcSession::Apply(const core::StepUpdate& update) {
           absl::StrCat("reference: expected 1 or ", H, " values (the horizon), got ", r.size()));
     }
     for (Eigen::Index n = 0; n < r.size(); ++n) {
-      if (!std::isfinite(r(n))) return absl::InvalidArgumentError(absl::StrCat("reference[", n, "] = ", r(n), ": must be finite"));
+      if (!std::isfinite(r(n)))
+        return absl::InvalidArgumentError(absl::StrCat("reference[", n, "] = ", r(n), ": must be finite"));
     }
     // The reference lives in the output means of steps 1..H (see the header).
     for (int n = 0; n < H; ++n) shape_.mutable_output_prior(n + 1, 0).mean = r.size() == H ? r(n) : r(0);

@@ -194,15 +194,24 @@ int AfterIteration(void* instance, const lbfgsfloatval_t* /*theta*/, const lbfgs
 
 std::string_view LbfgsOutcome(int code) {
   switch (code) {
-    case LBFGS_SUCCESS: return "success";
-    case LBFGS_STOP: return "stopping test met";
-    case LBFGS_ALREADY_MINIMIZED: return "already minimal";
-    case LBFGSERR_MAXIMUMITERATION: return "iteration limit";
-    case LBFGSERR_MAXIMUMLINESEARCH: return "line search: evaluation limit";
-    case LBFGSERR_MINIMUMSTEP: return "line search: step below minimum";
-    case LBFGSERR_ROUNDING_ERROR: return "line search: rounding errors";
-    case LBFGSERR_INCREASEGRADIENT: return "line search: gradient increases";
-    default: return "line search failed";
+    case LBFGS_SUCCESS:
+      return "success";
+    case LBFGS_STOP:
+      return "stopping test met";
+    case LBFGS_ALREADY_MINIMIZED:
+      return "already minimal";
+    case LBFGSERR_MAXIMUMITERATION:
+      return "iteration limit";
+    case LBFGSERR_MAXIMUMLINESEARCH:
+      return "line search: evaluation limit";
+    case LBFGSERR_MINIMUMSTEP:
+      return "line search: step below minimum";
+    case LBFGSERR_ROUNDING_ERROR:
+      return "line search: rounding errors";
+    case LBFGSERR_INCREASEGRADIENT:
+      return "line search: gradient increases";
+    default:
+      return "line search failed";
   }
 }
 
@@ -230,8 +239,7 @@ absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, cons
                                     result.negative_log_likelihood, result.gradient_norm, outcome, result.seconds);
     return result;
   };
-  absl::StatusOr<double> first =
-      NegativeLogLikelihood(inputs, targets, initial, nullptr, run.stop, &run.workspace);
+  absl::StatusOr<double> first = NegativeLogLikelihood(inputs, targets, initial, nullptr, run.stop, &run.workspace);
   if (!first.ok() && FitRun::Interrupted(first.status())) {
     // Stopped inside the first evaluation: the start, with what is known of it.
     result.kernel = initial;
@@ -252,7 +260,7 @@ absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, cons
   lbfgs_parameter_init(&parameters);
   parameters.max_iterations = options.max_iterations;
   parameters.linesearch = LBFGS_LINESEARCH_BACKTRACKING_WOLFE;  // copes with +inf (see EvaluateNll)
-  parameters.epsilon = 0.0;  // AfterIteration decides convergence
+  parameters.epsilon = 0.0;                                     // AfterIteration decides convergence
   parameters.past = 0;
   lbfgsfloatval_t last_nll = 0.0;
   const int code = lbfgs(n, theta.get(), &last_nll, EvaluateNll, AfterIteration, &run, &parameters);

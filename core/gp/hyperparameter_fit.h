@@ -46,7 +46,7 @@ struct FitResult {
   // was known (then also the NLLs, if it came inside the first evaluation).
   double gradient_norm = 0.0;
   double seconds = 0.0;
-  std::string report;      ///< one line: iterations, NLL before and after, how it ended
+  std::string report;  ///< one line: iterations, NLL before and after, how it ended
 };
 
 // The buffers of one likelihood evaluation (three P × P matrices at most), reused by every

@@ -7,10 +7,10 @@
 
 #include <atomic>
 #include <chrono>
-#include "absl/strings/string_view.h"
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/string_view.h"
 
 namespace nupmpc::gp {
 
@@ -24,15 +24,14 @@ struct Interrupt {
     Interrupt stop;
     stop.cancel = cancel;
     if (seconds > 0.0) {
-      stop.deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+      stop.deadline =
+          Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
     }
     return stop;
   }
 
   bool Cancelled() const { return cancel != nullptr && cancel->load(std::memory_order_relaxed); }
-  bool Requested() const {
-    return Cancelled() || (deadline != Clock::time_point::max() && Clock::now() >= deadline);
-  }
+  bool Requested() const { return Cancelled() || (deadline != Clock::time_point::max() && Clock::now() >= deadline); }
   // CANCELLED or DEADLINE_EXCEEDED (whichever fired; call after Requested() returned true)
   // saying where the work stopped, e.g. "factorising K + σ_n² I (column 1024 of 5000)".
   absl::Status Stopped(absl::string_view where) const {

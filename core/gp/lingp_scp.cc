@@ -14,7 +14,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double SecondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
-constexpr int kOutputs = 4;  // ȳ (tracking + trust), u (box ∩ trust), ȳ + κσ, ȳ - κσ
+constexpr int kOutputs = 4;                   // ȳ (tracking + trust), u (box ∩ trust), ȳ + κσ, ȳ - κσ
 constexpr double kMinRelativeRadius = 1e-12;  // of max(1, |nominal|): the narrowest trust box
 
 // Gradient of σ = sqrt(ξᵀ V̂ ξ) at ξ₀ = [1; 0] with respect to Δx: V̂[1:, 0] / σ.
@@ -227,8 +227,8 @@ void LinGpScp::ShiftWarmStart() {
 }
 
 absl::StatusOr<ScpSummary> LinGpScp::Solve(const Eigen::VectorXd& past_outputs, const Eigen::VectorXd& past_inputs,
-                                          const Eigen::VectorXd& reference, ScpPlan* plan,
-                                          const core::SolveLimits* outer_limits) {
+                                           const Eigen::VectorXd& reference, ScpPlan* plan,
+                                           const core::SolveLimits* outer_limits) {
   const int l = p_.layout.output_lags, m = p_.layout.input_lags, H = p_.horizon;
   if (past_outputs.size() != l) {
     return absl::InvalidArgumentError(absl::StrCat("past_outputs: expected ", l, " values, got ", past_outputs.size()));

@@ -39,8 +39,8 @@ namespace nupmpc::gp {
 
 struct GpMpcProblem {
   NarxLayout layout;
-  int horizon = 12;                 ///< H
-  double output_weight = 10.0;      ///< Q
+  int horizon = 12;                  ///< H
+  double output_weight = 10.0;       ///< Q
   double input_change_weight = 0.1;  ///< R
   double input_min = -1.0, input_max = 1.0;
   double rate_min = -0.5, rate_max = 0.5;
@@ -76,14 +76,14 @@ struct ScpSummary {
   // How the solve ended in the core's terms: converged, iteration limit (also when the
   // trust region collapsed without an acceptable step), time limit or cancelled.
   core::SolveStatus status = core::SolveStatus::kIterationLimit;
-  int iterations = 0;        ///< SCP iterations (subproblems solved)
-  int accepted = 0;          ///< of which accepted
+  int iterations = 0;  ///< SCP iterations (subproblems solved)
+  int accepted = 0;    ///< of which accepted
   // The returned plan was computed in this solve: some step was accepted or the SCP
   // converged (else it is the warm plan shifted, or the cold start's constant guess).
   bool has_plan = false;
-  int inner_passes = 0;      ///< NUP message-passing passes over all subproblems
-  double merit = 0.0;        ///< exact-penalty cost ϕ of the returned plan (exact GP)
-  double objective = 0.0;    ///< its tracking part J
+  int inner_passes = 0;        ///< NUP message-passing passes over all subproblems
+  double merit = 0.0;          ///< exact-penalty cost ϕ of the returned plan (exact GP)
+  double objective = 0.0;      ///< its tracking part J
   double max_violation = 0.0;  ///< largest chance/terminal constraint violation (exact GP)
   double trust_radius = 0.0;
   double inner_seconds = 0.0;  ///< in the NUP solves (subproblem (16) alone)
@@ -111,8 +111,7 @@ class LinGpScp {
   void ResetWarmStart() { has_warm_ = false; }
 
   // ϕ of inputs under the exact GP (for baselines and tests); also fills means/sigmas.
-  double ExactMerit(const Eigen::VectorXd& inputs, ScpPlan* evaluated, double* objective,
-                    double* max_violation) const;
+  double ExactMerit(const Eigen::VectorXd& inputs, ScpPlan* evaluated, double* objective, double* max_violation) const;
 
  private:
   LinGpScp(const GpModel* model, GpMpcProblem problem, ScpOptions options, core::Problem shape);

@@ -33,17 +33,19 @@ template <typename F>
 decltype(auto) DispatchStateSize(int M, F&& f) {
   switch (M) {
 #define NUPMPC_CASE(K) \
-  case K: return std::forward<F>(f).template operator()<K>();
+  case K:              \
+    return std::forward<F>(f).template operator()<K>();
     NUPMPC_FIXED_STATE_SIZES(NUPMPC_CASE)
 #undef NUPMPC_CASE
-    default: return std::forward<F>(f).template operator()<Eigen::Dynamic>();
+    default:
+      return std::forward<F>(f).template operator()<Eigen::Dynamic>();
   }
 }
 
 // The state size to run an augmented model at. Eigen's fixed-size kernels are fastest at
 // whole multiples of the SIMD width: a 15×15 time update with its rank-1 updates is slower
-// than the same work at 16×16 (13, 14 → 16 and 9–11 → 12 likewise). Padding with inert states (no dynamics, no input, no observation, zero
-// variance) leaves every message on the real states unchanged.
+// than the same work at 16×16 (13, 14 → 16 and 9–11 → 12 likewise). Padding with inert states (no dynamics, no input,
+// no observation, zero variance) leaves every message on the real states unchanged.
 constexpr int PaddedStateSize(int M) {
   if (M >= 9 && M <= 11) return 12;
   if (M >= 13 && M <= 15) return 16;

@@ -127,8 +127,7 @@ void Filter(const FactorGraph& graph, const ScalarFactor* row_factor, FactorOf&&
 }
 
 template <int MS>
-void Means(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilterWorkspace* ws,
-           Interrupt* interrupt) {
+void Means(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilterWorkspace* ws, Interrupt* interrupt) {
   const int M = graph.M, N = graph.N;
   StopPoll stop(interrupt);
   FilterScratch<MS> scratch(ws);
@@ -142,9 +141,9 @@ void Means(const FactorGraph& graph, const ScalarFactor* row_factor, ForwardFilt
       const int unit = graph.row_unit[r];
       const double yhat =
           graph.row_d[r] +
-          (unit >= 0 ? m(unit)
-                     : ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1)
-                           .dot(m));
+          (unit >= 0
+               ? m(unit)
+               : ConstView<MS, 1>(graph.c_pool.data() + static_cast<Eigen::Index>(graph.row_c[r]) * M, M, 1).dot(m));
       ws->yhat(r) = yhat;
       if (r + kPrefetchRows < ws->v.cols()) PrefetchForRead(ws->v.col(r + kPrefetchRows).data(), M);
       if (f.empty()) {
@@ -190,8 +189,7 @@ void ForwardFilterWorkspace::Resize(const FactorGraph& graph, bool keep_edges) {
   BD.setZero(M, L);
 }
 
-void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      ForwardFilterWorkspace* ws) {
+void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor, ForwardFilterWorkspace* ws) {
   for (int n = 0; n < graph.N; ++n) {
     for (int l = 0; l < graph.L; ++l) {
       const MomentForm mf = ToMoment(input_factor[n * graph.L + l]);
@@ -201,9 +199,8 @@ void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor
   }
 }
 
-void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws,
-                      Interrupt* interrupt) {
+void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor, const ScalarFactor* row_factor,
+                      bool keep_edges, ForwardFilterWorkspace* ws, Interrupt* interrupt) {
   if (input_factor != nullptr) LoadInputMoments(graph, input_factor, ws);
   const auto given = [row_factor](int r, double, double, const double*) { return row_factor[r]; };
   DispatchStateSize(graph.M, [&]<int MS>() { Filter<MS>(graph, row_factor, given, keep_edges, ws, interrupt); });

@@ -36,9 +36,8 @@ struct ForwardFilterWorkspace {
 // Degenerate rows (prior variance ≈ 0 with a pinned factor, §12.2) are skipped.
 // `interrupt` (may be null) is polled once per time step (interrupt.h); when it fires the
 // filter returns at once and the workspace holds a partial pass.
-void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      const ScalarFactor* row_factor, bool keep_edges, ForwardFilterWorkspace* ws,
-                      Interrupt* interrupt = nullptr);
+void RunForwardFilter(const FactorGraph& graph, const ScalarFactor* input_factor, const ScalarFactor* row_factor,
+                      bool keep_edges, ForwardFilterWorkspace* ws, Interrupt* interrupt = nullptr);
 
 // As RunForwardFilter (inputs as loaded last), but the factor of every row with a
 // constraint kind is chosen when the filter reaches it, from the row's prediction before
@@ -62,8 +61,7 @@ void RunForwardMeans(const FactorGraph& graph, const ScalarFactor* row_factor, F
 
 // Writes the moment form of the input factors into ws->mU / ws->VU. Separate because
 // IFFBDD's inputs stay fixed across iterations.
-void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor,
-                      ForwardFilterWorkspace* ws);
+void LoadInputMoments(const FactorGraph& graph, const ScalarFactor* input_factor, ForwardFilterWorkspace* ws);
 
 }  // namespace nupmpc::core
 

@@ -12,10 +12,10 @@ namespace nupmpc::core {
 // ([KL] Table III, re-indexed; nup-algorithms.md §3.2). Runs after RunForwardFilter with
 // keep_edges = true on the same factors.
 struct SmootherWorkspace {
-  Eigen::MatrixXd mU, VU;   ///< L × N posterior of the inputs
-  Eigen::VectorXd mY, VY;   ///< per row posterior of cᵀx + d
-  Eigen::VectorXd mX0;      ///< posterior mean of x[0]
-  Eigen::MatrixXd VX0;      ///< posterior covariance of x[0] (with variances)
+  Eigen::MatrixXd mU, VU;  ///< L × N posterior of the inputs
+  Eigen::VectorXd mY, VY;  ///< per row posterior of cᵀx + d
+  Eigen::VectorXd mX0;     ///< posterior mean of x[0]
+  Eigen::MatrixXd VX0;     ///< posterior covariance of x[0] (with variances)
   // Scratch.
   Eigen::VectorXd xi, mX, z, Btxi;
   Eigen::MatrixXd W, VX, WV, AtW;

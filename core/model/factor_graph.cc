@@ -12,12 +12,8 @@ namespace {
 bool HasTerminal(const Problem& p) { return p.terminal.has_value(); }
 
 // Pool row of output k at step n.
-int OutputPoolRow(const Problem& p, int n, int k) {
-  return p.C.size() == 1 ? k : n * p.num_outputs + k;
-}
-int NumOutputPoolRows(const Problem& p) {
-  return p.C.size() == 1 ? p.num_outputs : (p.horizon + 1) * p.num_outputs;
-}
+int OutputPoolRow(const Problem& p, int n, int k) { return p.C.size() == 1 ? k : n * p.num_outputs + k; }
+int NumOutputPoolRows(const Problem& p) { return p.C.size() == 1 ? p.num_outputs : (p.horizon + 1) * p.num_outputs; }
 
 ScalarPrior GaussianPartOnly(const ScalarPrior& p) {
   return p.has_gaussian() ? ScalarPrior::Gaussian(p.mean, p.variance) : ScalarPrior::Free();
@@ -155,8 +151,8 @@ void RefreshFactorGraph(const Problem& p, FactorGraph* graph) {
         break;
       case RowOrigin::Type::kTerminal:
         g.row_d[r] = 0.0;
-        g.row_prior[r] = terminal_scale(o.index) > 0.0 ? ScalarPrior::Gaussian(terminal_mean(o.index), 1.0)
-                                                        : ScalarPrior::Free();
+        g.row_prior[r] =
+            terminal_scale(o.index) > 0.0 ? ScalarPrior::Gaussian(terminal_mean(o.index), 1.0) : ScalarPrior::Free();
         break;
     }
   }

@@ -28,20 +28,20 @@ struct RowOrigin {
 // Built once per session shape (allocates); Refresh() copies new values of the same
 // shape into it without allocating.
 struct FactorGraph {
-  int M = 0;        ///< state dimension (M + L when augmented, padded: PaddedStateSize)
-  int L = 0;        ///< inputs per step
-  int N = 0;        ///< horizon
-  int base_M = 0;   ///< the problem's M
+  int M = 0;       ///< state dimension (M + L when augmented, padded: PaddedStateSize)
+  int L = 0;       ///< inputs per step
+  int N = 0;       ///< horizon
+  int base_M = 0;  ///< the problem's M
   bool augmented = false;
 
   std::vector<Eigen::MatrixXd> A_pool, B_pool;
-  std::vector<int> a_of, b_of;   ///< pool index per step (size N)
-  Eigen::MatrixXd cx;            ///< M × N state offsets (zero when none)
+  std::vector<int> a_of, b_of;  ///< pool index per step (size N)
+  Eigen::MatrixXd cx;           ///< M × N state offsets (zero when none)
 
-  RowMajorMatrix c_pool;         ///< rows cᵀ; row_c[r] indexes into it
-  std::vector<int> row_begin;    ///< rows of step n are [row_begin[n], row_begin[n+1]); size N+2
+  RowMajorMatrix c_pool;       ///< rows cᵀ; row_c[r] indexes into it
+  std::vector<int> row_begin;  ///< rows of step n are [row_begin[n], row_begin[n+1]); size N+2
   std::vector<int> row_c;
-  std::vector<int> row_unit;     ///< i if the row's c is the unit vector e_i, else -1
+  std::vector<int> row_unit;  ///< i if the row's c is the unit vector e_i, else -1
   std::vector<double> row_d;
   std::vector<ScalarPrior> row_prior;
   std::vector<RowOrigin> row_origin;
@@ -49,8 +49,8 @@ struct FactorGraph {
 
   std::vector<ScalarPrior> input_prior;  ///< N·L; augmented: only the Gaussian part remains here
 
-  Eigen::VectorXd m0;   ///< initial mean (size M)
-  Eigen::MatrixXd V0;   ///< initial covariance (M×M, zero when fixed)
+  Eigen::VectorXd m0;  ///< initial mean (size M)
+  Eigen::MatrixXd V0;  ///< initial covariance (M×M, zero when fixed)
   bool x0_fixed = true;
 
   int num_rows() const { return static_cast<int>(row_c.size()); }

@@ -10,8 +10,8 @@ absl::StatusOr<Problem> AugmentWithInputDifferences(const Problem& p, const std:
   NUPMPC_RETURN_IF_ERROR(Validate(p));
   const int M = p.num_states, L = p.num_inputs, K = p.num_outputs, N = p.horizon;
   if (delta_priors.size() != static_cast<std::size_t>(N) * L) {
-    return absl::InvalidArgumentError(absl::StrCat("delta_priors: expected N·L = ", N * L, " priors, got ",
-                                                   delta_priors.size()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("delta_priors: expected N·L = ", N * L, " priors, got ", delta_priors.size()));
   }
   if (previous_input.size() != L) {
     return absl::InvalidArgumentError(
@@ -21,8 +21,7 @@ absl::StatusOr<Problem> AugmentWithInputDifferences(const Problem& p, const std:
   if (!p.initial_state_fixed()) {
     // u[-1] would be a zero-variance block of a Gaussian x'[0], which the initial-state
     // solve cannot factor.
-    return absl::FailedPreconditionError(
-        "initial_covariance: input differences need a fixed (measured) initial state");
+    return absl::FailedPreconditionError("initial_covariance: input differences need a fixed (measured) initial state");
   }
   for (std::size_t i = 0; i < delta_priors.size(); ++i) {
     NUPMPC_RETURN_IF_ERROR(ValidatePrior(delta_priors[i], "delta_priors", static_cast<int>(i)));

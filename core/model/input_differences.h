@@ -27,7 +27,8 @@ namespace nupmpc::core {
 // `delta_priors`: N·L priors on Δu (index n·L + l); `previous_input`: u[-1], the input
 // applied before this horizon (size L). The problem's own input priors move to outputs.
 // INVALID_ARGUMENT naming the field when a size or value is wrong.
-absl::StatusOr<Problem> AugmentWithInputDifferences(const Problem& problem, const std::vector<ScalarPrior>& delta_priors,
+absl::StatusOr<Problem> AugmentWithInputDifferences(const Problem& problem,
+                                                    const std::vector<ScalarPrior>& delta_priors,
                                                     const Eigen::VectorXd& previous_input);
 
 // The inputs u (N × L, row n = u[n]) of a plan of the augmented problem, whose inputs are

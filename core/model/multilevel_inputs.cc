@@ -21,7 +21,8 @@ absl::StatusOr<Problem> ExpandMultiLevelInputs(const Problem& p, const std::vect
   for (int l = 0; l < L; ++l) {
     const InputLevels& v = levels[l];
     const std::string field = absl::StrCat("levels[", l, "]");
-    if (v.count != 0 && v.count < 2) return absl::InvalidArgumentError(absl::StrCat(field, ".count: must be 0 or >= 2"));
+    if (v.count != 0 && v.count < 2)
+      return absl::InvalidArgumentError(absl::StrCat(field, ".count: must be 0 or >= 2"));
     if (v.count != 0 && !(v.spacing > 0.0 && std::isfinite(v.spacing) && std::isfinite(v.lowest))) {
       return absl::InvalidArgumentError(absl::StrCat(field, ": lowest must be finite and spacing finite and > 0"));
     }
@@ -60,7 +61,8 @@ absl::StatusOr<Problem> ExpandMultiLevelInputs(const Problem& p, const std::vect
     const int offset_steps = std::max<int>({1, model_steps == 1 ? 1 : N, static_cast<int>(p.state_offset.size())});
     e.state_offset.assign(offset_steps, Eigen::VectorXd::Zero(M));
     for (int n = 0; n < offset_steps; ++n) {
-      if (!p.state_offset.empty()) e.state_offset[n] = p.state_offset.size() == 1 ? p.state_offset[0] : p.state_offset[n];
+      if (!p.state_offset.empty())
+        e.state_offset[n] = p.state_offset.size() == 1 ? p.state_offset[0] : p.state_offset[n];
       const Eigen::MatrixXd& B = p.B_at(n);
       for (int l = 0; l < L; ++l) {
         if (levels[l].count != 0) e.state_offset[n] += levels[l].lowest * B.col(l);

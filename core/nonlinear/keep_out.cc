@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "absl/strings/str_cat.h"
 #include "Eigen/Geometry"
+#include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::core {
@@ -114,11 +114,10 @@ class KeepOutLinearisation final : public Linearisation {
         // z = ρ ĝᵀ S (y - c) with y = C_pair x + d_pair: one row of C and one offset.
         const Eigen::Vector2d h = g.rho * g.S.transpose() * DualDirection(g, g.S * (y - g.centre), travel);
         const int row = K + static_cast<int>(r);
-        problem->C[n].row(row) = h(0) * plant_.C_at(n).row(keep_out_.first_output) +
-                                 h(1) * plant_.C_at(n).row(keep_out_.second_output);
+        problem->C[n].row(row) =
+            h(0) * plant_.C_at(n).row(keep_out_.first_output) + h(1) * plant_.C_at(n).row(keep_out_.second_output);
         problem->output_offset[n](row) = h(0) * plant_.output_offset_at(n, keep_out_.first_output) +
-                                         h(1) * plant_.output_offset_at(n, keep_out_.second_output) -
-                                         h.dot(g.centre);
+                                         h(1) * plant_.output_offset_at(n, keep_out_.second_output) - h.dot(g.centre);
       }
     }
   }
@@ -164,10 +163,10 @@ class KeepOutLinearisation final : public Linearisation {
   void PlanePoints(const Solution& point) const {
     for (int n = 0; n <= plant_.horizon; ++n) {
       const auto x = point.states.row(n);
-      plane_(0, n) = plant_.C_at(n).row(keep_out_.first_output).dot(x) +
-                     plant_.output_offset_at(n, keep_out_.first_output);
-      plane_(1, n) = plant_.C_at(n).row(keep_out_.second_output).dot(x) +
-                     plant_.output_offset_at(n, keep_out_.second_output);
+      plane_(0, n) =
+          plant_.C_at(n).row(keep_out_.first_output).dot(x) + plant_.output_offset_at(n, keep_out_.first_output);
+      plane_(1, n) =
+          plant_.C_at(n).row(keep_out_.second_output).dot(x) + plant_.output_offset_at(n, keep_out_.second_output);
     }
   }
 
@@ -194,8 +193,8 @@ KeepOutRegion KeepOutRegion::Ellipse(Eigen::Vector2d centre, double a, double b,
   return region;
 }
 
-KeepOutRegion KeepOutRegion::Rectangle(Eigen::Vector2d centre, double half_width, double half_height,
-                                       double rotation, double slope) {
+KeepOutRegion KeepOutRegion::Rectangle(Eigen::Vector2d centre, double half_width, double half_height, double rotation,
+                                       double slope) {
   KeepOutRegion region = Ellipse(centre, half_width, half_height, rotation, slope);
   region.shape = KeepOutShape::kRectangle;
   return region;
@@ -208,8 +207,7 @@ double KeepOutClearance(const KeepOutRegion& region, const Eigen::Vector2d& y) {
   return g.rho * (norm - 1.0);
 }
 
-absl::StatusOr<std::unique_ptr<Linearisation>> MakeKeepOutLinearisation(const Problem& plant,
-                                                                          const KeepOut& keep_out) {
+absl::StatusOr<std::unique_ptr<Linearisation>> MakeKeepOutLinearisation(const Problem& plant, const KeepOut& keep_out) {
   NUPMPC_RETURN_IF_ERROR(Validate(plant));
   NUPMPC_RETURN_IF_ERROR(ValidateKeepOut(plant, keep_out));
   return std::make_unique<KeepOutLinearisation>(plant, keep_out);

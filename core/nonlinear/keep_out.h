@@ -40,19 +40,19 @@ struct KeepOutRegion {
   KeepOutShape shape = KeepOutShape::kEllipse;
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();
   Eigen::Vector2d half_axes = Eigen::Vector2d::Ones();  ///< along the shape's own axes, > 0
-  double rotation = 0.0;     ///< of the shape's first axis, radians counter-clockwise
-  double margin = 0.0;       ///< extra clearance ≥ 0 (length units) added to the threshold
-  double slope = kInfinity;  ///< of the half-space prior on z; +∞ = hard
+  double rotation = 0.0;                                ///< of the shape's first axis, radians counter-clockwise
+  double margin = 0.0;                                  ///< extra clearance ≥ 0 (length units) added to the threshold
+  double slope = kInfinity;                             ///< of the half-space prior on z; +∞ = hard
 
   static KeepOutRegion Circle(Eigen::Vector2d centre, double radius, double slope = kInfinity);
   static KeepOutRegion Ellipse(Eigen::Vector2d centre, double a, double b, double rotation = 0.0,
                                double slope = kInfinity);
-  static KeepOutRegion Rectangle(Eigen::Vector2d centre, double half_width, double half_height,
-                                 double rotation = 0.0, double slope = kInfinity);
+  static KeepOutRegion Rectangle(Eigen::Vector2d centre, double half_width, double half_height, double rotation = 0.0,
+                                 double slope = kInfinity);
 };
 
 struct KeepOut {
-  int first_output = 0;   ///< the plane's coordinates: two distinct outputs of the plant
+  int first_output = 0;  ///< the plane's coordinates: two distinct outputs of the plant
   int second_output = 1;
   std::vector<KeepOutRegion> regions;
   int rectangle_order = 8;  ///< superellipse order p ≥ 2 for rectangles
@@ -66,8 +66,7 @@ double KeepOutClearance(const KeepOutRegion& region, const Eigen::Vector2d& y);
 // The linearisation of a linear plant with keep-out regions. The linearised problem has
 // the plant's outputs first, then one output per region; the regions apply at steps
 // 1..N (x[0] is given). INVALID_ARGUMENT naming the field for bad regions or outputs.
-absl::StatusOr<std::unique_ptr<Linearisation>> MakeKeepOutLinearisation(const Problem& plant,
-                                                                          const KeepOut& keep_out);
+absl::StatusOr<std::unique_ptr<Linearisation>> MakeKeepOutLinearisation(const Problem& plant, const KeepOut& keep_out);
 
 // The plant's own outputs of a plan of the linearised problem ((N+1) × K).
 Eigen::MatrixXd PlantOutputs(const Solution& plan, int plant_outputs);

@@ -65,7 +65,7 @@ class KeepOutSession final : public MpcSession {
   std::unique_ptr<Session> free_planner_;
   Solution guess_;  ///< the next linearisation point: the previous plan (shifted)
   bool has_plan_ = false;
-  Solution plan_;   ///< the linearised problem's plan (plant outputs + region outputs)
+  Solution plan_;  ///< the linearised problem's plan (plant outputs + region outputs)
 };
 
 }  // namespace nupmpc::core

@@ -27,9 +27,9 @@ absl::Status CheckDimensions(const NonlinearModel& model, const Problem& problem
   if (problem.horizon < 1) return mismatch("horizon", problem.horizon, 1);
   const std::size_t N = problem.horizon;
   if (problem.output_priors.size() != (N + 1) * model.num_outputs) {
-    return absl::InvalidArgumentError(absl::StrCat("Problem.output_priors: expected (N+1)·K = ",
-                                                   (N + 1) * model.num_outputs, " entries, got ",
-                                                   problem.output_priors.size()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("Problem.output_priors: expected (N+1)·K = ", (N + 1) * model.num_outputs, " entries, got ",
+                     problem.output_priors.size()));
   }
   return absl::OkStatus();
 }
@@ -103,8 +103,8 @@ class ModelLinearisation final : public Linearisation {
   absl::Status SetBase(const Problem& base) override {
     NUPMPC_RETURN_IF_ERROR(CheckDimensions(model_, base));
     if (base.horizon != shape_.horizon) {
-      return absl::FailedPreconditionError(absl::StrCat("Problem.horizon = ", base.horizon,
-                                                        " does not match the linearisation's ", shape_.horizon));
+      return absl::FailedPreconditionError(
+          absl::StrCat("Problem.horizon = ", base.horizon, " does not match the linearisation's ", shape_.horizon));
     }
     if (base.terminal.has_value() != shape_.terminal.has_value()) {
       return absl::FailedPreconditionError("Problem.terminal: presence does not match the linearisation's");
@@ -186,10 +186,10 @@ class ModelLinearisation final : public Linearisation {
   }
 
   NonlinearModel model_;
-  std::vector<std::pair<int, double>> trusted_;  ///< (state, trust radius), in output order
-  std::vector<std::pair<int, double>> damped_;   ///< (state, proximal σ), in output order
+  std::vector<std::pair<int, double>> trusted_;        ///< (state, trust radius), in output order
+  std::vector<std::pair<int, double>> damped_;         ///< (state, proximal σ), in output order
   std::vector<std::pair<int, double>> damped_inputs_;  ///< (input, proximal σ)
-  double proximal_scale_ = 1.0;  ///< set by the sequential solver's step control
+  double proximal_scale_ = 1.0;                        ///< set by the sequential solver's step control
   Problem shape_;
   mutable Eigen::MatrixXd dhdx_;
   mutable Eigen::VectorXd x_, u_, next_, y_;  // scratch: Linearise() allocates nothing
@@ -198,7 +198,7 @@ class ModelLinearisation final : public Linearisation {
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<Linearisation>> MakeModelLinearisation(NonlinearModel model, const Problem& problem,
-                                                                        TrustRegion trust_region) {
+                                                                      TrustRegion trust_region) {
   NUPMPC_RETURN_IF_ERROR(CheckDimensions(model, problem));
   NUPMPC_RETURN_IF_ERROR(CheckTrustRegion(trust_region, model.num_states, model.num_inputs));
   return std::make_unique<ModelLinearisation>(std::move(model), problem, trust_region);

@@ -46,7 +46,7 @@ struct NonlinearModel {
 // linear model promises much, and it vanishes at a fixed point (x = x*), so a converged
 // plan is a stationary point of the undamped nonlinear problem.
 struct TrustRegion {
-  Eigen::VectorXd state_radius;  ///< size M, > 0; +∞ = no bound on that state; empty = none
+  Eigen::VectorXd state_radius;           ///< size M, > 0; +∞ = no bound on that state; empty = none
   Eigen::VectorXd state_proximal_stddev;  ///< size M, > 0; +∞ = no term on that state; empty = none
   // The same on the inputs, multiplied into the Gaussian part of their priors (the product
   // of N(m, V) and N(u*, σ²) is a Gaussian).
@@ -57,7 +57,7 @@ struct TrustRegion {
 // ignored (the linearisation writes one matrix per step). Its dimensions must match the
 // model's: INVALID_ARGUMENT naming the field otherwise.
 absl::StatusOr<std::unique_ptr<Linearisation>> MakeModelLinearisation(NonlinearModel model, const Problem& problem,
-                                                                        TrustRegion trust_region = {});
+                                                                      TrustRegion trust_region = {});
 
 // Simulates the model from x[0] under `inputs` (N × L): states (N+1) × M.
 Eigen::MatrixXd SimulateNonlinear(const NonlinearModel& model, const Eigen::VectorXd& x0,

@@ -74,14 +74,15 @@ absl::Status Validate(const SequentialOptions& options) {
   const auto at_least_one = [](const char* field, double value) {
     return value >= 1.0 && std::isfinite(value)
                ? absl::OkStatus()
-               : absl::InvalidArgumentError(absl::StrCat("SequentialOptions.", field, ": must be finite and ≥ 1, got ", value));
+               : absl::InvalidArgumentError(
+                     absl::StrCat("SequentialOptions.", field, ": must be finite and ≥ 1, got ", value));
   };
   NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_growth", options.proximal_growth));
   NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_max_scale", options.proximal_max_scale));
   NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_shrink", options.proximal_shrink));
   if (!(options.proximal_model_error > 0.0) || !std::isfinite(options.proximal_model_error)) {
-    return absl::InvalidArgumentError(absl::StrCat("SequentialOptions.proximal_model_error: must be finite and > 0, got ",
-                                                   options.proximal_model_error));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "SequentialOptions.proximal_model_error: must be finite and > 0, got ", options.proximal_model_error));
   }
   if (!(options.proximal_violation_floor >= 0.0) || !std::isfinite(options.proximal_violation_floor)) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -90,14 +91,15 @@ absl::Status Validate(const SequentialOptions& options) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<std::unique_ptr<SequentialSolver>> SequentialSolver::Create(
-    std::unique_ptr<Linearisation> linearisation, SolverOptions solver_options, SequentialOptions options) {
+absl::StatusOr<std::unique_ptr<SequentialSolver>> SequentialSolver::Create(std::unique_ptr<Linearisation> linearisation,
+                                                                           SolverOptions solver_options,
+                                                                           SequentialOptions options) {
   if (linearisation == nullptr) return absl::InvalidArgumentError("linearisation: must not be null");
   NUPMPC_RETURN_IF_ERROR(Validate(options));
   Problem problem = linearisation->shape();
   if (problem.initial_mean.size() != problem.num_states) {
-    return absl::InvalidArgumentError(absl::StrCat("Problem.initial_mean: expected size ", problem.num_states,
-                                                   ", got ", problem.initial_mean.size()));
+    return absl::InvalidArgumentError(absl::StrCat("Problem.initial_mean: expected size ", problem.num_states, ", got ",
+                                                   problem.initial_mean.size()));
   }
   linearisation->Linearise(RestingPoint(problem), &problem);
   std::unique_ptr<SequentialSolver> solver(new SequentialSolver(std::move(linearisation), options, problem));
@@ -165,8 +167,8 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
     linearisation_->Linearise(point_, &problem_);
     if (absl::Status updated = session_->Update(problem_); !updated.ok()) {
       // Typically a plan that left the model's domain (a Jacobian became non-finite).
-      return absl::Status(updated.code(), absl::StrCat("linearisation ", k, " around the previous plan: ",
-                                                       updated.message()));
+      return absl::Status(updated.code(),
+                          absl::StrCat("linearisation ", k, " around the previous plan: ", updated.message()));
     }
     // Into trial_: an inner solve without a plan leaves plan_ (this sequence's last) as it was.
     NUPMPC_ASSIGN_OR_RETURN(summary.last_inner, session_->Solve(inner, &trial_));

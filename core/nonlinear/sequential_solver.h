@@ -84,12 +84,12 @@ absl::Status Validate(const SequentialOptions& options);
 struct SequentialSummary {
   bool converged = false;
   int linearisations = 0;
-  int inner_iterations = 0;        ///< message-passing passes over all linearisations
-  int rejected = 0;                ///< linearisations whose plan the step control discarded
-  double proximal_scale = 1.0;     ///< the proximal terms' scale at the end
-  double last_step = 0.0;          ///< relative plan change at the last linearisation
+  int inner_iterations = 0;     ///< message-passing passes over all linearisations
+  int rejected = 0;             ///< linearisations whose plan the step control discarded
+  double proximal_scale = 1.0;  ///< the proximal terms' scale at the end
+  double last_step = 0.0;       ///< relative plan change at the last linearisation
   double nonlinear_violation = 0.0;
-  SolveSummary last_inner;         ///< the last linearised problem's summary
+  SolveSummary last_inner;  ///< the last linearised problem's summary
   // Some linearised problem of this Solve() produced a plan (for the current x[0]): the
   // returned plan is then the last such one (or the last the step control accepted).
   bool has_plan = false;
@@ -99,8 +99,8 @@ struct SequentialSummary {
 class SequentialSolver {
  public:
   static absl::StatusOr<std::unique_ptr<SequentialSolver>> Create(std::unique_ptr<Linearisation> linearisation,
-                                                                   SolverOptions solver_options = {},
-                                                                   SequentialOptions options = {});
+                                                                  SolverOptions solver_options = {},
+                                                                  SequentialOptions options = {});
 
   // Starts from `initial_guess` (states (N+1)×M, inputs N×L; outputs are recomputed by
   // the linearisation), writes the final plan to `plan`. `limits` apply to the whole

@@ -8,7 +8,8 @@ namespace nupmpc::platform {
 
 const char kBuildCpuBaseline[] = NUPMPC_CPU_BASELINE;
 
-const char kBuildCpuFeatures[] = ""
+const char kBuildCpuFeatures[] =
+    ""
 #ifdef __SSE3__
     " sse3"
 #endif

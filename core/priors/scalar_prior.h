@@ -12,12 +12,12 @@ inline constexpr double kInfinity = std::numeric_limits<double>::infinity();
 // nup-algorithms.md §1.1 (the outside slope s, which is also the exact-penalty
 // weight); slope = +∞ means a hard constraint (only for half-spaces and boxes).
 enum class PriorKind : std::uint8_t {
-  kNone,       ///< only the Gaussian part (or nothing: a free scalar)
-  kL1,         ///< s |z - lower|                       (Laplace; `lower` is the centre)
-  kHuber,      ///< Huber around `lower` with radius r: z²/(2r²)+s²r²/2 inside, s|z| outside
-  kAtLeast,    ///< z ≥ lower  (cost s (lower - z)_+)
-  kAtMost,     ///< z ≤ upper  (cost s (z - upper)_+)
-  kBox,        ///< lower ≤ z ≤ upper (cost s dist(z, [lower, upper]))
+  kNone,     ///< only the Gaussian part (or nothing: a free scalar)
+  kL1,       ///< s |z - lower|                       (Laplace; `lower` is the centre)
+  kHuber,    ///< Huber around `lower` with radius r: z²/(2r²)+s²r²/2 inside, s|z| outside
+  kAtLeast,  ///< z ≥ lower  (cost s (lower - z)_+)
+  kAtMost,   ///< z ≤ upper  (cost s (z - upper)_+)
+  kBox,      ///< lower ≤ z ≤ upper (cost s dist(z, [lower, upper]))
   // Non-convex (IAKE only; nup-algorithms.md §5.1, §7). `em` picks the estimation variant.
   kPlainNuv,     ///< sparsity: favours z = lower exactly (cost log|z - lower|)
   kSmoothedNuv,  ///< plain NUV with its variance floored at radius² (no pull inside radius)

@@ -12,21 +12,28 @@ double Pos(double t) { return t > 0.0 ? t : 0.0; }
 double KindPenalty(const ScalarPrior& p, double z) {
   const double s = p.slope;
   switch (p.kind) {
-    case PriorKind::kNone: return 0.0;
-    case PriorKind::kL1: return s * std::abs(z - p.lower);
+    case PriorKind::kNone:
+      return 0.0;
+    case PriorKind::kL1:
+      return s * std::abs(z - p.lower);
     case PriorKind::kHuber: {
       const double t = std::abs(z - p.lower), r2 = p.radius * p.radius;
       return t <= s * r2 ? t * t / (2.0 * r2) + 0.5 * s * s * r2 : s * t;
     }
-    case PriorKind::kAtLeast: return p.is_hard() ? 0.0 : s * Pos(p.lower - z);
-    case PriorKind::kAtMost: return p.is_hard() ? 0.0 : s * Pos(z - p.upper);
-    case PriorKind::kBox: return p.is_hard() ? 0.0 : s * (Pos(p.lower - z) + Pos(z - p.upper));
-    case PriorKind::kLp: return s * std::pow(std::abs(z - p.lower), p.exponent);
+    case PriorKind::kAtLeast:
+      return p.is_hard() ? 0.0 : s * Pos(p.lower - z);
+    case PriorKind::kAtMost:
+      return p.is_hard() ? 0.0 : s * Pos(z - p.upper);
+    case PriorKind::kBox:
+      return p.is_hard() ? 0.0 : s * (Pos(p.lower - z) + Pos(z - p.upper));
+    case PriorKind::kLp:
+      return s * std::pow(std::abs(z - p.lower), p.exponent);
     // log|z| is unbounded below at the centre: NUV priors are reported by their sparsity,
     // not in J; a binary's indicator is 0 on the levels (the distance is the violation).
     case PriorKind::kPlainNuv:
     case PriorKind::kSmoothedNuv:
-    case PriorKind::kBinary: return 0.0;
+    case PriorKind::kBinary:
+      return 0.0;
   }
   return 0.0;
 }
@@ -46,10 +53,14 @@ double HardViolation(const ScalarPrior& p, double z) {
   if (p.kind == PriorKind::kBinary) return std::min(std::abs(z - p.lower), std::abs(z - p.upper));
   if (!p.is_constraint() || !p.is_hard()) return 0.0;
   switch (p.kind) {
-    case PriorKind::kAtLeast: return Pos(p.lower - z);
-    case PriorKind::kAtMost: return Pos(z - p.upper);
-    case PriorKind::kBox: return Pos(p.lower - z) + Pos(z - p.upper);
-    default: return 0.0;
+    case PriorKind::kAtLeast:
+      return Pos(p.lower - z);
+    case PriorKind::kAtMost:
+      return Pos(z - p.upper);
+    case PriorKind::kBox:
+      return Pos(p.lower - z) + Pos(z - p.upper);
+    default:
+      return 0.0;
   }
 }
 
@@ -66,7 +77,8 @@ Decision Decide(const ScalarPrior& p, double s, Message extrinsic) {
   const double m = f.m, V = f.V;
   const bool finite = s < kInfinity;
   switch (p.kind) {
-    case PriorKind::kNone: return {m, Region::kInside};
+    case PriorKind::kNone:
+      return {m, Region::kInside};
     case PriorKind::kL1: {
       const double t = m - p.lower, sv = s * V;
       if (t > sv) return {m - sv, Region::kAbove};
@@ -102,7 +114,8 @@ Decision Decide(const ScalarPrior& p, double s, Message extrinsic) {
       return {p.lower, Region::kAtLower};
     case PriorKind::kSmoothedNuv:
     case PriorKind::kLp:
-    case PriorKind::kBinary: return {m, Region::kInside};  // no deciding rule: IAKE only
+    case PriorKind::kBinary:
+      return {m, Region::kInside};  // no deciding rule: IAKE only
   }
   return {m, Region::kInside};
 }
@@ -111,8 +124,10 @@ ScalarFactor NupUpdate(const ScalarPrior& p, double s, double x, double posterio
   // EM variants add the posterior variance of the scalar to the squared distances (§5.1).
   const double vp = p.em ? posterior_variance : 0.0;
   switch (p.kind) {
-    case PriorKind::kNone: return {};
-    case PriorKind::kL1: return {p.lower, std::abs(x - p.lower) / s, 0.0, 0.0};
+    case PriorKind::kNone:
+      return {};
+    case PriorKind::kL1:
+      return {p.lower, std::abs(x - p.lower) / s, 0.0, 0.0};
     case PriorKind::kHuber: {
       const double r2 = p.radius * p.radius;
       return {p.lower, std::max(r2, std::abs(x - p.lower) / s), 0.0, 0.0};
@@ -161,9 +176,12 @@ Region NextPolishRegion(const ScalarPrior& prior, Region solved, Region decided)
 
 ScalarFactor PieceFactor(const ScalarPrior& p, double s, Region region) {
   switch (region) {
-    case Region::kAtLower: return ScalarFactor::Pinned(p.lower);
-    case Region::kAtUpper: return ScalarFactor::Pinned(p.upper);
-    default: break;
+    case Region::kAtLower:
+      return ScalarFactor::Pinned(p.lower);
+    case Region::kAtUpper:
+      return ScalarFactor::Pinned(p.upper);
+    default:
+      break;
   }
   ScalarFactor f = ScalarFactor::GaussianPart(p);
   if (p.kind == PriorKind::kHuber && region == Region::kInside) {
@@ -195,25 +213,28 @@ ScalarFactor HalfSpaceDual(double bound, double sign, double s, double y_dual, d
 
 ScalarFactor DualNupFactor(const ScalarPrior& p, double y_dual, double gamma) {
   switch (p.kind) {
-    case PriorKind::kAtLeast: return HalfSpaceDual(p.lower, +1.0, p.slope, y_dual, gamma);
-    case PriorKind::kAtMost: return HalfSpaceDual(p.upper, -1.0, p.slope, y_dual, gamma);
+    case PriorKind::kAtLeast:
+      return HalfSpaceDual(p.lower, +1.0, p.slope, y_dual, gamma);
+    case PriorKind::kAtMost:
+      return HalfSpaceDual(p.upper, -1.0, p.slope, y_dual, gamma);
     case PriorKind::kBox:
       return y_dual <= 0.0 ? HalfSpaceDual(p.lower, +1.0, p.slope, y_dual, gamma)
                            : HalfSpaceDual(p.upper, -1.0, p.slope, y_dual, gamma);
     case PriorKind::kL1: {
       const double s = p.slope, pp = std::abs(y_dual + s), q = std::abs(y_dual - s);
       const double den = gamma * (pp + q);
-      return ScalarFactor::Canonical((2.0 * p.lower * pp * q + s * gamma * (q - pp)) / den,
-                                     2.0 * pp * q / den);
+      return ScalarFactor::Canonical((2.0 * p.lower * pp * q + s * gamma * (q - pp)) / den, 2.0 * pp * q / den);
     }
-    default: return {};
+    default:
+      return {};
   }
 }
 
 double GammaNext(const ScalarPrior& p, Message f) {
   const double s = p.slope;
   switch (p.kind) {
-    case PriorKind::kL1: return std::abs(f.m - p.lower) - s * f.V;
+    case PriorKind::kL1:
+      return std::abs(f.m - p.lower) - s * f.V;
     case PriorKind::kAtLeast:
       return p.is_hard() ? f.m - p.lower : std::max(p.lower - f.m - s * f.V, f.m - p.lower);
     case PriorKind::kAtMost:
@@ -221,7 +242,8 @@ double GammaNext(const ScalarPrior& p, Message f) {
     case PriorKind::kBox:
       if (p.is_hard()) return 0.5 * (p.upper - p.lower);
       return std::max({0.5 * (p.upper - p.lower), p.lower - f.m - s * f.V, f.m - p.upper - s * f.V});
-    default: return 0.0;
+    default:
+      return 0.0;
   }
 }
 
@@ -232,10 +254,14 @@ double GammaInitial(const ScalarPrior& p) {
 
 double RequiredSlope(const ScalarPrior& p, Message f) {
   switch (p.kind) {
-    case PriorKind::kAtLeast: return (p.lower - f.m) / f.V;
-    case PriorKind::kAtMost: return (f.m - p.upper) / f.V;
-    case PriorKind::kBox: return std::max(p.lower - f.m, f.m - p.upper) / f.V;
-    default: return 0.0;
+    case PriorKind::kAtLeast:
+      return (p.lower - f.m) / f.V;
+    case PriorKind::kAtMost:
+      return (f.m - p.upper) / f.V;
+    case PriorKind::kBox:
+      return std::max(p.lower - f.m, f.m - p.upper) / f.V;
+    default:
+      return 0.0;
   }
 }
 

@@ -35,12 +35,8 @@ class DiscreteSearch {
 
   // `best`: the plan to make discrete; `scratch`: an iterate of the same size for the
   // re-solves. `interrupt` (the solve's) is polled between moves and inside evaluations.
-  DiscreteSearch(const Problem& problem,
-                 const SolverOptions& options,
-                 ObjectiveEvaluator* evaluator,
-                 Interrupt* interrupt,
-                 PrimalIterate* best,
-                 PrimalIterate* scratch)
+  DiscreteSearch(const Problem& problem, const SolverOptions& options, ObjectiveEvaluator* evaluator,
+                 Interrupt* interrupt, PrimalIterate* best, PrimalIterate* scratch)
       : problem_(problem),
         options_(options),
         evaluator_(*evaluator),

@@ -14,12 +14,8 @@ void SetBoundSlopes(const HardBounds& bounds, double slope, Problem* problem) {
   for (const int i : bounds) problem->output_priors[i].slope = slope;
 }
 
-void ElasticFallback::Continue(Solve* solve,
-                               Interrupt* interrupt,
-                               const SolveLimits& limits,
-                               int max_iterations,
-                               double violation_tolerance,
-                               SolveSummary* summary) const {
+void ElasticFallback::Continue(Solve* solve, Interrupt* interrupt, const SolveLimits& limits, int max_iterations,
+                               double violation_tolerance, SolveSummary* summary) const {
   SolveLimits rest = limits;  // the time limit and cancel flag act through the interrupt
   rest.max_iterations = max_iterations - summary->iterations;
   if (StopNow(interrupt, summary)) return;

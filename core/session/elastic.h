@@ -72,12 +72,8 @@ class ElasticFallback {
   // time limit and the cancel flag act through `interrupt`), restores the hard bounds and
   // reports the plan against them: `summary` becomes the whole solve's (kInfeasible when
   // the elastic plan converged outside the hard bounds by more than `violation_tolerance`).
-  void Continue(Solve* solve,
-                Interrupt* interrupt,
-                const SolveLimits& limits,
-                int max_iterations,
-                double violation_tolerance,
-                SolveSummary* summary) const;
+  void Continue(Solve* solve, Interrupt* interrupt, const SolveLimits& limits, int max_iterations,
+                double violation_tolerance, SolveSummary* summary) const;
 
  private:
   HardBounds hard_bounds_;

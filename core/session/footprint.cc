@@ -93,8 +93,7 @@ Parts Ibffd(const Dims& d) {
   const i64 rows = S * d.K + (d.terminal ? M : 0);
   Parts p;
   p.carried = GraphBytes(d, M, false, rows) + 2 * Array<ScalarFactor>(N * L) + Array<double>(N * L) +
-              3 * Array<Region>(N * L) + Doubles(3, M * M) + Doubles(4, M) + Doubles(1, M * M) +
-              2 * Array<int>(M);
+              3 * Array<Region>(N * L) + Doubles(3, M * M) + Doubles(4, M) + Doubles(1, M * M) + 2 * Array<int>(M);
   // Per step: W's lower triangle, ξ, the prediction's state; per input: its gain record.
   p.workspace = Doubles(1, M * (M + 1) / 2 * S) + Doubles(2, M * S) + Doubles(1, (M + 2) * N * L);
   p.transient = std::max(GraphTransient(rows), GemmScratch(M));
@@ -111,10 +110,10 @@ Parts Iffbdd(const Dims& d, bool inputs_constrained) {
   const i64 rows = S * d.K + (augmented ? N * L : 0) + (d.terminal ? d.M : 0);
   Parts p;
   p.carried = GraphBytes(d, Mg, augmented, rows) + Array<ScalarFactor>(N * L) + 2 * Array<ScalarFactor>(rows) +
-              Array<double>(rows) + 2 * Array<Region>(rows) + Doubles(2, Mg) + Doubles(1, Mg * S) +
-              Doubles(1, rows) + Array<int>(rows) + (augmented ? Array<int>(N * L) : 0);
-  p.workspace = Doubles(1, Mg * rows) + Doubles(4, rows) + Doubles(2, L * N) + Doubles(2, Mg) +
-                Doubles(2, Mg * Mg) + Doubles(1, Mg * L);
+              Array<double>(rows) + 2 * Array<Region>(rows) + Doubles(2, Mg) + Doubles(1, Mg * S) + Doubles(1, rows) +
+              Array<int>(rows) + (augmented ? Array<int>(N * L) : 0);
+  p.workspace = Doubles(1, Mg * rows) + Doubles(4, rows) + Doubles(2, L * N) + Doubles(2, Mg) + Doubles(2, Mg * Mg) +
+                Doubles(1, Mg * L);
   // The interior-point iteration (no constrained input): per row its sides (two of six
   // doubles), their backups (two of three), its Gaussian part (two), its flag and its
   // Newton value; two plans.
@@ -124,8 +123,8 @@ Parts Iffbdd(const Dims& d, bool inputs_constrained) {
   }
   const double m = static_cast<double>(Mg), rows_per_step = static_cast<double>(rows) / S;
   // Forward: time update 4M³ + 2M²L, rows 4M² each; backward: 2M² + 2M per row.
-  p.flops_per_step = 4.0 * m * m * m + 2.0 * m * m * L + 4.0 * m * m * rows_per_step + 2.0 * m * m +
-                     2.0 * m * rows_per_step;
+  p.flops_per_step =
+      4.0 * m * m * m + 2.0 * m * m * L + 4.0 * m * m * rows_per_step + 2.0 * m * m + 2.0 * m * rows_per_step;
   p.transient = std::max(GraphTransient(rows), GemmScratch(Mg));
   if (augmented) {
     // The input sub-problem's IBFFD (polish): all of it is scratch, rebuilt after release.
@@ -141,8 +140,16 @@ Parts Iffbdd(const Dims& d, bool inputs_constrained) {
 
 Footprint EstimateFootprint(const ProblemShape& s) {
   const i64 M = s.num_states, L = s.num_inputs, K = s.num_outputs, N = s.horizon;
-  Dims d{M, L, K, N, N + 1, s.a_per_step ? N : 1, s.b_per_step ? N : 1, s.c_per_step ? N + 1 : 1,
-         s.terminal_cost, s.uncertain_initial_state};
+  Dims d{M,
+         L,
+         K,
+         N,
+         N + 1,
+         s.a_per_step ? N : 1,
+         s.b_per_step ? N : 1,
+         s.c_per_step ? N + 1 : 1,
+         s.terminal_cost,
+         s.uncertain_initial_state};
   const i64 S = d.steps;
   Footprint f;
   // The Problem.

@@ -16,9 +16,7 @@ void InfeasibilityWatch::OpenWindow(double largest_dual, double max_violation) {
   window_settled_ = true;
 }
 
-bool InfeasibilityWatch::Observe(double largest_dual,
-                                 double max_violation,
-                                 bool objective_settled,
+bool InfeasibilityWatch::Observe(double largest_dual, double max_violation, bool objective_settled,
                                  double violation_tolerance) {
   // Without multipliers (not a dual method) or within the tolerance there is nothing to
   // certify: the windows start again.

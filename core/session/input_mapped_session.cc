@@ -57,7 +57,8 @@ absl::Status InputMappedSession::CheckPreviousInput(const StepUpdate& update) co
         absl::StrCat("previous_input: expected ", L, " values (num_inputs), got ", u.size()));
   }
   for (int l = 0; l < L; ++l) {
-    if (!std::isfinite(u(l))) return absl::InvalidArgumentError(absl::StrCat("previous_input[", l, "]: must be finite"));
+    if (!std::isfinite(u(l)))
+      return absl::InvalidArgumentError(absl::StrCat("previous_input[", l, "]: must be finite"));
   }
   return absl::OkStatus();
 }
@@ -79,8 +80,9 @@ absl::Status InputMappedSession::Apply(const StepUpdate& update) {
 
   // u[-1] is part of the inner x[0], which therefore changes every step.
   const Eigen::VectorXd& previous_input = update.previous_input.value_or(map_.previous_input);
-  WriteInnerState(update.state.has_value() ? *update.state
-                                           : Eigen::VectorXd(inner_->problem().initial_mean.head(dimensions_.num_states)),
+  WriteInnerState(update.state.has_value()
+                      ? *update.state
+                      : Eigen::VectorXd(inner_->problem().initial_mean.head(dimensions_.num_states)),
                   previous_input);
   StepUpdate inner;
   inner.state = inner_state_;

@@ -63,11 +63,11 @@ class InputMappedSession final : public MpcSession {
   void KeepFixedInputFree(StepUpdate* inner) const;
 
   std::unique_ptr<MpcSession> inner_;
-  InputMap map_;  ///< its previous_input: the next step's default u[-1]
-  Dimensions dimensions_;  ///< the caller's
-  Eigen::VectorXd inner_state_;  ///< scratch for the inner x[0]
+  InputMap map_;                            ///< its previous_input: the next step's default u[-1]
+  Dimensions dimensions_;                   ///< the caller's
+  Eigen::VectorXd inner_state_;             ///< scratch for the inner x[0]
   Eigen::VectorXd applied_previous_input_;  ///< the u[-1] of the inner problem now
-  Solution own_plan_;            ///< Solve()'s plan when the caller passes none
+  Solution own_plan_;                       ///< Solve()'s plan when the caller passes none
 };
 
 }  // namespace nupmpc::core

@@ -28,8 +28,8 @@ absl::Status CheckEntries(const std::vector<ModelChanges::At<Value>>& entries, c
     }
     if constexpr (std::is_same_v<Value, Eigen::MatrixXd>) {
       if (e.value.rows() != rows || e.value.cols() != cols) {
-        return Invalid(absl::StrCat(path, ".matrix: expected ", rows, "x", cols, ", got ", e.value.rows(), "x",
-                                    e.value.cols()));
+        return Invalid(
+            absl::StrCat(path, ".matrix: expected ", rows, "x", cols, ", got ", e.value.rows(), "x", e.value.cols()));
       }
       if (!e.value.allFinite()) return Invalid(absl::StrCat(path, ".matrix: contains a non-finite number"));
     } else {
@@ -46,8 +46,8 @@ absl::Status CheckAllSteps(const std::optional<Eigen::VectorXd>& values, const c
   if (!values.has_value()) return absl::OkStatus();
   const auto size = values->size();
   if (size != width && size != static_cast<Eigen::Index>(width) * steps) {
-    return Invalid(absl::StrCat("model.", field, ": expected ", width, " values (every step) or ", width * steps,
-                                " (", steps, " steps), got ", size));
+    return Invalid(absl::StrCat("model.", field, ": expected ", width, " values (every step) or ", width * steps, " (",
+                                steps, " steps), got ", size));
   }
   if (!values->allFinite()) return Invalid(absl::StrCat("model.", field, ": contains a non-finite number"));
   return absl::OkStatus();

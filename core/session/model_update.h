@@ -33,8 +33,8 @@ struct ModelChanges {
   std::vector<At<Eigen::VectorXd>> state_offset, output_offset;
 
   bool empty() const {
-    return !shift && !state_offsets.has_value() && !output_offsets.has_value() && A.empty() && B.empty() &&
-           C.empty() && state_offset.empty() && output_offset.empty();
+    return !shift && !state_offsets.has_value() && !output_offsets.has_value() && A.empty() && B.empty() && C.empty() &&
+           state_offset.empty() && output_offset.empty();
   }
 };
 

@@ -68,8 +68,7 @@ class Session::Hooks final : public DiscreteSearch::PinnedPasses, public Elastic
   Session& s_;
 };
 
-Session::Session(Problem problem, SolverOptions options)
-    : problem_(std::move(problem)), options_(options) {}
+Session::Session(Problem problem, SolverOptions options) : problem_(std::move(problem)), options_(options) {}
 
 Session::~Session() = default;
 
@@ -172,9 +171,8 @@ absl::Status Session::AdoptNewValues(bool was_input_constrained, bool new_storag
   NUPMPC_ASSIGN_OR_RETURN(const Algorithm selected, SelectAlgorithm(problem_, options_.algorithm));
   // IFFBDD's graph is augmented iff some input is constrained: that is part of its shape;
   // so is the storage of the model (one or per-step matrices).
-  const bool same_graph =
-      !new_storage && selected == algorithm_->algorithm() &&
-      (selected != Algorithm::kIffbdd || AnyInputConstrained(problem_) == was_input_constrained);
+  const bool same_graph = !new_storage && selected == algorithm_->algorithm() &&
+                          (selected != Algorithm::kIffbdd || AnyInputConstrained(problem_) == was_input_constrained);
   if (same_graph) {
     algorithm_->Refresh(problem_);
   } else {
@@ -375,8 +373,8 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     const int changed = algorithm_->Iterate(&current_);
     if (PassInterrupted(&summary)) break;  // an incomplete pass: discarded
     ++summary.iterations;
-    const ObjectiveEvaluator::Result r =
-        AllFinite(current_) ? evaluator_.Evaluate(problem_, current_, interrupt_) : ObjectiveEvaluator::Result{NAN, NAN};
+    const ObjectiveEvaluator::Result r = AllFinite(current_) ? evaluator_.Evaluate(problem_, current_, interrupt_)
+                                                             : ObjectiveEvaluator::Result{NAN, NAN};
     if (evaluation_cut_short()) {  // a complete pass, not evaluated: not returned either
       summary.status = *interrupt_->reason();
       break;
@@ -389,19 +387,21 @@ SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
     // while the inputs are still being sparsified or binarised, so the plan must settle
     // too.
     const bool iterate_settled =
-        !has_nonconvex_priors_ ||
-        (current_.u - best_.u).cwiseAbs().maxCoeff() <= kNonconvexStepTolerance * (1.0 + current_.u.cwiseAbs().maxCoeff());
+        !has_nonconvex_priors_ || (current_.u - best_.u).cwiseAbs().maxCoeff() <=
+                                      kNonconvexStepTolerance * (1.0 + current_.u.cwiseAbs().maxCoeff());
     if (limits.trace) {
-      limits.trace({.kind = PassTrace::Kind::kIterate, .pass = summary.iterations, .changed = changed,
-                    .objective = r.objective, .max_violation = r.max_violation});
+      limits.trace({.kind = PassTrace::Kind::kIterate,
+                    .pass = summary.iterations,
+                    .changed = changed,
+                    .objective = r.objective,
+                    .max_violation = r.max_violation});
     }
     std::swap(best_, current_);
     have_finite = true;
     summary.objective = r.objective;
     summary.max_violation = r.max_violation;
-    const bool objective_settled =
-        iterate_settled &&
-        std::abs(r.objective - previous_objective) <= options_.objective_tolerance * std::abs(r.objective);
+    const bool objective_settled = iterate_settled && std::abs(r.objective - previous_objective) <=
+                                                          options_.objective_tolerance * std::abs(r.objective);
     if (objective_settled && r.max_violation <= violation_tolerance) {
       summary.status = SolveStatus::kConverged;
       break;

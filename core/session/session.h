@@ -97,7 +97,7 @@ class Session final : public MpcSession {
   std::unique_ptr<OuterIteration> algorithm_;
   ObjectiveEvaluator evaluator_;
   PrimalIterate current_, candidate_, best_;
-  PrimalIterate least_violation_;      ///< RunLoop: its plain iterate closest to the bounds
+  PrimalIterate least_violation_;     ///< RunLoop: its plain iterate closest to the bounds
   InfeasibilityWatch infeasibility_;  ///< RunLoop: whether its passes show no feasible point
   bool has_warm_state_ = false;
   bool has_binary_inputs_ = false;     ///< derived from problem_ whenever it is replaced

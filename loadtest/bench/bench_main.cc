@@ -21,7 +21,8 @@ ABSL_FLAG(std::string, reference, "", "reference.json (default: the one beside e
 ABSL_FLAG(std::string, algorithm, "auto", "auto, iake, ibffd or iffbdd");
 ABSL_FLAG(int, repeat, 5, "solves per instance; the median time is reported");
 ABSL_FLAG(bool, scaling, false, "also report time per horizon step across the masses_N* files given");
-ABSL_FLAG(bool, trace, false, "also print every pass of one cold solve per instance (region changes, objective, "
+ABSL_FLAG(bool, trace, false,
+          "also print every pass of one cold solve per instance (region changes, objective, "
           "violation; polish residuals)");
 ABSL_FLAG(int, max_iterations, 5000, "iteration cap per solve");
 ABSL_FLAG(int, polish_after, 1, "polish once the active set is unchanged for this many iterations (0: never)");
@@ -32,11 +33,12 @@ ABSL_FLAG(bool, interior_point, true,
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-bench",
-    .summary = "nupmpc-bench: the core's speed and accuracy on benchmark instance files (format: "
-               "benchmarks/README.md), in process, without the service. Per instance: algorithm, "
-               "iterations, median cold solve time of --repeat solves, objective, relative gap to reference.json, "
-               "max violation, status and GFLOP/s next to the machine's Eigen GEMM rate; instances with a "
-               "closed loop also get warm and cold per-step times and iterations.",
+    .summary =
+        "nupmpc-bench: the core's speed and accuracy on benchmark instance files (format: "
+        "benchmarks/README.md), in process, without the service. Per instance: algorithm, "
+        "iterations, median cold solve time of --repeat solves, objective, relative gap to reference.json, "
+        "max violation, status and GFLOP/s next to the machine's Eigen GEMM rate; instances with a "
+        "closed loop also get warm and cold per-step times and iterations.",
     .usage = "nupmpc-bench [--json] [--reference PATH] [--algorithm NAME] [--repeat R] [--scaling] [--trace] FILE...",
 };
 

@@ -92,8 +92,8 @@ double FlopsPerIteration(const core::Problem& p, core::Algorithm algorithm) {
   const double M = p.num_states + (augmented ? L : 0);
   const double rows = K + (augmented ? L : 0);
   // Forward Kalman filter: A V Aᵀ (2 products), B diag(VU) Bᵀ, per row V c and the rank-1 update.
-  const double filter = N * (4 * M * M * M + 2 * M * M * L + 2 * M * L + rows * (4 * M * M + 6 * M)) +
-                        terminal * (4 * M * M + 6 * M);
+  const double filter =
+      N * (4 * M * M * M + 2 * M * M * L + 2 * M * L + rows * (4 * M * M + 6 * M)) + terminal * (4 * M * M + 6 * M);
   switch (algorithm) {
     case core::Algorithm::kIffbdd:
       // Backward dual deciding: per row vᵀx̃ and x̃ += c ỹ; per step Aᵀx̃ and the inputs.
@@ -105,7 +105,8 @@ double FlopsPerIteration(const core::Problem& p, core::Algorithm algorithm) {
       // Backward information filter (Aᵀ W A, rows, inputs) + forward deciding (recomputed
       // per-input messages, one W b per input, the state update).
       return N * (4 * M * M * M + K * 4 * M * M + L * 4 * M * M) + N * (L * 4 * M * M + L * 2 * M * M + 2 * M * M);
-    case core::Algorithm::kAuto: break;
+    case core::Algorithm::kAuto:
+      break;
   }
   return NAN;
 }
@@ -136,8 +137,8 @@ int RunBenchmarks(const std::vector<std::string>& paths, const BenchOptions& opt
   // state sizes (masses 12, random_outbox 40) is what their flop rate compares with.
   const double gemm12 = MeasureGemmGflops(12), gemm20 = MeasureGemmGflops(20), gemm40 = MeasureGemmGflops(40);
   if (!options.json) {
-    std::printf("machine: Eigen double GEMM (one thread) n=12 %.1f, n=20 %.1f, n=40 %.1f GFLOP/s\n\n", gemm12,
-                gemm20, gemm40);
+    std::printf("machine: Eigen double GEMM (one thread) n=12 %.1f, n=20 %.1f, n=40 %.1f GFLOP/s\n\n", gemm12, gemm20,
+                gemm40);
     std::printf("%-36s %-7s %6s %10s %20s %10s %10s %-16s %8s\n", "instance", "algo", "iter", "solve_ms", "objective",
                 "rel_gap", "max_viol", "status", "GFLOP/s");
   }

@@ -12,10 +12,11 @@ void PrintPassTrace(const std::string& name, core::Session& session, bool json) 
   limits.trace = [&](const core::PassTrace& t) {
     const bool polish = t.kind == core::PassTrace::Kind::kPolish;
     if (json) {
-      std::printf("{\"trace\":\"%s\",\"pass\":%d,\"kind\":\"%s\",\"changed\":%d,\"objective\":%s,"
-                  "\"max_violation\":%s,\"residual\":%s}\n",
-                  name.c_str(), t.pass, polish ? "polish" : "iterate", t.changed, Num(t.objective).c_str(),
-                  Num(t.max_violation).c_str(), Num(t.residual).c_str());
+      std::printf(
+          "{\"trace\":\"%s\",\"pass\":%d,\"kind\":\"%s\",\"changed\":%d,\"objective\":%s,"
+          "\"max_violation\":%s,\"residual\":%s}\n",
+          name.c_str(), t.pass, polish ? "polish" : "iterate", t.changed, Num(t.objective).c_str(),
+          Num(t.max_violation).c_str(), Num(t.residual).c_str());
     } else if (polish) {
       std::printf("  pass %4d  polish   residual %.3e\n", t.pass, t.residual);
     } else {

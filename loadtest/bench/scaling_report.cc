@@ -45,16 +45,18 @@ void PrintScaling(std::vector<const InstanceResult*> rows, int gemm_n, double ge
   for (const InstanceResult* r : rows) {
     const double us = per_step_us(*r), ns = per_it_step_ns(*r);
     if (json) {
-      std::printf("{\"scaling\":\"%s\",\"N\":%d,\"iterations\":%d,\"us_per_step\":%s,\"ns_per_iteration_step\":%s,"
-                  "\"per_step_vs_N300\":%s,\"per_iteration_step_vs_N300\":%s,\"gflops\":%s,\"gemm_n\":%d,"
-                  "\"gemm_gflops\":%s}\n",
-                  r->name.c_str(), r->N, r->iterations, Num(us).c_str(), Num(ns).c_str(), Num(us / base_us).c_str(),
-                  Num(ns / base_ns).c_str(), Num(r->gflops).c_str(), gemm_n, Num(gemm).c_str());
+      std::printf(
+          "{\"scaling\":\"%s\",\"N\":%d,\"iterations\":%d,\"us_per_step\":%s,\"ns_per_iteration_step\":%s,"
+          "\"per_step_vs_N300\":%s,\"per_iteration_step_vs_N300\":%s,\"gflops\":%s,\"gemm_n\":%d,"
+          "\"gemm_gflops\":%s}\n",
+          r->name.c_str(), r->N, r->iterations, Num(us).c_str(), Num(ns).c_str(), Num(us / base_us).c_str(),
+          Num(ns / base_ns).c_str(), Num(r->gflops).c_str(), gemm_n, Num(gemm).c_str());
     } else {
-      std::printf("  %-34s N=%6d  %9.3f us/step (%4.2fx N=300)  %9.1f ns/(iteration*step) (%4.2fx)  (%d iterations)  "
-                  "%6.2f GFLOP/s (%.0f %% of GEMM n=%d)\n",
-                  r->name.c_str(), r->N, us, us / base_us, ns, ns / base_ns, r->iterations, r->gflops,
-                  100.0 * r->gflops / gemm, gemm_n);
+      std::printf(
+          "  %-34s N=%6d  %9.3f us/step (%4.2fx N=300)  %9.1f ns/(iteration*step) (%4.2fx)  (%d iterations)  "
+          "%6.2f GFLOP/s (%.0f %% of GEMM n=%d)\n",
+          r->name.c_str(), r->N, us, us / base_us, ns, ns / base_ns, r->iterations, r->gflops, 100.0 * r->gflops / gemm,
+          gemm_n);
     }
   }
 }
@@ -122,8 +124,9 @@ int RunKernelRates(const BenchOptions& options, double gemm20, double gemm40) {
     const int M = result_shape[i]->M;
     const double gemm = result_shape[i]->gemm;
     if (options.json) {
-      std::printf("{\"kernel_rate\":\"%s\",\"N\":%d,\"iterations\":%d,\"gflops\":%s,\"gemm_n\":%d,\"gemm_gflops\":%s}\n",
-                  r.name.c_str(), r.N, r.iterations, Num(r.gflops).c_str(), M, Num(gemm).c_str());
+      std::printf(
+          "{\"kernel_rate\":\"%s\",\"N\":%d,\"iterations\":%d,\"gflops\":%s,\"gemm_n\":%d,\"gemm_gflops\":%s}\n",
+          r.name.c_str(), r.N, r.iterations, Num(r.gflops).c_str(), M, Num(gemm).c_str());
     } else {
       std::printf("  per-stage kernels, %s N=%d, IFFBDD's passes (%d): %.2f GFLOP/s = %.0f %% of GEMM n=%d\n",
                   r.name.c_str(), r.N, r.iterations, r.gflops, 100.0 * r.gflops / gemm, M);

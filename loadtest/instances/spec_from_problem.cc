@@ -50,16 +50,36 @@ absl::Status ComponentToProto(const std::vector<core::ScalarPrior>& priors, int 
     kind = core::PriorKind::kBox;
   }
   switch (kind) {
-    case core::PriorKind::kNone: out->set_kind(v1::PRIOR_KIND_UNSPECIFIED); break;
-    case core::PriorKind::kL1: out->set_kind(v1::PRIOR_KIND_L1); break;
-    case core::PriorKind::kHuber: out->set_kind(v1::PRIOR_KIND_HUBER); break;
-    case core::PriorKind::kAtLeast: out->set_kind(v1::PRIOR_KIND_AT_LEAST); break;
-    case core::PriorKind::kAtMost: out->set_kind(v1::PRIOR_KIND_AT_MOST); break;
-    case core::PriorKind::kBox: out->set_kind(v1::PRIOR_KIND_BOX); break;
-    case core::PriorKind::kPlainNuv: out->set_kind(v1::PRIOR_KIND_PLAIN_NUV); break;
-    case core::PriorKind::kSmoothedNuv: out->set_kind(v1::PRIOR_KIND_SMOOTHED_NUV); break;
-    case core::PriorKind::kLp: out->set_kind(v1::PRIOR_KIND_LP); break;
-    case core::PriorKind::kBinary: out->set_kind(v1::PRIOR_KIND_BINARY); break;
+    case core::PriorKind::kNone:
+      out->set_kind(v1::PRIOR_KIND_UNSPECIFIED);
+      break;
+    case core::PriorKind::kL1:
+      out->set_kind(v1::PRIOR_KIND_L1);
+      break;
+    case core::PriorKind::kHuber:
+      out->set_kind(v1::PRIOR_KIND_HUBER);
+      break;
+    case core::PriorKind::kAtLeast:
+      out->set_kind(v1::PRIOR_KIND_AT_LEAST);
+      break;
+    case core::PriorKind::kAtMost:
+      out->set_kind(v1::PRIOR_KIND_AT_MOST);
+      break;
+    case core::PriorKind::kBox:
+      out->set_kind(v1::PRIOR_KIND_BOX);
+      break;
+    case core::PriorKind::kPlainNuv:
+      out->set_kind(v1::PRIOR_KIND_PLAIN_NUV);
+      break;
+    case core::PriorKind::kSmoothedNuv:
+      out->set_kind(v1::PRIOR_KIND_SMOOTHED_NUV);
+      break;
+    case core::PriorKind::kLp:
+      out->set_kind(v1::PRIOR_KIND_LP);
+      break;
+    case core::PriorKind::kBinary:
+      out->set_kind(v1::PRIOR_KIND_BINARY);
+      break;
   }
   const bool em = priors[static_cast<std::size_t>(offset)].em;
   for (int n = 0; n < steps; ++n) {
@@ -125,8 +145,8 @@ absl::StatusOr<v1::ProblemSpec> SpecFromProblem(const core::Problem& p) {
   x0->mutable_mean()->Add(p.initial_mean.data(), p.initial_mean.data() + p.initial_mean.size());
   if (!p.initial_state_fixed()) SetMatrix(p.initial_covariance, x0->mutable_covariance());
   for (int l = 0; l < p.num_inputs; ++l) {
-    NUPMPC_RETURN_IF_ERROR(ComponentToProto(p.input_priors, p.horizon, p.num_inputs, l,
-                                            absl::StrCat("input ", l), spec.add_input_priors()));
+    NUPMPC_RETURN_IF_ERROR(ComponentToProto(p.input_priors, p.horizon, p.num_inputs, l, absl::StrCat("input ", l),
+                                            spec.add_input_priors()));
   }
   for (int k = 0; k < p.num_outputs; ++k) {
     NUPMPC_RETURN_IF_ERROR(ComponentToProto(p.output_priors, p.horizon + 1, p.num_outputs, k,

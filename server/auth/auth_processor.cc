@@ -43,8 +43,8 @@ grpc::Status AuthProcessor::Process(const InputMetadata& auth_metadata, grpc::Au
     if (principal->admin) context->AddProperty(kAdminProperty, "1");
     context->AddProperty(kBearerTokenProperty, "1");
     // Consumed: the token does not reach the service's metadata (nor any log of it).
-    consumed_auth_metadata->insert(std::make_pair(std::string(header->first.data(), header->first.size()),
-                                                  std::string(value)));
+    consumed_auth_metadata->insert(
+        std::make_pair(std::string(header->first.data(), header->first.size()), std::string(value)));
     return grpc::Status::OK;
   }
   if (accept_client_certificates_) {

@@ -13,8 +13,8 @@ namespace nupmpc::server {
 // Authenticates every call before it reaches the service: an `authorization: Bearer TOKEN`
 // header must name a token of `tokens`; a call without one is accepted when its TLS client
 // certificate was verified (mTLS), its subject being the principal. Anything else is
-// UNAUTHENTICATED, except grpc.health.v1 (probes carry no credentials). The principal (and admin role) is added to the call's AuthContext
-// (server/auth/caller.h reads it). Tokens are never logged or echoed.
+// UNAUTHENTICATED, except grpc.health.v1 (probes carry no credentials). The principal (and admin role) is added to the
+// call's AuthContext (server/auth/caller.h reads it). Tokens are never logged or echoed.
 class AuthProcessor final : public grpc::AuthMetadataProcessor {
  public:
   // `tokens` may be null (certificates only); `accept_client_certificates`: mTLS is on.

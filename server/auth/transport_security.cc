@@ -29,7 +29,8 @@ absl::Status CheckTlsFiles(const TlsFiles& tls) {
     return absl::InvalidArgumentError("--tls_cert_file and --tls_key_file: give both or neither");
   }
   if (!tls.enabled()) {
-    if (tls.mutual()) return absl::InvalidArgumentError("--tls_client_ca_file: needs --tls_cert_file and --tls_key_file");
+    if (tls.mutual())
+      return absl::InvalidArgumentError("--tls_client_ca_file: needs --tls_cert_file and --tls_key_file");
     return absl::OkStatus();
   }
   if (absl::Status s = CheckPemFile("tls_cert_file", tls.cert_file, "CERTIFICATE"); !s.ok()) return s;
@@ -50,8 +51,8 @@ bool IsLocalAddress(absl::string_view address) {
 }
 
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(const TlsFiles& tls,
-                                                                                absl::string_view address,
-                                                                                std::shared_ptr<AuthProcessor> auth) {
+                                                                              absl::string_view address,
+                                                                              std::shared_ptr<AuthProcessor> auth) {
   if (absl::Status s = CheckTlsFiles(tls); !s.ok()) return s;
   std::shared_ptr<grpc::ServerCredentials> credentials;
   if (tls.enabled()) {

@@ -38,8 +38,8 @@ bool IsLocalAddress(absl::string_view address);
 // from this machine and, unlike insecure ones, run an AuthMetadataProcessor.
 // `auth`: the processor, or null when authentication is off.
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentialsFor(const TlsFiles& tls,
-                                                                                absl::string_view address,
-                                                                                std::shared_ptr<AuthProcessor> auth);
+                                                                              absl::string_view address,
+                                                                              std::shared_ptr<AuthProcessor> auth);
 
 }  // namespace nupmpc::server
 

@@ -57,8 +57,8 @@ void KernelToProto(const gp::SeArdKernel& kernel, v1::GpKernel* out) {
 
 // DEADLINE_EXCEEDED or CANCELLED for a fit its limits stopped.
 absl::Status StoppedFit(const gp::FitResult& fit, const gp::FitOptions& options, int points) {
-  const std::string done =
-      absl::StrCat(" after ", fit.iterations, " L-BFGS iterations on ", points, " points; fit fewer points or allow more time");
+  const std::string done = absl::StrCat(" after ", fit.iterations, " L-BFGS iterations on ", points,
+                                        " points; fit fewer points or allow more time");
   if (options.cancel != nullptr && options.cancel->load()) {
     return absl::CancelledError(absl::StrCat("the fit was cancelled", done));
   }
@@ -215,8 +215,8 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   NUPMPC_RETURN_IF_ERROR(optional_positive(s.tolerance(), &options.tolerance, "tolerance"));
   // The SCP stops when its radius falls below min_trust_radius: a smaller start is no start.
   if (options.initial_trust_radius < options.min_trust_radius) {
-    return Invalid("spec.gp.scp.initial_trust_radius = ", s.initial_trust_radius(), ": must be >= ",
-                   options.min_trust_radius, " (the radius at which the SCP stops)");
+    return Invalid("spec.gp.scp.initial_trust_radius = ", s.initial_trust_radius(),
+                   ": must be >= ", options.min_trust_radius, " (the radius at which the SCP stops)");
   }
   options.max_trust_radius = std::max(options.max_trust_radius, options.initial_trust_radius);
   // Every rule of the SCP options here, before the O(P³) set-up (LinGpScp::Create checks

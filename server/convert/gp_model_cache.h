@@ -24,8 +24,8 @@ class GpModelCache {
   // The model for `key` (canonical bytes of the data, lags and kernel), built by `make` when
   // no live session holds one. Two concurrent builds of one key may both run; the first to
   // finish is kept and returned to both.
-  absl::StatusOr<std::shared_ptr<const gp::GpModel>> GetOrCreate(
-      const std::string& key, absl::FunctionRef<absl::StatusOr<gp::GpModel>()> make);
+  absl::StatusOr<std::shared_ptr<const gp::GpModel>> GetOrCreate(const std::string& key,
+                                                                 absl::FunctionRef<absl::StatusOr<gp::GpModel>()> make);
   // Models some session holds now.
   int live_models() const;
 

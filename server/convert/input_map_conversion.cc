@@ -26,7 +26,8 @@ absl::StatusOr<std::vector<core::InputLevels>> LevelsFromSpec(const v1::ProblemS
     if (v.count != 0) return Invalid(field + ".input", absl::StrCat("input ", e.input(), " is listed twice"));
     if (e.count() < 2) return Invalid(field + ".count", "must be >= 2");
     if (!std::isfinite(e.lowest())) return Invalid(field + ".lowest", "must be finite");
-    if (!(e.spacing() > 0.0) || !std::isfinite(e.spacing())) return Invalid(field + ".spacing", "must be finite and > 0");
+    if (!(e.spacing() > 0.0) || !std::isfinite(e.spacing()))
+      return Invalid(field + ".spacing", "must be finite and > 0");
     const v1::ComponentPrior& own = spec.input_priors(static_cast<int>(e.input()));
     bool weighted = false;
     for (double w : own.weight()) weighted |= w != 0.0;
@@ -69,14 +70,13 @@ absl::StatusOr<core::InputMap> InputMapFromSpec(const v1::ProblemSpec& spec, con
 
   const v1::InputDifferences& d = spec.input_differences();
   if (d.priors_size() != L) {
-    return Invalid("spec.input_differences.priors", absl::StrCat("expected ", L, " entries (num_inputs), got ",
-                                                                  d.priors_size()));
+    return Invalid("spec.input_differences.priors",
+                   absl::StrCat("expected ", L, " entries (num_inputs), got ", d.priors_size()));
   }
   map.difference_priors.resize(static_cast<std::size_t>(N) * L);
   for (int l = 0; l < L; ++l) {
-    NUPMPC_RETURN_IF_ERROR(ComponentPriorsFromProto(d.priors(l), N,
-                                                    absl::StrCat("spec.input_differences.priors[", l, "]"),
-                                                    &map.difference_priors, L, l));
+    NUPMPC_RETURN_IF_ERROR(ComponentPriorsFromProto(
+        d.priors(l), N, absl::StrCat("spec.input_differences.priors[", l, "]"), &map.difference_priors, L, l));
   }
   map.previous_input = Eigen::VectorXd::Zero(L);
   if (d.previous_input_size() != 0) {

@@ -18,9 +18,14 @@ absl::StatusOr<core::KeepOutRegion> RegionFromSpec(const v1::KeepOutRegion& r, c
   core::KeepOutRegion region;
   switch (r.shape()) {
     case v1::KeepOutRegion::SHAPE_UNSPECIFIED:
-    case v1::KeepOutRegion::SHAPE_ELLIPSE: region.shape = core::KeepOutShape::kEllipse; break;
-    case v1::KeepOutRegion::SHAPE_RECTANGLE: region.shape = core::KeepOutShape::kRectangle; break;
-    default: return Invalid(field + ".shape", absl::StrCat("unknown value ", r.shape()));
+    case v1::KeepOutRegion::SHAPE_ELLIPSE:
+      region.shape = core::KeepOutShape::kEllipse;
+      break;
+    case v1::KeepOutRegion::SHAPE_RECTANGLE:
+      region.shape = core::KeepOutShape::kRectangle;
+      break;
+    default:
+      return Invalid(field + ".shape", absl::StrCat("unknown value ", r.shape()));
   }
   if (!std::isfinite(r.centre_x())) return Invalid(field + ".centre_x", "must be finite");
   if (!std::isfinite(r.centre_y())) return Invalid(field + ".centre_y", "must be finite");
@@ -51,7 +56,8 @@ absl::StatusOr<core::KeepOutRegion> RegionFromSpec(const v1::KeepOutRegion& r, c
 absl::StatusOr<core::KeepOut> KeepOutFromSpec(const v1::KeepOut& spec, int num_outputs) {
   core::KeepOut keep_out;
   if (spec.first_output() >= static_cast<unsigned>(num_outputs)) {
-    return Invalid("first_output", absl::StrCat("must be < num_outputs = ", num_outputs, ", got ", spec.first_output()));
+    return Invalid("first_output",
+                   absl::StrCat("must be < num_outputs = ", num_outputs, ", got ", spec.first_output()));
   }
   if (spec.second_output() >= static_cast<unsigned>(num_outputs)) {
     return Invalid("second_output",

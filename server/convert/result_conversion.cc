@@ -7,10 +7,14 @@ namespace nupmpc::server {
 
 v1::Algorithm AlgorithmToProto(core::Algorithm a) {
   switch (a) {
-    case core::Algorithm::kIake: return v1::ALGORITHM_IAKE;
-    case core::Algorithm::kIbffd: return v1::ALGORITHM_IBFFD;
-    case core::Algorithm::kIffbdd: return v1::ALGORITHM_IFFBDD;
-    case core::Algorithm::kAuto: break;
+    case core::Algorithm::kIake:
+      return v1::ALGORITHM_IAKE;
+    case core::Algorithm::kIbffd:
+      return v1::ALGORITHM_IBFFD;
+    case core::Algorithm::kIffbdd:
+      return v1::ALGORITHM_IFFBDD;
+    case core::Algorithm::kAuto:
+      break;
   }
   return v1::ALGORITHM_UNSPECIFIED;
 }
@@ -18,12 +22,18 @@ v1::Algorithm AlgorithmToProto(core::Algorithm a) {
 namespace {
 v1::SolveStatus StatusToProto(core::SolveStatus s) {
   switch (s) {
-    case core::SolveStatus::kConverged: return v1::SOLVE_STATUS_CONVERGED;
-    case core::SolveStatus::kIterationLimit: return v1::SOLVE_STATUS_ITERATION_LIMIT;
-    case core::SolveStatus::kTimeLimit: return v1::SOLVE_STATUS_TIME_LIMIT;
-    case core::SolveStatus::kNumericalError: return v1::SOLVE_STATUS_NUMERICAL_ERROR;
-    case core::SolveStatus::kCancelled: return v1::SOLVE_STATUS_CANCELLED;
-    case core::SolveStatus::kInfeasible: return v1::SOLVE_STATUS_INFEASIBLE;
+    case core::SolveStatus::kConverged:
+      return v1::SOLVE_STATUS_CONVERGED;
+    case core::SolveStatus::kIterationLimit:
+      return v1::SOLVE_STATUS_ITERATION_LIMIT;
+    case core::SolveStatus::kTimeLimit:
+      return v1::SOLVE_STATUS_TIME_LIMIT;
+    case core::SolveStatus::kNumericalError:
+      return v1::SOLVE_STATUS_NUMERICAL_ERROR;
+    case core::SolveStatus::kCancelled:
+      return v1::SOLVE_STATUS_CANCELLED;
+    case core::SolveStatus::kInfeasible:
+      return v1::SOLVE_STATUS_INFEASIBLE;
   }
   return v1::SOLVE_STATUS_UNSPECIFIED;
 }

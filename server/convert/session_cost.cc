@@ -32,23 +32,31 @@ absl::StatusOr<std::int64_t> GpPoints(const v1::GpModel& model, const std::strin
 absl::Status CheckSessionLimits(const SessionCost& cost, const SizeLimits& limits) {
   const std::int64_t peak = std::max(cost.build_bytes, cost.session_bytes());
   if (peak > limits.max_session_bytes) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat("spec: the session needs an estimated ", Mib(peak), " of memory, over the server's per-session "
-                     "limit (ServerLimits.max_session_bytes) of ", Mib(limits.max_session_bytes),
-                     "; shorten the horizon or reduce the dimensions"));
+    return absl::ResourceExhaustedError(absl::StrCat("spec: the session needs an estimated ", Mib(peak),
+                                                     " of memory, over the server's per-session "
+                                                     "limit (ServerLimits.max_session_bytes) of ",
+                                                     Mib(limits.max_session_bytes),
+                                                     "; shorten the horizon or reduce the dimensions"));
   }
   if (cost.pass_flops > limits.max_pass_flops) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        "spec: one message-passing pass needs an estimated ", cost.pass_flops, " flops, over the server's limit "
-        "(ServerLimits.max_pass_flops) of ", limits.max_pass_flops, "; shorten the horizon or reduce the dimensions"));
+    return absl::ResourceExhaustedError(
+        absl::StrCat("spec: one message-passing pass needs an estimated ", cost.pass_flops,
+                     " flops, over the server's limit "
+                     "(ServerLimits.max_pass_flops) of ",
+                     limits.max_pass_flops, "; shorten the horizon or reduce the dimensions"));
   }
   return absl::OkStatus();
 }
 
 core::Footprint Footprint(std::int64_t M, std::int64_t L, std::int64_t K, std::int64_t N, bool per_step,
                           bool uncertain_initial_state = false, bool terminal_cost = true) {
-  return core::EstimateFootprint({.num_states = M, .num_inputs = L, .num_outputs = K, .horizon = N,
-                                  .a_per_step = per_step, .b_per_step = per_step, .c_per_step = per_step,
+  return core::EstimateFootprint({.num_states = M,
+                                  .num_inputs = L,
+                                  .num_outputs = K,
+                                  .horizon = N,
+                                  .a_per_step = per_step,
+                                  .b_per_step = per_step,
+                                  .c_per_step = per_step,
                                   .uncertain_initial_state = uncertain_initial_state,
                                   .terminal_cost = terminal_cost});
 }
@@ -98,15 +106,14 @@ absl::StatusOr<SessionCost> SpecCost(const v1::ProblemSpec& spec, const SizeLimi
         CheckLimit(absl::StrCat("spec.input_levels[", i, "].count").c_str(), count, limits.max_input_levels));
     if (count >= 2) L += count - 2;
   }
-  NUPMPC_RETURN_IF_ERROR(CheckLimit("spec.input_levels (inputs after expanding the levels into binaries)", L,
-                                    limits.max_inputs));
+  NUPMPC_RETURN_IF_ERROR(
+      CheckLimit("spec.input_levels (inputs after expanding the levels into binaries)", L, limits.max_inputs));
   if (spec.has_input_differences()) {
     M += L;
     K += L;
   }
   const bool per_step = model.a_size() > 1 || model.b_size() > 1 || model.c_size() > 1;
-  core::Footprint f =
-      Footprint(M, L, K, N, per_step, spec.initial_state().has_covariance(), spec.has_terminal());
+  core::Footprint f = Footprint(M, L, K, N, per_step, spec.initial_state().has_covariance(), spec.has_terminal());
   SessionCost cost;
   cost.resident_bytes = f.problem_bytes + f.carried_bytes;
   cost.scratch_bytes = f.workspace_bytes;

@@ -14,11 +14,11 @@
 namespace nupmpc::server {
 
 struct SessionCost {
-  std::int64_t build_bytes = 0;     ///< peak while the session is built (a GP kernel fit, factorisation)
-  std::int64_t resident_bytes = 0;  ///< kept while the session exists (problem, warm start, GP factors)
-  std::int64_t scratch_bytes = 0;   ///< solver scratch, given back while the session is idle
-  std::int64_t transient_bytes = 0; ///< allocated and freed again within one solve
-  double pass_flops = 0.0;          ///< one message-passing pass over the horizon
+  std::int64_t build_bytes = 0;      ///< peak while the session is built (a GP kernel fit, factorisation)
+  std::int64_t resident_bytes = 0;   ///< kept while the session exists (problem, warm start, GP factors)
+  std::int64_t scratch_bytes = 0;    ///< solver scratch, given back while the session is idle
+  std::int64_t transient_bytes = 0;  ///< allocated and freed again within one solve
+  double pass_flops = 0.0;           ///< one message-passing pass over the horizon
   // What a session holds while it solves (its reservation).
   std::int64_t session_bytes() const { return resident_bytes + scratch_bytes + transient_bytes; }
 };

@@ -58,8 +58,7 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
   NUPMPC_ASSIGN_OR_RETURN(const PerStep upper, PerStep::Make(c.upper(), steps, kInf, Path(path, "upper")));
   NUPMPC_ASSIGN_OR_RETURN(const PerStep slope, PerStep::Make(c.slope(), steps, kInf, Path(path, "slope")));
   NUPMPC_ASSIGN_OR_RETURN(const PerStep radius, PerStep::Make(c.radius(), steps, 1.0, Path(path, "radius")));
-  NUPMPC_ASSIGN_OR_RETURN(const PerStep exponent,
-                          PerStep::Make(c.exponent(), steps, 1.0, Path(path, "exponent")));
+  NUPMPC_ASSIGN_OR_RETURN(const PerStep exponent, PerStep::Make(c.exponent(), steps, 1.0, Path(path, "exponent")));
   const v1::PriorKind kind = c.kind();
   if (!v1::PriorKind_IsValid(kind)) return Invalid(Path(path, "kind"), " = ", static_cast<int>(kind), ": unknown");
   if (!v1::Estimation_IsValid(c.estimation())) {
@@ -123,7 +122,8 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
           p = core::ScalarPrior::SmoothedNuv(centre, r, em);
         } else {
           const double e = exponent.at(n);
-          if (!(e > 0.0 && e <= 1.0)) return Invalid(Path(path, "exponent"), " at step ", n, " = ", e, ": must be in (0, 1]");
+          if (!(e > 0.0 && e <= 1.0))
+            return Invalid(Path(path, "exponent"), " at step ", n, " = ", e, ": must be in (0, 1]");
           if (!std::isfinite(s)) return Invalid(Path(path, "slope"), " at step ", n, ": must be finite for LP");
           p = core::ScalarPrior::Lp(centre, e, s);
         }
@@ -131,7 +131,8 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
       }
       case v1::PRIOR_KIND_BINARY:
         if (!std::isfinite(a) || !std::isfinite(b) || !(a < b)) {
-          return Invalid(path, " at step ", n, ": levels lower = ", a, ", upper = ", b, " must be finite with lower < upper");
+          return Invalid(path, " at step ", n, ": levels lower = ", a, ", upper = ", b,
+                         " must be finite with lower < upper");
         }
         p = core::ScalarPrior::Binary(a, b, em);
         break;
@@ -207,7 +208,7 @@ absl::Status CheckLimit(const char* field, long long value, long long limit) {
 }
 
 absl::Status ComponentPriorsFromProto(const v1::ComponentPrior& component, int steps, const std::string& path,
-                                     std::vector<core::ScalarPrior>* out, int stride, int offset) {
+                                      std::vector<core::ScalarPrior>* out, int stride, int offset) {
   return ComponentFromProto(component, steps, path, out, stride, offset);
 }
 
@@ -241,8 +242,7 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
                      " (per step) matrices, got ", list.size());
     }
     for (int i = 0; i < list.size(); ++i) {
-      NUPMPC_ASSIGN_OR_RETURN(Eigen::MatrixXd mat,
-                              MatrixFromProto(list[i], rows, cols, Path("spec.model", name, i)));
+      NUPMPC_ASSIGN_OR_RETURN(Eigen::MatrixXd mat, MatrixFromProto(list[i], rows, cols, Path("spec.model", name, i)));
       out->push_back(std::move(mat));
     }
     return absl::OkStatus();
@@ -258,8 +258,7 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
                                 std::vector<Eigen::VectorXd>* out) -> absl::Status {
     if (values.empty()) return absl::OkStatus();
     if (values.size() != size && values.size() != size * steps) {
-      return Invalid("spec.model.", name, ": expected 0, ", size, " or ", size * steps, " values, got ",
-                     values.size());
+      return Invalid("spec.model.", name, ": expected 0, ", size, " or ", size * steps, " values, got ", values.size());
     }
     for (int i = 0; i < values.size(); ++i) {
       if (!std::isfinite(values[i])) return Invalid("spec.model.", name, "[", i, "] = ", values[i], ": must be finite");
@@ -320,11 +319,20 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
 absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, const SizeLimits& limits) {
   core::SolverOptions out;
   switch (o.algorithm()) {
-    case v1::ALGORITHM_UNSPECIFIED: out.algorithm = core::Algorithm::kAuto; break;
-    case v1::ALGORITHM_IAKE: out.algorithm = core::Algorithm::kIake; break;
-    case v1::ALGORITHM_IBFFD: out.algorithm = core::Algorithm::kIbffd; break;
-    case v1::ALGORITHM_IFFBDD: out.algorithm = core::Algorithm::kIffbdd; break;
-    default: return Invalid("spec.options.algorithm = ", static_cast<int>(o.algorithm()), ": unknown");
+    case v1::ALGORITHM_UNSPECIFIED:
+      out.algorithm = core::Algorithm::kAuto;
+      break;
+    case v1::ALGORITHM_IAKE:
+      out.algorithm = core::Algorithm::kIake;
+      break;
+    case v1::ALGORITHM_IBFFD:
+      out.algorithm = core::Algorithm::kIbffd;
+      break;
+    case v1::ALGORITHM_IFFBDD:
+      out.algorithm = core::Algorithm::kIffbdd;
+      break;
+    default:
+      return Invalid("spec.options.algorithm = ", static_cast<int>(o.algorithm()), ": unknown");
   }
   if (o.max_iterations() > static_cast<unsigned>(limits.max_iterations)) {
     return absl::ResourceExhaustedError(absl::StrCat("spec.options.max_iterations = ", o.max_iterations(),

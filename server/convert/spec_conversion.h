@@ -46,7 +46,7 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
 // One ComponentPrior's `steps` scalar priors, written to out[n * stride + offset];
 // INVALID_ARGUMENT naming `path` and the field.
 absl::Status ComponentPriorsFromProto(const v1::ComponentPrior& component, int steps, const std::string& path,
-                                     std::vector<core::ScalarPrior>* out, int stride, int offset);
+                                      std::vector<core::ScalarPrior>* out, int stride, int offset);
 
 // The solver options of a spec (defaults where fields are 0).
 absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& options, const SizeLimits& limits);

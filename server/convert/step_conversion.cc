@@ -31,7 +31,6 @@ absl::StatusOr<std::vector<core::ComponentPriors>> ComponentsFromProto(
   return components;
 }
 
-
 // The matrix as given (its size is the session's to check), once its data matches it.
 absl::StatusOr<Eigen::MatrixXd> GivenMatrix(const v1::Matrix& m, const std::string& path) {
   // Larger than any session's matrices (which the session checks), and than an int.
@@ -41,7 +40,8 @@ absl::StatusOr<Eigen::MatrixXd> GivenMatrix(const v1::Matrix& m, const std::stri
         absl::StrCat(path, ": ", m.rows(), "x", m.cols(), " is larger than any session's matrices"));
   }
   if (static_cast<std::uint64_t>(m.rows()) * m.cols() != static_cast<std::uint64_t>(m.data_size())) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ".data: expected ", static_cast<std::uint64_t>(m.rows()) * m.cols(),
+    return absl::InvalidArgumentError(absl::StrCat(path, ".data: expected ",
+                                                   static_cast<std::uint64_t>(m.rows()) * m.cols(),
                                                    " values (rows*cols, row-major), got ", m.data_size()));
   }
   return MatrixFromProto(m, static_cast<int>(m.rows()), static_cast<int>(m.cols()), path);

@@ -25,16 +25,26 @@ constexpr std::chrono::milliseconds kAcceptPauseWhenOutOfDescriptors{100};
 
 const char* ReasonPhrase(int status) {
   switch (status) {
-    case 200: return "OK";
-    case 400: return "Bad Request";
-    case 404: return "Not Found";
-    case 405: return "Method Not Allowed";
-    case 408: return "Request Timeout";
-    case 413: return "Content Too Large";
-    case 431: return "Request Header Fields Too Large";
-    case 500: return "Internal Server Error";
-    case 503: return "Service Unavailable";
-    default: return "Status";
+    case 200:
+      return "OK";
+    case 400:
+      return "Bad Request";
+    case 404:
+      return "Not Found";
+    case 405:
+      return "Method Not Allowed";
+    case 408:
+      return "Request Timeout";
+    case 413:
+      return "Content Too Large";
+    case 431:
+      return "Request Header Fields Too Large";
+    case 500:
+      return "Internal Server Error";
+    case 503:
+      return "Service Unavailable";
+    default:
+      return "Status";
   }
 }
 
@@ -278,8 +288,8 @@ void HttpListener::Answer(int fd, Connection& connection, const HttpResponse& re
 
 void HttpListener::OnWritable(int fd, Connection& connection) {
   while (connection.sent < connection.response.size()) {
-    const ssize_t n = send(fd, connection.response.data() + connection.sent, connection.response.size() - connection.sent,
-                           MSG_NOSIGNAL);
+    const ssize_t n = send(fd, connection.response.data() + connection.sent,
+                           connection.response.size() - connection.sent, MSG_NOSIGNAL);
     if (n > 0) {
       connection.sent += static_cast<std::size_t>(n);
       continue;

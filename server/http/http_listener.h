@@ -52,9 +52,9 @@ struct HttpListenerLimits {
 // What the listener did, for tests and operators.
 struct HttpListenerCounts {
   std::uint64_t accepted = 0;
-  std::uint64_t answered = 0;  // responses sent in full, errors included
+  std::uint64_t answered = 0;   // responses sent in full, errors included
   std::uint64_t timed_out = 0;  // closed at a read or write deadline
-  std::uint64_t evicted = 0;  // closed to admit a newer connection
+  std::uint64_t evicted = 0;    // closed to admit a newer connection
 };
 
 class HttpListener {

@@ -20,7 +20,7 @@ struct HttpHeadLimits {
 
 struct HttpRequestHead {
   std::string method;
-  std::string path;  // the request target without its query string
+  std::string path;             // the request target without its query string
   bool announces_body = false;  // Content-Length > 0 or any Transfer-Encoding
 };
 
@@ -33,8 +33,8 @@ enum class HeadParseState {
 struct HeadParse {
   HeadParseState state = HeadParseState::kIncomplete;
   HttpRequestHead head;  // set when kComplete
-  int status = 0;  // set when kRefused: 400 or 431
-  std::string reason;  // set when kRefused, for the response body
+  int status = 0;        // set when kRefused: 400 or 431
+  std::string reason;    // set when kRefused, for the response body
 };
 
 // Looks at everything received on the connection so far (bytes after the head, a body or

@@ -16,11 +16,21 @@ namespace {
 void AppendJsonEscaped(absl::string_view text, spdlog::memory_buf_t& out) {
   for (const char c : text) {
     switch (c) {
-      case '"': out.append(absl::string_view("\\\"")); break;
-      case '\\': out.append(absl::string_view("\\\\")); break;
-      case '\n': out.append(absl::string_view("\\n")); break;
-      case '\r': out.append(absl::string_view("\\r")); break;
-      case '\t': out.append(absl::string_view("\\t")); break;
+      case '"':
+        out.append(absl::string_view("\\\""));
+        break;
+      case '\\':
+        out.append(absl::string_view("\\\\"));
+        break;
+      case '\n':
+        out.append(absl::string_view("\\n"));
+        break;
+      case '\r':
+        out.append(absl::string_view("\\r"));
+        break;
+      case '\t':
+        out.append(absl::string_view("\\t"));
+        break;
       default:
         if (static_cast<unsigned char>(c) < 0x20) {
           const std::string escaped = absl::StrCat("\\u00", absl::Hex(static_cast<unsigned char>(c), absl::kZeroPad2));

@@ -24,16 +24,26 @@ std::vector<std::uint64_t> Histogram::counts() const {
 
 absl::string_view RpcName(Rpc rpc) {
   switch (rpc) {
-    case Rpc::kCreateSession: return "CreateSession";
-    case Rpc::kControl: return "Control";
-    case Rpc::kSolve: return "Solve";
-    case Rpc::kSolveOnce: return "SolveOnce";
-    case Rpc::kGetSession: return "GetSession";
-    case Rpc::kListSessions: return "ListSessions";
-    case Rpc::kCloseSession: return "CloseSession";
-    case Rpc::kGetServerInfo: return "GetServerInfo";
-    case Rpc::kFitGpModel: return "FitGpModel";
-    case Rpc::kSolveFleet: return "SolveFleet";
+    case Rpc::kCreateSession:
+      return "CreateSession";
+    case Rpc::kControl:
+      return "Control";
+    case Rpc::kSolve:
+      return "Solve";
+    case Rpc::kSolveOnce:
+      return "SolveOnce";
+    case Rpc::kGetSession:
+      return "GetSession";
+    case Rpc::kListSessions:
+      return "ListSessions";
+    case Rpc::kCloseSession:
+      return "CloseSession";
+    case Rpc::kGetServerInfo:
+      return "GetServerInfo";
+    case Rpc::kFitGpModel:
+      return "FitGpModel";
+    case Rpc::kSolveFleet:
+      return "SolveFleet";
   }
   return "unknown";
 }
@@ -102,7 +112,7 @@ void Metrics::Fill(v1::GetServerInfoResponse* out) const {
   for (std::size_t i = 0; i < counts.size(); ++i) {
     v1::LatencyBucket* b = out->add_solve_latency();
     b->set_upper_ms(i < kLatencyBucketsS.size() ? kLatencyBucketsS[i] * 1000.0
-                                                 : std::numeric_limits<double>::infinity());
+                                                : std::numeric_limits<double>::infinity());
     b->set_count(counts[i]);
   }
 }

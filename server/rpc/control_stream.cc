@@ -1,9 +1,9 @@
 #include "server/rpc/control_stream.h"
 
 #include "absl/strings/str_cat.h"
+#include "server/observability/log_context.h"
 #include "server/rpc/catch_exceptions.h"
 #include "server/rpc/grpc_handover.h"
-#include "server/observability/log_context.h"
 #include "server/rpc/raw_messages.h"
 #include "server/sessions/session_factory.h"
 #include "server/sessions/step_solver.h"
@@ -43,9 +43,10 @@ void ControlStream::Begin() {
   }
   counted_ = true;
   if (state_->control_streams.fetch_add(1) >= state_->options.max_control_streams) {
-    End(state_->ToGrpc(Rpc::kControl, absl::ResourceExhaustedError(
-        absl::StrCat("the server has its maximum of ", state_->options.max_control_streams,
-                     " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
+    End(state_->ToGrpc(Rpc::kControl,
+                       absl::ResourceExhaustedError(absl::StrCat(
+                           "the server has its maximum of ", state_->options.max_control_streams,
+                           " Control streams open (ServerLimits.max_control_streams); close one or retry later"))));
     return;
   }
   std::function<void()> revoke;
@@ -87,9 +88,9 @@ void ControlStream::OnFirstMessageTimeout(bool fired) {
     phase_ = Phase::kEnding;
     final_status_ = state_->ToGrpc(
         Rpc::kControl,
-        absl::DeadlineExceededError(absl::StrCat("first ControlRequest: none within first_message_timeout_s = ",
-                                                 state_->options.first_message_timeout_s,
-                                                 " s (ServerLimits.first_message_timeout_s); send the attach at once")));
+        absl::DeadlineExceededError(absl::StrCat(
+            "first ControlRequest: none within first_message_timeout_s = ", state_->options.first_message_timeout_s,
+            " s (ServerLimits.first_message_timeout_s); send the attach at once")));
   }
   Pump();
 }
@@ -127,8 +128,8 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       if (!found.ok()) return found.status();
       entry = *std::move(found);
       if (entry->owned_by_stream || entry->attached.exchange(true)) {
-        return absl::FailedPreconditionError(
-            absl::StrCat("session_id ", QuoteSessionId(first.session_id()), ": another Control stream is attached to it"));
+        return absl::FailedPreconditionError(absl::StrCat("session_id ", QuoteSessionId(first.session_id()),
+                                                          ": another Control stream is attached to it"));
       }
       break;
     }
@@ -138,8 +139,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       call.cancel = &cancelled_;
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
           CreateAndRegister(first.spec(), state_->options.size_limits, &state_->gp_models, &state_->budget,
-                            &state_->registry, call, /*owned_by_stream=*/true, /*requested_id=*/{},
-                            OwnerFor(caller_));
+                            &state_->registry, call, /*owned_by_stream=*/true, /*requested_id=*/{}, OwnerFor(caller_));
       if (!added.ok()) return added.status();
       entry = *std::move(added);
       entry->attached.store(true);
@@ -204,10 +204,12 @@ void ControlStream::OnReadDone(bool ok) {
     } else if (request.attach_case() != v1::ControlRequest::ATTACH_NOT_SET) {
       QueueWriteLocked(ErrorResponse(
           request.sequence(),
-          state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
+          state_->ToGrpc(Rpc::kControl,
+                         absl::InvalidArgumentError("attach: only the first ControlRequest may carry it"))));
     } else if (!request.has_step()) {
       QueueWriteLocked(ErrorResponse(
-          request.sequence(), state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
+          request.sequence(),
+          state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
     } else {
       read_timing_.StepArrived(solving_, read_after_solve_, Clock::now() - read_started_at_, writing_);
       start = EnqueueStepLocked(std::move(request));
@@ -280,8 +282,8 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
 
 std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
   if (state_->draining.load()) {
-    QueueWriteLocked(
-        ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
+    QueueWriteLocked(ErrorResponse(
+        request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
     return std::nullopt;
   }
   if (parked_.has_value()) {

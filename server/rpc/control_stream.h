@@ -126,7 +126,7 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   // phase kAttaching or `solving_` set).
   grpc::CallbackServerContext* const context_;
   std::shared_ptr<ControlStream> grpc_reference_;  // set by Start, dropped by OnDone
-  grpc::ByteBuffer read_buffer_;  // raw: parsed by OnReadDone (server/rpc/raw_messages.h)
+  grpc::ByteBuffer read_buffer_;                   // raw: parsed by OnReadDone (server/rpc/raw_messages.h)
   std::atomic<bool> cancelled_{false};
   bool counted_ = false;  // in state_->control_streams (set by Begin, before any reaction)
   const Caller caller_;   // who opened the stream: owns the session it creates
@@ -152,18 +152,18 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   std::mutex mu_;
   Phase phase_ = Phase::kAwaitingFirst;
   Reading reading_ = Reading::kActive;
-  std::shared_ptr<SessionEntry> entry_;        // set by the first message
-  std::optional<v1::ControlRequest> parked_;   // the newest step not yet started
-  bool solving_ = false;                       // a step is on the pool (in its session's strand)
-  std::deque<grpc::ByteBuffer> writes_;        // serialized answers; front is being written when writing_
+  std::shared_ptr<SessionEntry> entry_;       // set by the first message
+  std::optional<v1::ControlRequest> parked_;  // the newest step not yet started
+  bool solving_ = false;                      // a step is on the pool (in its session's strand)
+  std::deque<grpc::ByteBuffer> writes_;       // serialized answers; front is being written when writing_
   bool writing_ = false;
   // Reads decided on (under mu_) but not started yet (ReadNext counts it down once its
   // StartRead is issued): the stream must not finish in between, as no read may start
   // after Finish.
   int reads_starting_ = 0;
   ReadTiming read_timing_;
-  bool read_after_solve_ = false;       // the pending read was started after a solve
-  Clock::time_point read_started_at_;   // when the pending read was started
+  bool read_after_solve_ = false;      // the pending read was started after a solve
+  Clock::time_point read_started_at_;  // when the pending read was started
   grpc::Status final_status_;
   // Set by Begin; cancelled once the first message arrives (the callback holds only a weak
   // reference, so a pending timer never keeps the stream alive).

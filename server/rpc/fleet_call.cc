@@ -15,8 +15,12 @@ namespace {
 class FleetRun : public std::enable_shared_from_this<FleetRun> {
  public:
   explicit FleetRun(FleetCall* call)
-      : call_(call), state_(call->state()), request_(call->request()), response_(call->response()),
-        steps_(static_cast<std::size_t>(call->request().steps_size())), context_(call->Context()) {}
+      : call_(call),
+        state_(call->state()),
+        request_(call->request()),
+        response_(call->response()),
+        steps_(static_cast<std::size_t>(call->request().steps_size())),
+        context_(call->Context()) {}
 
   void Start(const Caller& caller) {
     if (state_->draining.load()) {
@@ -24,8 +28,9 @@ class FleetRun : public std::enable_shared_from_this<FleetRun> {
       return;
     }
     if (steps_ > static_cast<std::size_t>(state_->options.max_fleet_steps)) {
-      call_->Reply(absl::InvalidArgumentError(absl::StrCat("steps: ", steps_, " steps, over ServerLimits.max_fleet_steps = ",
-                                                           state_->options.max_fleet_steps, "; split the fleet")));
+      call_->Reply(absl::InvalidArgumentError(absl::StrCat(
+          "steps: ", steps_, " steps, over ServerLimits.max_fleet_steps = ", state_->options.max_fleet_steps,
+          "; split the fleet")));
       return;
     }
     items_.resize(steps_);
@@ -36,7 +41,8 @@ class FleetRun : public std::enable_shared_from_this<FleetRun> {
     std::size_t accepted = 0;
     double expected_ms = 0.0;
     for (std::size_t i = 0; i < steps_; ++i) {
-      absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(request_.steps(i).session_id(), caller);
+      absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+          state_->registry.Find(request_.steps(i).session_id(), caller);
       if (entry.ok() && (*entry)->attached.load()) {
         entry = absl::FailedPreconditionError(
             "session_id: a Control stream is attached to this session; send its steps there");
@@ -119,7 +125,8 @@ class FleetRun : public std::enable_shared_from_this<FleetRun> {
       AnswerError(i, status);
       return;
     }
-    state_->RecordSolve(answer->result(), item.entry.get(), std::chrono::duration<double>(started_at - queued_at_).count(),
+    state_->RecordSolve(answer->result(), item.entry.get(),
+                        std::chrono::duration<double>(started_at - queued_at_).count(),
                         std::chrono::duration<double>(Clock::now() - queued_at_).count());
     Done();
   }

@@ -3,26 +3,26 @@
 #include "absl/strings/ascii.h"
 #include "core/platform/cpu_baseline.h"
 #include "core/util/status_macros.h"
-#include "server/rpc/control_stream.h"
-#include "server/scheduling/cpu_affinity.h"
-#include "server/rpc/fleet_call.h"
 #include "server/convert/gp_conversion.h"
-#include "server/observability/log_context.h"
-#include "server/observability/process_memory.h"
 #include "server/convert/result_conversion.h"
 #include "server/convert/session_cost.h"
+#include "server/observability/log_context.h"
+#include "server/observability/process_memory.h"
+#include "server/observability/version.h"
+#include "server/rpc/control_stream.h"
+#include "server/rpc/fleet_call.h"
+#include "server/rpc/unary_call.h"
+#include "server/scheduling/cpu_affinity.h"
 #include "server/sessions/session_factory.h"
 #include "server/sessions/step_solver.h"
-#include "server/rpc/unary_call.h"
-#include "server/observability/version.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
 
 grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerContext* context, const Raw* raw_request,
                                                         Raw* raw_response) {
-  auto* call = UnaryCall<v1::CreateSessionRequest, v1::CreateSessionResponse>::Start(state_, context, raw_request,
-                                                                                    raw_response);
+  auto* call =
+      UnaryCall<v1::CreateSessionRequest, v1::CreateSessionResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
   if (const std::string& requested = call->request().session_id(); !requested.empty()) {
     if (absl::Status form = CheckRequestedSessionId(requested); !form.ok()) {
@@ -33,23 +33,24 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
   ServerState* state = state_;
   const v1::CreateSessionRequest* request = &call->request();
   v1::CreateSessionResponse* response = call->response();
-  call->RunOnPool("CreateSession", /*solve_result=*/nullptr,
-                  [state, request, response, owner = OwnerFor(CallerOf(*context))](const CallContext& c) {
-    absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
-        CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
-                          &state->registry, c, /*owned_by_stream=*/false, request->session_id(), owner);
-    if (!entry.ok()) return entry.status();
-    response->set_session_id((*entry)->id);
-    *response->mutable_dimensions() = (*entry)->dims;
-    response->set_algorithm(AlgorithmToProto((*entry)->algorithm.load()));
-    state->FillLimits(response->mutable_limits());
-    const LogContext log_context((*entry)->id, (*entry)->owner.principal);
-    spdlog::info("session {} created (M={}, L={}, K={}, N={}); memory budget: {} MiB reserved of {} MiB",
-                 (*entry)->id, response->dimensions().num_states(), response->dimensions().num_inputs(),
-                 response->dimensions().num_outputs(), response->dimensions().horizon(),
-                 state->budget.reserved() >> 20, state->budget.capacity() >> 20);
-    return absl::OkStatus();
-  });
+  call->RunOnPool(
+      "CreateSession", /*solve_result=*/nullptr,
+      [state, request, response, owner = OwnerFor(CallerOf(*context))](const CallContext& c) {
+        absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+            CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
+                              &state->registry, c, /*owned_by_stream=*/false, request->session_id(), owner);
+        if (!entry.ok()) return entry.status();
+        response->set_session_id((*entry)->id);
+        *response->mutable_dimensions() = (*entry)->dims;
+        response->set_algorithm(AlgorithmToProto((*entry)->algorithm.load()));
+        state->FillLimits(response->mutable_limits());
+        const LogContext log_context((*entry)->id, (*entry)->owner.principal);
+        spdlog::info("session {} created (M={}, L={}, K={}, N={}); memory budget: {} MiB reserved of {} MiB",
+                     (*entry)->id, response->dimensions().num_states(), response->dimensions().num_inputs(),
+                     response->dimensions().num_outputs(), response->dimensions().horizon(),
+                     state->budget.reserved() >> 20, state->budget.capacity() >> 20);
+        return absl::OkStatus();
+      });
   return call;
 }
 
@@ -133,7 +134,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
     return call;
   }
   if ((*entry)->owned_by_stream) {
-    call->Reply(absl::FailedPreconditionError("session_id: the session belongs to a Control stream and closes with it"));
+    call->Reply(
+        absl::FailedPreconditionError("session_id: the session belongs to a Control stream and closes with it"));
     return call;
   }
   // Answered once the session's memory is given back (after a solve in flight).
@@ -149,8 +151,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
 
 grpc::ServerUnaryReactor* MpcServiceImpl::GetServerInfo(grpc::CallbackServerContext* context, const Raw* raw_request,
                                                         Raw* raw_response) {
-  auto* call = UnaryCall<v1::GetServerInfoRequest, v1::GetServerInfoResponse>::Start(state_, context, raw_request,
-                                                                                    raw_response);
+  auto* call =
+      UnaryCall<v1::GetServerInfoRequest, v1::GetServerInfoResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
   v1::GetServerInfoResponse* response = call->response();
   response->set_version(kVersion);
@@ -182,14 +184,15 @@ grpc::ServerUnaryReactor* MpcServiceImpl::FitGpModel(grpc::CallbackServerContext
   v1::FitGpModelResponse* response = call->response();
   // O(P³) per iteration: on the pool like a solve, never in the reaction; its O(P²)
   // matrices are reserved in the memory budget first.
-  call->RunOnPool("FitGpModel", /*solve_result=*/nullptr, [state, request, response](const CallContext& c) -> absl::Status {
-    NUPMPC_ASSIGN_OR_RETURN(const gp::FitOptions fit_limits, FitLimits(&c));
-    NUPMPC_ASSIGN_OR_RETURN(const std::int64_t fit_bytes,
-                            GpFitBytes(request->model(), "model", state->options.size_limits));
-    NUPMPC_ASSIGN_OR_RETURN(const MemoryBudget::Reservation reserved,
-                            state->budget.Reserve(fit_bytes, "model (the fit's kernel matrices)"));
-    return server::FitGpModel(*request, state->options.size_limits, fit_limits, response);
-  });
+  call->RunOnPool("FitGpModel", /*solve_result=*/nullptr,
+                  [state, request, response](const CallContext& c) -> absl::Status {
+                    NUPMPC_ASSIGN_OR_RETURN(const gp::FitOptions fit_limits, FitLimits(&c));
+                    NUPMPC_ASSIGN_OR_RETURN(const std::int64_t fit_bytes,
+                                            GpFitBytes(request->model(), "model", state->options.size_limits));
+                    NUPMPC_ASSIGN_OR_RETURN(const MemoryBudget::Reservation reserved,
+                                            state->budget.Reserve(fit_bytes, "model (the fit's kernel matrices)"));
+                    return server::FitGpModel(*request, state->options.size_limits, fit_limits, response);
+                  });
   return call;
 }
 

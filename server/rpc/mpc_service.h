@@ -12,9 +12,8 @@ using MpcServiceBase = v1::MpcService::WithRawCallbackMethod_CreateSession<
     v1::MpcService::WithRawCallbackMethod_Control<v1::MpcService::WithRawCallbackMethod_Solve<
         v1::MpcService::WithRawCallbackMethod_SolveOnce<v1::MpcService::WithRawCallbackMethod_GetSession<
             v1::MpcService::WithRawCallbackMethod_ListSessions<v1::MpcService::WithRawCallbackMethod_CloseSession<
-                v1::MpcService::WithRawCallbackMethod_GetServerInfo<
-                    v1::MpcService::WithRawCallbackMethod_FitGpModel<
-                        v1::MpcService::WithRawCallbackMethod_SolveFleet<v1::MpcService::Service>>>>>>>>>>;
+                v1::MpcService::WithRawCallbackMethod_GetServerInfo<v1::MpcService::WithRawCallbackMethod_FitGpModel<
+                    v1::MpcService::WithRawCallbackMethod_SolveFleet<v1::MpcService::Service>>>>>>>>>>;
 
 // nupmpc.v1.MpcService on gRPC's callback API. Reactions never block: solves (and session
 // creation, which is O(N) work) run on the worker pool; lookups, listings and counters are
@@ -28,8 +27,7 @@ class MpcServiceImpl final : public MpcServiceBase {
                                           Raw* response) override;
   grpc::ServerBidiReactor<Raw, Raw>* Control(grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* Solve(grpc::CallbackServerContext* context, const Raw* request, Raw* response) override;
-  grpc::ServerUnaryReactor* SolveOnce(grpc::CallbackServerContext* context, const Raw* request,
-                                      Raw* response) override;
+  grpc::ServerUnaryReactor* SolveOnce(grpc::CallbackServerContext* context, const Raw* request, Raw* response) override;
   grpc::ServerUnaryReactor* GetSession(grpc::CallbackServerContext* context, const Raw* request,
                                        Raw* response) override;
   grpc::ServerUnaryReactor* ListSessions(grpc::CallbackServerContext* context, const Raw* request,

@@ -9,12 +9,12 @@
 #include "absl/status/status.h"
 #include "grpcpp/grpcpp.h"
 #include "server/auth/caller.h"
+#include "server/observability/log_context.h"
 #include "server/rpc/catch_exceptions.h"
 #include "server/rpc/grpc_handover.h"
-#include "server/observability/log_context.h"
 #include "server/rpc/raw_messages.h"
-#include "server/state/server_state.h"
 #include "server/sessions/step_solver.h"
+#include "server/state/server_state.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
@@ -51,7 +51,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
   static UnaryCall* Start(ServerState* state, grpc::CallbackServerContext* context, const grpc::ByteBuffer* raw_request,
                           grpc::ByteBuffer* raw_response) {
     auto* call = new UnaryCall(state, context, raw_response);
-    state->work_in_flight.fetch_add(1);  // until Reply
+    state->work_in_flight.fetch_add(1);    // until Reply
     grpc::ByteBuffer bytes(*raw_request);  // parsing consumes its buffer
     const absl::Status parsed = ParseRaw(&bytes, &call->request_);
     call->parsed_ = parsed.ok();
@@ -104,12 +104,11 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
       }
       Reply(status);
     };
-    const absl::Status queued =
-        session == nullptr
-            ? state_->pool.TrySubmit(std::move(run))
-            : SessionStrand::Submit(session->strand, state_->pool,
-                                    {std::move(run), [this](absl::Status s) { Reply(s); },
-                                     session->last_solve_ms.load(std::memory_order_relaxed)});
+    const absl::Status queued = session == nullptr
+                                    ? state_->pool.TrySubmit(std::move(run))
+                                    : SessionStrand::Submit(session->strand, state_->pool,
+                                                            {std::move(run), [this](absl::Status s) { Reply(s); },
+                                                             session->last_solve_ms.load(std::memory_order_relaxed)});
     if (!queued.ok()) Reply(queued);
   }
 

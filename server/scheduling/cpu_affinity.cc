@@ -31,7 +31,8 @@ absl::StatusOr<cpu_set_t> ParseCpuList(absl::string_view list) {
     if (!first.ok()) return first.status();
     absl::StatusOr<int> last = ends.size() == 2 ? CpuNumber(ends[1], part) : first;
     if (!last.ok()) return last.status();
-    if (*last < *first) return absl::InvalidArgumentError(absl::StrCat("CPU list: range \"", part, "\" runs backwards"));
+    if (*last < *first)
+      return absl::InvalidArgumentError(absl::StrCat("CPU list: range \"", part, "\" runs backwards"));
     for (int cpu = *first; cpu <= *last; ++cpu) CPU_SET(cpu, &set);
   }
   return set;
@@ -60,8 +61,7 @@ std::string CallingThreadCpuList() {
 absl::Status PinCallingThread(const cpu_set_t& set) {
   if (sched_setaffinity(0, sizeof(set), &set) != 0) {
     const int error = errno;
-    return absl::InvalidArgumentError(
-        absl::StrCat("cannot run on CPUs ", CpuList(set), ": ", std::strerror(error)));
+    return absl::InvalidArgumentError(absl::StrCat("cannot run on CPUs ", CpuList(set), ": ", std::strerror(error)));
   }
   return absl::OkStatus();
 }

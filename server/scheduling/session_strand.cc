@@ -70,8 +70,7 @@ void SessionStrand::StartNext(const std::shared_ptr<SessionStrand>& strand, Work
 }
 
 bool SessionStrand::TryRunHere(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
-                               const std::function<void()>& run, const std::function<void()>& then,
-                               double drain_ms) {
+                               const std::function<void()>& run, const std::function<void()>& then, double drain_ms) {
   {
     std::lock_guard<std::mutex> lock(strand->mu_);
     if (strand->busy_) return false;

@@ -107,7 +107,9 @@ bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) 
     struct Timed {
       WorkerPool* pool;
       std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
-      ~Timed() { pool->Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()); }
+      ~Timed() {
+        pool->Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+      }
     } timed{this};
     run_here_.fetch_add(1, std::memory_order_relaxed);
     task();

@@ -101,10 +101,10 @@ class WorkerPool {
   std::condition_variable ready_;      ///< workers: work queued and a core free
   std::condition_variable core_free_;  ///< threads waiting in TryRunHere for a core
   std::deque<Task> queue_;
-  double queued_ms_ = 0.0;         ///< sum of the queued tasks' expected_ms
-  double average_task_ms_ = 0.0;   ///< exponentially weighted, of finished tasks
+  double queued_ms_ = 0.0;        ///< sum of the queued tasks' expected_ms
+  double average_task_ms_ = 0.0;  ///< exponentially weighted, of finished tasks
   bool stopping_ = false;
-  int running_ = 0;  ///< tasks running, on workers or through TryRunHere (at most cores())
+  int running_ = 0;       ///< tasks running, on workers or through TryRunHere (at most cores())
   int running_long_ = 0;  ///< of them, kWorker tasks (a caller does not wait for those)
   int running_here_ = 0;  ///< of them, held by TryRunHere callers
   int here_waiting_ = 0;  ///< callers of TryRunHere waiting for a core

@@ -71,9 +71,9 @@ absl::StatusOr<MemoryBudget::Reservation> MemoryBudget::Take(const std::shared_p
   do {
     if (bytes > counter->capacity - reserved) {
       return absl::ResourceExhaustedError(absl::StrCat(
-          purpose, ": needs an estimated ", Mib(bytes), " of memory; the server's memory budget (--memory_budget_mb) of ",
-          Mib(counter->capacity), " has ", Mib(counter->capacity - reserved),
-          " left; close sessions, shrink the problem, or retry later"));
+          purpose, ": needs an estimated ", Mib(bytes),
+          " of memory; the server's memory budget (--memory_budget_mb) of ", Mib(counter->capacity), " has ",
+          Mib(counter->capacity - reserved), " left; close sessions, shrink the problem, or retry later"));
     }
   } while (!counter->reserved.compare_exchange_weak(reserved, reserved + bytes, std::memory_order_relaxed));
   return Reservation(counter, bytes);

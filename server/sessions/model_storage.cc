@@ -19,10 +19,10 @@ absl::Status ReserveModelStorage(const core::MpcSession& session, const core::Mo
   const std::int64_t resident = f.problem_bytes + f.carried_bytes;
   const std::int64_t peak = resident + f.workspace_bytes + f.transient_bytes;
   if (memory->max_session_bytes > 0 && peak > memory->max_session_bytes) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        "step.model: a per-step model makes the session need an estimated ", (peak + (1 << 20) - 1) >> 20,
-        " MiB, over the server's per-session limit (ServerLimits.max_session_bytes) of ",
-        (memory->max_session_bytes + (1 << 20) - 1) >> 20, " MiB"));
+    return absl::ResourceExhaustedError(
+        absl::StrCat("step.model: a per-step model makes the session need an estimated ", (peak + (1 << 20) - 1) >> 20,
+                     " MiB, over the server's per-session limit (ServerLimits.max_session_bytes) of ",
+                     (memory->max_session_bytes + (1 << 20) - 1) >> 20, " MiB"));
   }
   return memory->resident.GrowTo(std::max(resident, memory->resident.bytes()),
                                  "step.model (the session's model, now per-step)");

@@ -18,8 +18,7 @@ namespace {
 
 // The linear kinds: a plain or keep-out session of the mapped problem, wrapped by the
 // input map when the spec has multi-level inputs or input differences.
-absl::StatusOr<std::unique_ptr<core::MpcSession>> LinearSession(const v1::ProblemSpec& spec,
-                                                                const SizeLimits& limits) {
+absl::StatusOr<std::unique_ptr<core::MpcSession>> LinearSession(const v1::ProblemSpec& spec, const SizeLimits& limits) {
   NUPMPC_ASSIGN_OR_RETURN(core::Problem base, ProblemFromSpec(spec, limits));
   NUPMPC_ASSIGN_OR_RETURN(core::InputMap map, InputMapFromSpec(spec, base));
   const core::Dimensions caller = core::DimensionsOf(base);
@@ -76,8 +75,8 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::Proble
   NUPMPC_RETURN_IF_ERROR(registry->CheckQuota(owner));
   NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, limits, gp_models, &call, budget));
   NUPMPC_RETURN_IF_ERROR(CheckCallStillWanted(call, "the session was built"));
-  return registry->Add(std::move(built.solver), built.default_time_limit_ms, owned_by_stream,
-                       std::move(built.memory), requested_id, owner);
+  return registry->Add(std::move(built.solver), built.default_time_limit_ms, owned_by_stream, std::move(built.memory),
+                       requested_id, owner);
 }
 
 }  // namespace nupmpc::server

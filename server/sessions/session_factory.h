@@ -11,11 +11,11 @@
 #include "absl/strings/string_view.h"
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
-#include "server/sessions/call_context.h"
 #include "server/convert/gp_model_cache.h"
+#include "server/convert/spec_conversion.h"
+#include "server/sessions/call_context.h"
 #include "server/sessions/memory_budget.h"
 #include "server/sessions/session_registry.h"
-#include "server/convert/spec_conversion.h"
 
 namespace nupmpc::server {
 

@@ -3,13 +3,13 @@
 #include <algorithm>
 #include <random>
 
-#include "absl/strings/str_cat.h"
 #include "absl/strings/ascii.h"
 #include "absl/strings/escaping.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/util/status_macros.h"
-#include "server/observability/log_context.h"
 #include "server/convert/result_conversion.h"
+#include "server/observability/log_context.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
@@ -38,9 +38,8 @@ std::string SessionRegistry::NewId() {
 }
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
-                                                                   double default_time_limit_ms,
-                                                                   bool owned_by_stream, SessionMemory memory,
-                                                                   absl::string_view requested_id,
+                                                                   double default_time_limit_ms, bool owned_by_stream,
+                                                                   SessionMemory memory, absl::string_view requested_id,
                                                                    SessionOwner owner) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owner = std::move(owner);
@@ -131,7 +130,8 @@ absl::Status SessionRegistry::Close(const std::string& id, std::function<void()>
   {
     std::lock_guard<std::mutex> lock(mu_);
     const auto it = sessions_.find(id);
-    if (it == sessions_.end()) return absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
+    if (it == sessions_.end())
+      return absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
     entry = std::move(it->second);
     sessions_.erase(it);
     if (!entry->owner.principal.empty()) {
@@ -188,7 +188,8 @@ int SessionRegistry::ExpireIdle(double idle_seconds) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     for (const auto& [id, entry] : sessions_) {
-      if (!entry->attached.load() && entry->idle_seconds() > idle_seconds) expired.emplace_back(id, entry->owner.principal);
+      if (!entry->attached.load() && entry->idle_seconds() > idle_seconds)
+        expired.emplace_back(id, entry->owner.principal);
     }
   }
   int closed = 0;

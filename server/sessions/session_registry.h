@@ -15,8 +15,8 @@
 #include "core/session/mpc_session.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/auth/caller.h"
-#include "server/sessions/memory_budget.h"
 #include "server/scheduling/session_strand.h"
+#include "server/sessions/memory_budget.h"
 
 namespace nupmpc::server {
 
@@ -27,7 +27,7 @@ using Clock = std::chrono::steady_clock;
 struct SessionMemory {
   MemoryBudget::Reservation resident;
   MemoryBudget::Reservation scratch;
-  std::int64_t scratch_bytes = 0;  ///< what `scratch` holds when the scratch is allocated
+  std::int64_t scratch_bytes = 0;      ///< what `scratch` holds when the scratch is allocated
   std::int64_t max_session_bytes = 0;  ///< the per-session limit when created (0: none)
 };
 

@@ -2,11 +2,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
-#include "server/sessions/model_storage.h"
 #include "server/convert/result_conversion.h"
-#include "server/sessions/session_factory.h"
 #include "server/convert/step_conversion.h"
 #include "server/scheduling/thread_cpu_time.h"
+#include "server/sessions/model_storage.h"
+#include "server/sessions/session_factory.h"
 
 namespace nupmpc::server {
 
@@ -16,8 +16,8 @@ namespace {
 // for a model that becomes per-step), then applies the update.
 absl::Status ReserveAndApply(SessionEntry& entry, const core::StepUpdate& update) {
   if (entry.compacted) {
-    NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(entry.memory.scratch_bytes,
-                                                       "session_id (allocating the idle session's solver scratch again)"));
+    NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(
+        entry.memory.scratch_bytes, "session_id (allocating the idle session's solver scratch again)"));
   }
   if (update.changes_model()) NUPMPC_RETURN_IF_ERROR(ReserveModelStorage(*entry.solver, update.model, &entry.memory));
   return AsStepError(entry.solver->Apply(update));
@@ -44,10 +44,16 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 
   switch (step.warm_start()) {
     case v1::WARM_START_UNSPECIFIED:
-    case v1::WARM_START_SHIFT: solver.ShiftWarmStart(); break;
-    case v1::WARM_START_KEEP: break;
-    case v1::WARM_START_COLD: limits.warm_start = false; break;
-    default: break;
+    case v1::WARM_START_SHIFT:
+      solver.ShiftWarmStart();
+      break;
+    case v1::WARM_START_KEEP:
+      break;
+    case v1::WARM_START_COLD:
+      limits.warm_start = false;
+      break;
+    default:
+      break;
   }
   // Read on every solve, short ones included, although the thread CPU clock is a system
   // call: the reading also brings the scheduler's account of this thread up to date, and

@@ -5,11 +5,11 @@
 
 #include "absl/status/status.h"
 #include "nupmpc/v1/nupmpc.pb.h"
-#include "server/sessions/call_context.h"
 #include "server/convert/gp_model_cache.h"
+#include "server/convert/spec_conversion.h"
+#include "server/sessions/call_context.h"
 #include "server/sessions/memory_budget.h"
 #include "server/sessions/session_registry.h"
-#include "server/convert/spec_conversion.h"
 
 namespace nupmpc::server {
 

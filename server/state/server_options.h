@@ -28,19 +28,19 @@ struct ServerOptions {
   double session_compact_idle_s = 10.0;  ///< 0: idle sessions keep their scratch
   int max_message_bytes = 64 << 20;
   double grace_period_s = 5.0;
-  std::int64_t memory_budget_bytes = 0;  ///< 0: DefaultMemoryBudgetBytes()
-  int max_control_streams = 1000;         ///< open Control streams, server-wide
-  int max_stream_answers = 16;            ///< answers a Control stream queues before it stops reading
-  int max_streams_per_connection = 100;   ///< HTTP/2 concurrent streams (calls) per client connection
-  double first_message_timeout_s = 10.0;  ///< a connection's handshake and a Control stream's first message
+  std::int64_t memory_budget_bytes = 0;      ///< 0: DefaultMemoryBudgetBytes()
+  int max_control_streams = 1000;            ///< open Control streams, server-wide
+  int max_stream_answers = 16;               ///< answers a Control stream queues before it stops reading
+  int max_streams_per_connection = 100;      ///< HTTP/2 concurrent streams (calls) per client connection
+  double first_message_timeout_s = 10.0;     ///< a connection's handshake and a Control stream's first message
   double connection_idle_timeout_s = 600.0;  ///< a connection without calls this long is closed
-  std::string metrics_address;            ///< HTTP /metrics, /healthz, /readyz; empty: none
-  TlsFiles tls;                           ///< TLS / mTLS of the gRPC port; none by default
-  std::string auth_tokens_file;           ///< bearer tokens (server/auth/token_file.h); empty: none
-  int max_sessions_per_principal = 0;     ///< 0: only max_sessions
-  int max_streams_per_principal = 0;      ///< 0: only max_control_streams
-  bool list_all_sessions = false;         ///< without authentication: ListSessions shows every connection's
-  double slow_solve_ms = 0.0;             ///< solves slower than this are logged at warn; 0: none
+  std::string metrics_address;               ///< HTTP /metrics, /healthz, /readyz; empty: none
+  TlsFiles tls;                              ///< TLS / mTLS of the gRPC port; none by default
+  std::string auth_tokens_file;              ///< bearer tokens (server/auth/token_file.h); empty: none
+  int max_sessions_per_principal = 0;        ///< 0: only max_sessions
+  int max_streams_per_principal = 0;         ///< 0: only max_control_streams
+  bool list_all_sessions = false;            ///< without authentication: ListSessions shows every connection's
+  double slow_solve_ms = 0.0;                ///< solves slower than this are logged at warn; 0: none
   SizeLimits size_limits;
 };
 

@@ -20,12 +20,13 @@ void ServerState::RecordSolve(const v1::SolveResult& result, const SessionEntry*
   const LogContext context(session != nullptr ? absl::string_view(session->id) : absl::string_view("SolveOnce"),
                            session != nullptr ? absl::string_view(session->owner.principal) : absl::string_view());
   const v1::Dimensions* dims = session != nullptr ? &session->dims : nullptr;
-  spdlog::warn("slow solve: {:.3f} ms in the solver (--slow_solve_ms {}), {} iterations, status {}, queue wait {:.3f} ms{}",
-               result.solve_ms(), options.slow_solve_ms, result.iterations(), v1::SolveStatus_Name(result.status()),
-               queue_wait_s * 1e3,
-               dims == nullptr ? std::string()
-                               : absl::StrCat(", M=", dims->num_states(), " L=", dims->num_inputs(),
-                                              " K=", dims->num_outputs(), " N=", dims->horizon()));
+  spdlog::warn(
+      "slow solve: {:.3f} ms in the solver (--slow_solve_ms {}), {} iterations, status {}, queue wait {:.3f} ms{}",
+      result.solve_ms(), options.slow_solve_ms, result.iterations(), v1::SolveStatus_Name(result.status()),
+      queue_wait_s * 1e3,
+      dims == nullptr ? std::string()
+                      : absl::StrCat(", M=", dims->num_states(), " L=", dims->num_inputs(), " K=", dims->num_outputs(),
+                                     " N=", dims->horizon()));
 }
 
 void ServerState::FillLimits(v1::ServerLimits* out) const {

@@ -10,16 +10,16 @@
 #include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
 #include "server/auth/auth_processor.h"
-#include "server/convert/gp_model_cache.h"
-#include "server/sessions/memory_budget.h"
-#include "server/observability/metrics.h"
 #include "server/auth/principal_streams.h"
-#include "server/sessions/session_registry.h"
-#include "server/state/server_options.h"
-#include "server/convert/spec_conversion.h"
 #include "server/auth/token_file.h"
 #include "server/auth/transport_security.h"
+#include "server/convert/gp_model_cache.h"
+#include "server/convert/spec_conversion.h"
+#include "server/observability/metrics.h"
 #include "server/scheduling/worker_pool.h"
+#include "server/sessions/memory_budget.h"
+#include "server/sessions/session_registry.h"
+#include "server/state/server_options.h"
 
 namespace nupmpc::server {
 
@@ -29,7 +29,8 @@ struct ServerState {
   explicit ServerState(const ServerOptions& o)
       : options(o),
         budget(o.memory_budget_bytes > 0 ? o.memory_budget_bytes : DefaultMemoryBudgetBytes()),
-        registry(o.max_sessions, pool, o.max_sessions_per_principal),  // only kept: the pool is built next, and joined first
+        registry(o.max_sessions, pool,
+                 o.max_sessions_per_principal),  // only kept: the pool is built next, and joined first
         pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms, SolverCores(o)),
         principal_streams(o.max_streams_per_principal) {}
   ServerOptions options;
@@ -38,9 +39,9 @@ struct ServerState {
   WorkerPool pool;
   Metrics metrics;
   PrincipalStreams principal_streams;
-  std::shared_ptr<TokenStore> tokens;  ///< --auth_tokens_file (null: none), re-read by the janitor
+  std::shared_ptr<TokenStore> tokens;   ///< --auth_tokens_file (null: none), re-read by the janitor
   std::shared_ptr<AuthProcessor> auth;  ///< null: authentication off
-  GpModelCache gp_models;  ///< factorised GP models shared by the sessions that use them
+  GpModelCache gp_models;               ///< factorised GP models shared by the sessions that use them
   // From SIGTERM on (the drain delay included): what grpc.health.v1 (NOT_SERVING),
   // nupmpc_draining and GetServerInfo.draining report, one truth for the three.
   std::atomic<bool> serving{true};
@@ -49,7 +50,7 @@ struct ServerState {
   // Unary calls not yet answered and Control streams with a step being solved: the work a
   // shutdown lets finish before it ends what is left (idle connections and streams).
   std::atomic<int> work_in_flight{0};
-  std::atomic<int> control_streams{0};  ///< open Control streams
+  std::atomic<int> control_streams{0};               ///< open Control streams
   std::atomic<std::uint64_t> stream_read_pauses{0};  ///< times a stream stopped reading (flow control)
 
   // An absl::Status of `rpc` as a gRPC status, counted when it is an error.

@@ -14,7 +14,8 @@
 
 ABSL_FLAG(int, test_count, 3, "how many things to do");
 ABSL_FLAG(bool, test_verbose, false, "say more");
-ABSL_FLAG(std::string, test_name, "anna", "a name that is long enough to need wrapping when the help text is printed "
+ABSL_FLAG(std::string, test_name, "anna",
+          "a name that is long enough to need wrapping when the help text is printed "
           "in a terminal that is only a hundred columns wide, which it is");
 ABSL_FLAG(double, concurrency_level, 1.5, "for prefix suggestions");
 
@@ -129,7 +130,8 @@ TEST(CheckArguments, ValuesAreCheckedAgainstTheFlagsType) {
   EXPECT_EQ(Check({"--test_count"}).error, "flag --test_count needs a value (int)");
   EXPECT_EQ(Check({"--test_verbose=maybe"}).error, "bad value \"maybe\" for --test_verbose (expects bool)");
   EXPECT_EQ(Check({"--notest_verbose=true"}).error, "--notest_verbose takes no value");
-  EXPECT_EQ(Check({"--notest_count"}).error, "--notest_count: only yes/no flags have a --no form; --test_count expects int");
+  EXPECT_EQ(Check({"--notest_count"}).error,
+            "--notest_count: only yes/no flags have a --no form; --test_count expects int");
 }
 
 TEST(CheckArguments, WellFormedCommandLinesAreLeftToAbseil) {

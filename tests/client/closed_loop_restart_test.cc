@@ -9,7 +9,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-
 #include <chrono>
 #include <cstdio>
 #include <filesystem>

@@ -55,7 +55,8 @@ TEST(ClosedLoopSummary, CountsStepsThatDidNotConvergeByStatus) {
   EXPECT_EQ(SummaryJson(s),
             "{\"summary\":true,\"steps\":4,\"all_converged\":false,\"not_converged\":{\"iteration_limit\":2,"
             "\"time_limit\":1},\"held_steps\":0,\"held\":{},\"reconnects\":0,\"reconnect_attempts\":0,"
-            "\"reconnect_s\":0.000000,\"longest_without_plan_s\":0.000000,\"median_solve_ms\":4.500000,\"max_solve_ms\":9.000000,\"median_round_trip_ms\":5.500000,"
+            "\"reconnect_s\":0.000000,\"longest_without_plan_s\":0.000000,\"median_solve_ms\":4.500000,\"max_solve_"
+            "ms\":9.000000,\"median_round_trip_ms\":5.500000,"
             "\"p90_round_trip_ms\":10.000000,\"max_violation\":0.5}\n");
 }
 
@@ -75,16 +76,18 @@ TEST(ClosedLoopSummary, StepsWithoutAPlanAreHeldAndCountedByStatus) {
   s.reconnect_attempts = 6;
   s.reconnect_s = 1.5;
   s.longest_without_plan_s = 1.75;
-  EXPECT_THAT(SummaryText(s), ::testing::HasSubstr(
-                                  "  without a plan       2 steps (numerical_error 2), last input held\n"
-                                  "  reconnects           1 (6 attempts, 1.500 s), longest without a fresh plan 1.750 s\n"));
+  EXPECT_THAT(
+      SummaryText(s),
+      ::testing::HasSubstr("  without a plan       2 steps (numerical_error 2), last input held\n"
+                           "  reconnects           1 (6 attempts, 1.500 s), longest without a fresh plan 1.750 s\n"));
   EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"held_steps\":2,\"held\":{\"numerical_error\":2},\"reconnects\":1,"
                                                    "\"reconnect_attempts\":6,\"reconnect_s\":1.500000,"
                                                    "\"longest_without_plan_s\":1.750000"));
 }
 
 TEST(ClosedLoopSummary, AllConvergedAndNoSteps) {
-  EXPECT_THAT(SummaryText(SummariseClosedLoop({Converged(1, 2)})), ::testing::StartsWith("summary: 1 steps, all converged\n"));
+  EXPECT_THAT(SummaryText(SummariseClosedLoop({Converged(1, 2)})),
+              ::testing::StartsWith("summary: 1 steps, all converged\n"));
   const ClosedLoopSummary none = SummariseClosedLoop({});
   EXPECT_EQ(none.steps, 0);
   EXPECT_EQ(none.p90_round_trip_ms, 0.0);

@@ -5,6 +5,8 @@
 // bicycle example (client/examples/bicycle.h) keeps every bound in closed loop, tracks its
 // path, reaches the goal, and warm-starts each period in a fraction of a cold solve's
 // passes. Last, both example programs run against a spawned nupmpc-server.
+#include "client/nonlinear_session.h"
+
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -18,11 +20,10 @@
 #include "client/examples/bicycle.h"
 #include "client/examples/period_table.h"
 #include "client/examples/race_track.h"
-#include "client/nonlinear_session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/util/server_process.h"
 #include "tests/server/service_fixture.h"
+#include "tests/util/server_process.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::testing {
@@ -165,10 +166,9 @@ TEST(NonlinearSessionJacobians, AWrongAnalyticEntryIsNamed) {
     return B;
   };
   const std::vector<double> x = {3.0, -0.4, 0.3, 4.0}, u = {1.2, 0.2};
-  EXPECT_THAT(CheckJacobians(model, 7, x, u),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       AllOf(HasSubstr("NonlinearModel.transition_u (∂f/∂u) at t = 7"), HasSubstr("entry (2, 1)"),
-                             HasSubstr("∂f_2/∂u_1"))));
+  EXPECT_THAT(CheckJacobians(model, 7, x, u), StatusIs(absl::StatusCode::kInvalidArgument,
+                                                       AllOf(HasSubstr("NonlinearModel.transition_u (∂f/∂u) at t = 7"),
+                                                             HasSubstr("entry (2, 1)"), HasSubstr("∂f_2/∂u_1"))));
 }
 
 TEST_F(ServiceTest, NonlinearSessionRefusesAWrongJacobianBeforeCreatingASession) {
@@ -281,8 +281,8 @@ TEST_F(ServiceTest, NonlinearSessionSqpSettlesOnATrajectoryOfTheNonlinearModel) 
   std::vector<double> x = scenario.start;
   for (int n = 0; n < scenario.horizon; ++n) {
     x = model.transition(n, x, {plan->inputs[2 * n], plan->inputs[2 * n + 1]});
-    EXPECT_LT(MaxAbsDifference(x, std::vector<double>(plan->states.begin() + 4 * (n + 1),
-                                                      plan->states.begin() + 4 * (n + 2))),
+    EXPECT_LT(MaxAbsDifference(
+                  x, std::vector<double>(plan->states.begin() + 4 * (n + 1), plan->states.begin() + 4 * (n + 2))),
               1e-6)
         << "step " << n + 1;
   }
@@ -334,9 +334,10 @@ TEST_F(BicycleClosedLoop, KeepsEveryBoundTracksThePathAndReachesTheGoal) {
   }
   EXPECT_LT(last_error, 0.05);
   EXPECT_NEAR(run->final_state[3], s.speed_limit, 1e-3) << "at the speed limit (the reference is above it)";
-  std::printf("bicycle: %zu periods to the goal, least clearance %.4f m (car), %.4f m (plans), last 2 s lateral "
-              "error <= %.4f m\n",
-              run->periods.size(), least_clearance, least_plan_clearance, last_error);
+  std::printf(
+      "bicycle: %zu periods to the goal, least clearance %.4f m (car), %.4f m (plans), last 2 s lateral "
+      "error <= %.4f m\n",
+      run->periods.size(), least_clearance, least_plan_clearance, last_error);
 }
 
 TEST_F(BicycleClosedLoop, WarmPeriodsTakeAFractionOfTheColdPasses) {

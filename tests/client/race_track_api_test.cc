@@ -37,8 +37,8 @@ TEST(RaceTrackApiModel, IsTheCoreExamplesTrackAndModel) {
   Eigen::VectorXd next(6), y(4);
   Eigen::MatrixXd A(6, 6), B(6, 2), C(4, 6);
   for (const int n : {0, 5, 17, 50, 99}) {
-    const std::vector<double> x = {0.002 * (n % 3 - 1), 0.1 * std::sin(n), 0.5 + 0.01 * n, 0.3, 0.05 * std::cos(n),
-                                   0.05 * n};
+    const std::vector<double> x = {0.002 * (n % 3 - 1), 0.1 * std::sin(n), 0.5 + 0.01 * n, 0.3,
+                                   0.05 * std::cos(n),  0.05 * n};
     const std::vector<double> u = {0.4, -0.2};
     const Eigen::Map<const Eigen::VectorXd> xe(x.data(), 6), ue(u.data(), 2);
     core.transition(n, xe, ue, &next, &A, &B);

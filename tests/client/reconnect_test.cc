@@ -88,8 +88,8 @@ TEST(RetryWithBackoff, RetriesUnavailableUntilItSucceeds) {
       &attempts);
   EXPECT_TRUE(s.ok()) << s;
   EXPECT_EQ(attempts, 4);
-  EXPECT_THAT(time.sleeps, ::testing::ElementsAre(milliseconds(50), milliseconds(100), milliseconds(200),
-                                                  milliseconds(400)));
+  EXPECT_THAT(time.sleeps,
+              ::testing::ElementsAre(milliseconds(50), milliseconds(100), milliseconds(200), milliseconds(400)));
   ASSERT_EQ(reported.size(), 4u);
   EXPECT_EQ(reported[0].cause.message(), "stream broke");
   EXPECT_EQ(reported[1].cause.message(), "connection refused");
@@ -107,13 +107,13 @@ TEST(RetryWithBackoff, StopsAtTheBudgetShorteningTheLastWait) {
   std::vector<ReconnectAttempt> reported;
   options.on_attempt = [&](const ReconnectAttempt& a) { reported.push_back(a); };
   int attempts = 0;
-  const absl::Status s =
-      RetryWithBackoff(options, absl::UnavailableError("stream broke"),
-                       [&](milliseconds) {
-                         time.now += milliseconds(5);  // each refused connect takes a little time
-                         return absl::UnavailableError("connection refused");
-                       },
-                       &attempts);
+  const absl::Status s = RetryWithBackoff(
+      options, absl::UnavailableError("stream broke"),
+      [&](milliseconds) {
+        time.now += milliseconds(5);  // each refused connect takes a little time
+        return absl::UnavailableError("connection refused");
+      },
+      &attempts);
   EXPECT_TRUE(absl::IsUnavailable(s)) << s;
   EXPECT_THAT(std::string(s.message()), ::testing::HasSubstr("gave up reconnecting"));
   EXPECT_THAT(std::string(s.message()), ::testing::HasSubstr("connection refused"));

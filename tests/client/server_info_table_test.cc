@@ -27,7 +27,8 @@ v1::GetServerInfoResponse Info() {
   (*info.mutable_errors_by_code())["INVALID_ARGUMENT"] = 3;
   info.set_active_sessions(5);
   info.set_resident_memory_bytes(3 << 20);
-  const std::pair<double, int> buckets[] = {{0.5, 0}, {1.0, 40}, {2.0, 0}, {std::numeric_limits<double>::infinity(), 2}};
+  const std::pair<double, int> buckets[] = {
+      {0.5, 0}, {1.0, 40}, {2.0, 0}, {std::numeric_limits<double>::infinity(), 2}};
   for (const auto& [upper, count] : buckets) {
     v1::LatencyBucket* b = info.add_solve_latency();
     b->set_upper_ms(upper);

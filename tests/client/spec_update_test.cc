@@ -61,7 +61,7 @@ TEST(SpecUpdateTest, ShiftMovesPerStepArraysAndKeepsConstantOnes) {
   EXPECT_THAT(Values(spec.input_priors(0).weight()), ElementsAre(5.0));
   EXPECT_THAT(Values(spec.input_priors(1).target()), ElementsAre(7.0));
   EXPECT_THAT(Values(spec.output_priors(0).target()), ElementsAre(11.0, 12.0, 13.0, 14.0, 14.0));  // N+1 steps
-  EXPECT_THAT(Values(spec.initial_state().mean()), ElementsAre(1.0, 2.0));  // no state: kept
+  EXPECT_THAT(Values(spec.initial_state().mean()), ElementsAre(1.0, 2.0));                         // no state: kept
 }
 
 TEST(SpecUpdateTest, EntriesReplaceAfterTheShiftSoAConstantPriorBecomesPerStepUnshifted) {

@@ -19,7 +19,8 @@ const std::string kDir = NUPMPC_BENCHMARK_DIR;
 const std::map<std::string, bench::Reference>& References() {
   static const auto* refs = [] {
     auto loaded = bench::LoadReferences(kDir + "/reference.json");
-    return new std::map<std::string, bench::Reference>(loaded.ok() ? *loaded : std::map<std::string, bench::Reference>{});
+    return new std::map<std::string, bench::Reference>(loaded.ok() ? *loaded
+                                                                   : std::map<std::string, bench::Reference>{});
   }();
   return *refs;
 }

@@ -42,9 +42,7 @@ Eigen::VectorXd SolveInputs(const Problem& p, const SolverOptions& options, Solv
   return plan.inputs.col(0);
 }
 
-bool AllBinary(const Eigen::VectorXd& u) {
-  return (u.array() == 0.0 || u.array() == 1.0).all();
-}
+bool AllBinary(const Eigen::VectorXd& u) { return (u.array() == 0.0 || u.array() == 1.0).all(); }
 
 TEST(BinaryNupUpdate, ClampsTheEstimateToTheLevelsHull) {
   // Outside [a, b] the EM binary factor would widen with the distance (V ≈ x²/2) and let

@@ -56,11 +56,20 @@ TEST_P(CorridorExample, StaysInTheCorridorWithTheVersionsStructure) {
   ASSERT_TRUE(run.ok()) << run.status();
   EXPECT_LE(run->max_corridor_violation, 1e-6);
   switch (GetParam()) {
-    case CorridorVersion::kRateLimit: EXPECT_GE(run->min_input_change, -0.03 - 1e-9); break;
-    case CorridorVersion::kSparseInput: EXPECT_LE(run->nonzero_inputs, 20); break;  // of 175
-    case CorridorVersion::kSparseChanges: EXPECT_LE(run->input_switches, 20); break;
-    case CorridorVersion::kThreeLevels: EXPECT_TRUE(AllIn(run->inputs, {-1.0, 0.0, 1.0})); break;
-    default: break;
+    case CorridorVersion::kRateLimit:
+      EXPECT_GE(run->min_input_change, -0.03 - 1e-9);
+      break;
+    case CorridorVersion::kSparseInput:
+      EXPECT_LE(run->nonzero_inputs, 20);
+      break;  // of 175
+    case CorridorVersion::kSparseChanges:
+      EXPECT_LE(run->input_switches, 20);
+      break;
+    case CorridorVersion::kThreeLevels:
+      EXPECT_TRUE(AllIn(run->inputs, {-1.0, 0.0, 1.0}));
+      break;
+    default:
+      break;
   }
 }
 
@@ -109,7 +118,8 @@ TEST(RaceTrackExample, TheLapIsFeasibleAndBeatsTheCentreLine) {
   ASSERT_TRUE(run.ok()) << run.status();
   EXPECT_LT(run->model_defect, 1e-9);
   const core::NonlinearModel model = RaceModel(track, vehicle, kSteps);
-  const Eigen::MatrixXd simulated = core::SimulateNonlinear(model, run->plan.states.row(0).transpose(), run->plan.inputs);
+  const Eigen::MatrixXd simulated =
+      core::SimulateNonlinear(model, run->plan.states.row(0).transpose(), run->plan.inputs);
   EXPECT_LT((simulated - run->plan.states).cwiseAbs().maxCoeff(), 1e-7);
   EXPECT_LT(run->max_output_violation, 1e-5);  // of bounds 0.006, 1, 0.35 and 150
   const double centre_line = CentreLineLapTime(track, vehicle, settings.start_speed, 100000);

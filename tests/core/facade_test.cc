@@ -24,7 +24,8 @@ Problem BoundedDoubleIntegrator() {
   p.A[0] << 1.0, 1.0, 0.0, 1.0;
   p.B[0] << 0.5, 1.0;
   p.C[0] << 1.0, 0.0;
-  p.initial_mean = (Eigen::VectorXd(2) << 5.0, 0.0).finished();  // not Vector2d: GCC 12 -Warray-bounds false positive on its AVX load
+  p.initial_mean = (Eigen::VectorXd(2) << 5.0, 0.0)
+                       .finished();  // not Vector2d: GCC 12 -Warray-bounds false positive on its AVX load
   for (ScalarPrior& prior : p.input_priors) {
     prior = ScalarPrior::Box(-1.0, 1.0);
     prior.mean = 0.0;

@@ -6,13 +6,14 @@
 // over a grid of shapes (small and large M, L, K, N; time-varying and invariant; terminal
 // cost, uncertain x[0]) and each algorithm. ReleaseWorkspace must give back at most the
 // estimated workspace and at least a third of it.
+#include "core/session/footprint.h"
+
 #include <malloc.h>
 
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
 
-#include "core/session/footprint.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "tests/util/random_problem.h"
@@ -32,8 +33,8 @@ std::atomic<long long> g_peak{0};
 
 void Added(void* p) {
   if (p == nullptr) return;
-  const long long now = g_live.fetch_add(static_cast<long long>(malloc_usable_size(p))) +
-                        static_cast<long long>(malloc_usable_size(p));
+  const long long now =
+      g_live.fetch_add(static_cast<long long>(malloc_usable_size(p))) + static_cast<long long>(malloc_usable_size(p));
   long long peak = g_peak.load(std::memory_order_relaxed);
   while (now > peak && !g_peak.compare_exchange_weak(peak, now)) {
   }
@@ -101,10 +102,14 @@ enum class Kind { kIake, kIbffd, kIffbddAugmented, kIffbddOutputsOnly };
 
 const char* KindName(Kind k) {
   switch (k) {
-    case Kind::kIake: return "iake";
-    case Kind::kIbffd: return "ibffd";
-    case Kind::kIffbddAugmented: return "iffbdd_aug";
-    case Kind::kIffbddOutputsOnly: return "iffbdd";
+    case Kind::kIake:
+      return "iake";
+    case Kind::kIbffd:
+      return "ibffd";
+    case Kind::kIffbddAugmented:
+      return "iffbdd_aug";
+    case Kind::kIffbddOutputsOnly:
+      return "iffbdd";
   }
   return "?";
 }
@@ -179,11 +184,12 @@ TEST_P(Footprint, EstimateBoundsWhatASessionAllocates) {
     ASSERT_TRUE((*session)->Solve(limits, &solution).ok());  // gets it back
   }
   const long long peak = g_peak.load() - base;
-  std::printf("%s M=%d L=%d K=%d N=%d: peak %.3f MB, estimate %.3f MB (%.2f x); problem %.3f/%.3f MB; "
-              "released %.3f MB of %.3f MB estimated workspace\n",
-              KindName(kind), shape.M, shape.L, shape.K, shape.N, peak / 1e6, estimate.total_bytes() / 1e6,
-              static_cast<double>(estimate.total_bytes()) / peak, problem / 1e6, estimate.problem_bytes / 1e6,
-              released / 1e6, estimate.workspace_bytes / 1e6);
+  std::printf(
+      "%s M=%d L=%d K=%d N=%d: peak %.3f MB, estimate %.3f MB (%.2f x); problem %.3f/%.3f MB; "
+      "released %.3f MB of %.3f MB estimated workspace\n",
+      KindName(kind), shape.M, shape.L, shape.K, shape.N, peak / 1e6, estimate.total_bytes() / 1e6,
+      static_cast<double>(estimate.total_bytes()) / peak, problem / 1e6, estimate.problem_bytes / 1e6, released / 1e6,
+      estimate.workspace_bytes / 1e6);
   EXPECT_LE(peak, estimate.total_bytes());
   EXPECT_LE(static_cast<double>(estimate.total_bytes()), kSlack * peak);
   EXPECT_LE(problem, estimate.problem_bytes);

@@ -3,6 +3,8 @@
 // of the exact GP, V̂ positive semidefinite; the likelihood gradient against finite
 // differences; the hyper-parameter fit recovers the parameters of data drawn from a
 // known GP and stops within one evaluation of its time limit; NARX data layout.
+#include "core/gp/gp_model.h"
+
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -13,7 +15,6 @@
 #include "Eigen/Eigenvalues"
 #include "Eigen/LU"
 #include "core/gp/blocked_cholesky.h"
-#include "core/gp/gp_model.h"
 #include "core/gp/hyperparameter_fit.h"
 #include "core/gp/narx.h"
 #include "gtest/gtest.h"

@@ -3,10 +3,11 @@
 // (the iterate closest to the bounds) whose violation is at least the distance any plan
 // must keep; feasible tight problems converge as before; the detector's two regimes on
 // synthetic pass sequences; the session solves a feasible state afterwards like a fresh one.
+#include "core/session/infeasibility.h"
+
 #include <cmath>
 #include <memory>
 
-#include "core/session/infeasibility.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/instances/benchmark_instance.h"
@@ -167,31 +168,40 @@ int PassesUntilFound(InfeasibilityWatch* watch, int max_passes, double (*dual)(i
 
 TEST(InfeasibilityWatch, GeometricDualGrowthWithAPersistentViolationIsFound) {
   InfeasibilityWatch watch;
-  EXPECT_EQ(PassesUntilFound(&watch, 1000, [](int k) { return std::pow(1.5, k); }, [](int) { return 0.1; }, false),
+  EXPECT_EQ(PassesUntilFound(
+                &watch, 1000, [](int k) { return std::pow(1.5, k); }, [](int) { return 0.1; }, false),
             kExplosivePasses);
 }
 
 TEST(InfeasibilityWatch, ACreepingDualUnderAStillIterateIsFound) {
   InfeasibilityWatch watch;
-  EXPECT_EQ(PassesUntilFound(&watch, 1000, [](int k) { return 1.0 + 1e-4 * k; }, [](int) { return 1e-4; }, true),
+  EXPECT_EQ(PassesUntilFound(
+                &watch, 1000, [](int k) { return 1.0 + 1e-4 * k; }, [](int) { return 1e-4; }, true),
             kStalledPasses);
   // While the iterate still moves, a creeping dual proves nothing.
-  EXPECT_EQ(PassesUntilFound(&watch, 1000, [](int k) { return 1.0 + 1e-4 * k; }, [](int) { return 1e-4; }, false), 0);
+  EXPECT_EQ(PassesUntilFound(
+                &watch, 1000, [](int k) { return 1.0 + 1e-4 * k; }, [](int) { return 1e-4; }, false),
+            0);
 }
 
 TEST(InfeasibilityWatch, ConvergingDualsOrAFallingViolationAreNeverFound) {
   InfeasibilityWatch watch;
   // Multipliers rising to a finite limit while the violation goes to zero.
-  EXPECT_EQ(PassesUntilFound(&watch, 1000, [](int k) { return 1e3 * (1.0 - std::pow(0.5, k + 1)); },
-                             [](int k) { return std::pow(0.5, k); }, true),
+  EXPECT_EQ(PassesUntilFound(
+                &watch, 1000, [](int k) { return 1e3 * (1.0 - std::pow(0.5, k + 1)); },
+                [](int k) { return std::pow(0.5, k); }, true),
             0);
   // Fast dual growth while the violation falls geometrically (a feasible cold start).
-  EXPECT_EQ(PassesUntilFound(&watch, 40, [](int k) { return std::pow(2.0, k); }, [](int k) { return std::pow(0.8, k); },
-                             false),
+  EXPECT_EQ(PassesUntilFound(
+                &watch, 40, [](int k) { return std::pow(2.0, k); }, [](int k) { return std::pow(0.8, k); }, false),
             0);
   // No multipliers (IAKE, IBFFD) or a violation within the tolerance.
-  EXPECT_EQ(PassesUntilFound(&watch, 1000, [](int) { return 0.0; }, [](int) { return 1.0; }, true), 0);
-  EXPECT_EQ(PassesUntilFound(&watch, 1000, [](int k) { return std::pow(1.5, k); }, [](int) { return 1e-10; }, true), 0);
+  EXPECT_EQ(PassesUntilFound(
+                &watch, 1000, [](int) { return 0.0; }, [](int) { return 1.0; }, true),
+            0);
+  EXPECT_EQ(PassesUntilFound(
+                &watch, 1000, [](int k) { return std::pow(1.5, k); }, [](int) { return 1e-10; }, true),
+            0);
 }
 
 }  // namespace

@@ -29,8 +29,8 @@ Problem SmallPlant() {
 TEST(InputDifferences, GaussianPlanEqualsTheDenseLeastSquaresSolution) {
   const Problem p = SmallPlant();
   const double w_delta = 20.0, u_prev = 0.3;
-  auto augmented = AugmentWithInputDifferences(p, std::vector<ScalarPrior>(kN, ScalarPrior::Gaussian(0.0, 1.0 / w_delta)),
-                                               Eigen::VectorXd::Constant(1, u_prev));
+  auto augmented = AugmentWithInputDifferences(
+      p, std::vector<ScalarPrior>(kN, ScalarPrior::Gaussian(0.0, 1.0 / w_delta)), Eigen::VectorXd::Constant(1, u_prev));
   ASSERT_TRUE(augmented.ok()) << augmented.status();
   auto session = Session::Create(*augmented);
   ASSERT_TRUE(session.ok()) << session.status();
@@ -62,10 +62,10 @@ TEST(InputDifferences, GaussianPlanEqualsTheDenseLeastSquaresSolution) {
   }
   Eigen::VectorXd d0 = Eigen::VectorXd::Zero(kN);
   d0(0) = u_prev;
-  const Eigen::MatrixXd H = 50.0 * Phi.transpose() * Phi + 0.1 * Eigen::MatrixXd::Identity(kN, kN) +
-                            w_delta * D.transpose() * D;
-  const Eigen::VectorXd g = 50.0 * Phi.transpose() * (Eigen::VectorXd::Ones(kN + 1) - free_response) +
-                            w_delta * D.transpose() * d0;
+  const Eigen::MatrixXd H =
+      50.0 * Phi.transpose() * Phi + 0.1 * Eigen::MatrixXd::Identity(kN, kN) + w_delta * D.transpose() * D;
+  const Eigen::VectorXd g =
+      50.0 * Phi.transpose() * (Eigen::VectorXd::Ones(kN + 1) - free_response) + w_delta * D.transpose() * d0;
   const Eigen::VectorXd u_ref = H.ldlt().solve(g);
   for (int n = 0; n < kN; ++n) EXPECT_NEAR(u(n, 0), u_ref(n), 1e-9) << "step " << n;
   // The carried-input outputs are u[n-1].
@@ -77,8 +77,8 @@ TEST(InputDifferences, RateLimitsAndInputBoxesHoldTogether) {
   Problem p = SmallPlant();
   for (int n = 0; n < kN; ++n) p.mutable_input_prior(n, 0) = ScalarPrior::Box(-0.5, 0.5).WithGaussian(0.0, 10.0);
   const double rate = 0.05;
-  auto augmented = AugmentWithInputDifferences(p, std::vector<ScalarPrior>(kN, ScalarPrior::Box(-rate, rate).WithGaussian(0.0, 1.0)),
-                                               Eigen::VectorXd::Zero(1));
+  auto augmented = AugmentWithInputDifferences(
+      p, std::vector<ScalarPrior>(kN, ScalarPrior::Box(-rate, rate).WithGaussian(0.0, 1.0)), Eigen::VectorXd::Zero(1));
   ASSERT_TRUE(augmented.ok()) << augmented.status();
   auto session = Session::Create(*augmented);
   ASSERT_TRUE(session.ok()) << session.status();

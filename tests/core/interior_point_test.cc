@@ -61,7 +61,7 @@ TEST(InteriorPoint, HandlesHardBoundsWhoseStartIsRepresentable) {
   EXPECT_TRUE(InteriorPointHandles(ScalarPrior::AtMost(1.0).WithGaussian(0.5, 2.0)));
   EXPECT_FALSE(InteriorPointHandles(ScalarPrior::Box(-1.0, 1.0, /*slope=*/5.0)));  // soft: an exact penalty
   EXPECT_FALSE(InteriorPointHandles(ScalarPrior::L1(0.0, 1.0)));
-  EXPECT_FALSE(InteriorPointHandles(ScalarPrior::Box(0.0, 1e-160)));  // 6/w² overflows
+  EXPECT_FALSE(InteriorPointHandles(ScalarPrior::Box(0.0, 1e-160)));    // 6/w² overflows
   EXPECT_FALSE(InteriorPointHandles(ScalarPrior::Box(-1e160, 1e160)));  // 6/w² underflows
 }
 

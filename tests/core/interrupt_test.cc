@@ -1,13 +1,14 @@
 // Time limits and cancellation inside a pass (issue 18; core/algorithms/interrupt.h).
 // Bounds are relative to one pass of the same problem measured in the same test (the
 // machine is shared and may run under a sanitizer): never an absolute speed.
+#include "core/algorithms/interrupt.h"
+
 #include <atomic>
 #include <chrono>
 #include <climits>
 #include <cmath>
 #include <thread>
 
-#include "core/algorithms/interrupt.h"
 #include "core/session/footprint.h"
 #include "core/session/session.h"
 #include "gtest/gtest.h"
@@ -275,7 +276,8 @@ TEST_P(NextSolve, AfterAnInterruptedPassMatchesTheReference) {
     EXPECT_EQ(n->status, done) << what << ": " << n->Describe();
     EXPECT_TRUE(n->has_plan);
     EXPECT_NEAR(n->objective, e->objective, 1e-9 * std::abs(e->objective)) << what;
-    EXPECT_LE((next.inputs - expected.inputs).cwiseAbs().maxCoeff(), 1e-6 * (1.0 + expected.inputs.cwiseAbs().maxCoeff()))
+    EXPECT_LE((next.inputs - expected.inputs).cwiseAbs().maxCoeff(),
+              1e-6 * (1.0 + expected.inputs.cwiseAbs().maxCoeff()))
         << what;
   };
 
@@ -316,16 +318,16 @@ TEST_P(NextSolve, AfterAnInterruptedPassMatchesTheReference) {
   if (c.max_iterations == 0) check_next("warm after that");
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Instances, NextSolve,
-    ::testing::Values(Case{"masses_N30000", Algorithm::kIffbdd, false, true},
-                      Case{"random_outbox_M40_K20_L20_N1000_s1", Algorithm::kIffbdd, false, true},
-                      Case{"masses_N30000", Algorithm::kIbffd, true, false},
-                      Case{"masses_N30000", Algorithm::kIake, false, false, 12}),
-    [](const auto& info) {
-      std::string name = std::string(AlgorithmName(info.param.algorithm)) + "_" + std::to_string(info.index);
-      return name;
-    });
+INSTANTIATE_TEST_SUITE_P(Instances, NextSolve,
+                         ::testing::Values(Case{"masses_N30000", Algorithm::kIffbdd, false, true},
+                                           Case{"random_outbox_M40_K20_L20_N1000_s1", Algorithm::kIffbdd, false, true},
+                                           Case{"masses_N30000", Algorithm::kIbffd, true, false},
+                                           Case{"masses_N30000", Algorithm::kIake, false, false, 12}),
+                         [](const auto& info) {
+                           std::string name =
+                               std::string(AlgorithmName(info.param.algorithm)) + "_" + std::to_string(info.index);
+                           return name;
+                         });
 
 }  // namespace
 }  // namespace nupmpc::core

@@ -28,8 +28,8 @@ TEST(KeepOutClearance, MatchesClosedForms) {
   // A rectangle 2 × 1 rotated by 90°: its long side is vertical.
   const KeepOutRegion rect = KeepOutRegion::Rectangle({0.0, 0.0}, 1.0, 0.5, std::numbers::pi / 2);
   EXPECT_NEAR(KeepOutClearance(rect, {0.0, 0.9}), 0.5 * (0.9 - 1.0), 1e-12);  // inside, near the top
-  EXPECT_GT(KeepOutClearance(rect, {0.6, 0.0}), 0.0);                        // right of the short side
-  EXPECT_LT(KeepOutClearance(rect, {0.4, 0.95}), 0.0);                       // inside, near a corner
+  EXPECT_GT(KeepOutClearance(rect, {0.6, 0.0}), 0.0);                         // right of the short side
+  EXPECT_LT(KeepOutClearance(rect, {0.4, 0.95}), 0.0);                        // inside, near a corner
 }
 
 // z = C_row x + d of the linearised problem never exceeds the true f(y) = ρ‖w‖, at any

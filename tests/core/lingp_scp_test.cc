@@ -2,12 +2,13 @@
 // closed loop converges, the plans satisfy the chance and terminal constraints under the
 // exact GP, they equal Ipopt's plans on the same step problems (the full NLP with exact
 // GP mean and variance, an independent solver), and the loop tracks the reference.
+#include "core/gp/lingp_scp.h"
+
 #include <atomic>
 #include <cmath>
 
 #include "core/examples/scenarios/gp_tanh.h"
 #include "core/gp/hyperparameter_fit.h"
-#include "core/gp/lingp_scp.h"
 #include "gtest/gtest.h"
 #include "loadtest/bench/gp/gp_closed_loop.h"
 
@@ -106,7 +107,8 @@ TEST(LinGpScp, BadArgumentsAreRefusedNamingTheField) {
   auto scp = LinGpScp::Create(&model, examples::TanhMpcProblem());
   ASSERT_TRUE(scp.ok());
   ScpPlan plan;
-  EXPECT_NE((*scp)->Solve(Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(1), Eigen::VectorXd::Zero(1), &plan)
+  EXPECT_NE((*scp)
+                ->Solve(Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(1), Eigen::VectorXd::Zero(1), &plan)
                 .status()
                 .message()
                 .find("past_outputs"),

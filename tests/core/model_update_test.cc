@@ -226,38 +226,50 @@ struct Rejected {
 TEST(ModelUpdate, ARejectedUpdateNamesItsFieldAndLeavesTheSessionBitIdentical) {
   const Problem base = BoxedProblem();
   const std::vector<Rejected> cases = {
-      {"step out of range", [](const Problem& p) {
+      {"step out of range",
+       [](const Problem& p) {
          ModelChanges m;
          m.A.push_back({p.horizon, p.A[0]});
          return m;
-       }, "model.a[0].step = 15: must be < horizon = 15"},
-      {"wrong matrix size", [](const Problem& p) {
+       },
+       "model.a[0].step = 15: must be < horizon = 15"},
+      {"wrong matrix size",
+       [](const Problem& p) {
          ModelChanges m;
          m.B.push_back({0, p.A[0]});
          return m;
-       }, "model.b[0].matrix: expected 4x2, got 4x4"},
-      {"non-finite", [](const Problem& p) {
+       },
+       "model.b[0].matrix: expected 4x2, got 4x4"},
+      {"non-finite",
+       [](const Problem& p) {
          ModelChanges m;
          m.C.push_back({1, p.C[0]});
          m.C[0].value(0, 0) = std::numeric_limits<double>::infinity();
          return m;
-       }, "model.c[0].matrix: contains a non-finite number"},
-      {"step given twice", [](const Problem& p) {
+       },
+       "model.c[0].matrix: contains a non-finite number"},
+      {"step given twice",
+       [](const Problem& p) {
          ModelChanges m;
          m.A.push_back({2, p.A[0]});
          m.A.push_back({2, p.A[0]});
          return m;
-       }, "model.a[1].step = 2: that step is given twice"},
-      {"offsets of the wrong length", [](const Problem& p) {
+       },
+       "model.a[1].step = 2: that step is given twice"},
+      {"offsets of the wrong length",
+       [](const Problem& p) {
          ModelChanges m;
          m.state_offsets = Eigen::VectorXd::Zero(p.num_states + 1);
          return m;
-       }, "model.state_offsets: expected 4 values (every step) or 60"},
-      {"a good change next to a bad one", [](const Problem& p) {
+       },
+       "model.state_offsets: expected 4 values (every step) or 60"},
+      {"a good change next to a bad one",
+       [](const Problem& p) {
          ModelChanges m = FullLtvChanges(p, 0.05);
          m.output_offset.back().value.resize(1);
          return m;
-       }, "model.output_offset[15].values: expected 3 values, got 1"},
+       },
+       "model.output_offset[15].values: expected 3 values, got 1"},
   };
   for (const Rejected& c : cases) {
     SCOPED_TRACE(c.name);

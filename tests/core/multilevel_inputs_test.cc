@@ -5,10 +5,10 @@
 
 #include <cmath>
 
+#include "core/examples/scenarios/dac.h"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "core/examples/scenarios/dac.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::core {

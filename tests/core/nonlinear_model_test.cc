@@ -27,8 +27,8 @@ constexpr double kInputVariance = 0.5, kTargetVariance = 0.01, kTarget = 1.2;
 NonlinearModel SineCubeModel() {
   NonlinearModel m;
   m.num_states = m.num_inputs = m.num_outputs = 1;
-  m.transition = [](int, const Eigen::VectorXd& x, const Eigen::VectorXd& u, Eigen::VectorXd* next,
-                    Eigen::MatrixXd* A, Eigen::MatrixXd* B) {
+  m.transition = [](int, const Eigen::VectorXd& x, const Eigen::VectorXd& u, Eigen::VectorXd* next, Eigen::MatrixXd* A,
+                    Eigen::MatrixXd* B) {
     (*next)(0) = x(0) + 0.5 * std::sin(u(0));
     (*A)(0, 0) = 1.0;
     (*B)(0, 0) = 0.5 * std::cos(u(0));

@@ -38,7 +38,7 @@ int Overhead(int argc, char** argv) {
   const std::string algorithm = argc > 6 ? argv[6] : "iffbdd";
   core::Problem p = testing::WithBoxes(testing::RandomGaussianProblem(spec), 0.5, algorithm == "ibffd" ? 0.0 : 2.0);
   core::SolverOptions options;
-  options.algorithm = algorithm == "iake" ? core::Algorithm::kIake
+  options.algorithm = algorithm == "iake"    ? core::Algorithm::kIake
                       : algorithm == "ibffd" ? core::Algorithm::kIbffd
                                              : core::Algorithm::kIffbdd;
   options.polish_after_stable_iterations = 0;
@@ -89,7 +89,7 @@ int main(int argc, char** argv) {
   core::Problem p = testing::RandomGaussianProblem(spec);
   p = testing::WithBoxes(std::move(p), 0.5, algorithm == "ibffd" ? 0.0 : 2.0);
   core::SolverOptions options;
-  options.algorithm = algorithm == "iake" ? core::Algorithm::kIake
+  options.algorithm = algorithm == "iake"    ? core::Algorithm::kIake
                       : algorithm == "ibffd" ? core::Algorithm::kIbffd
                                              : core::Algorithm::kIffbdd;
   std::printf("problem generated: %.3f s\n", Since(t));

@@ -1,9 +1,10 @@
 // Scalar checks of nup-algorithms.md §5.2 / §13.1: the box and half-space theorems of [KL],
 // deciding rules as proximal operators (against brute-force minimisation), NUP updates.
+#include "core/priors/scalar_rules.h"
+
 #include <cmath>
 #include <random>
 
-#include "core/priors/scalar_rules.h"
 #include "gtest/gtest.h"
 
 namespace nupmpc::core {
@@ -66,7 +67,10 @@ double BruteForceProx(const ScalarPrior& prior, double m, double V) {
   const double g = 0.5 * (std::sqrt(5.0) - 1.0);
   for (int i = 0; i < 200; ++i) {
     const double c = b - g * (b - a), d = a + g * (b - a);
-    if (f(c) < f(d)) b = d; else a = c;
+    if (f(c) < f(d))
+      b = d;
+    else
+      a = c;
   }
   return 0.5 * (a + b);
 }

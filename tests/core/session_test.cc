@@ -1,13 +1,14 @@
 // Session behaviour (issue tests 4–6): warm start on the masses_N30 closed loop, restart
 // from the optimum, bad input, rejected updates leave the session unchanged, determinism,
 // no NaN on ill-conditioned problems, cancellation and limits.
+#include "core/session/session.h"
+
 #include <algorithm>
-#include <cmath>
 #include <atomic>
+#include <cmath>
 #include <memory>
 #include <vector>
 
-#include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "loadtest/instances/benchmark_instance.h"
@@ -256,7 +257,8 @@ Problem SmallProblem() {
   for (int n = 0; n < p.horizon; ++n) {
     p.mutable_input_prior(n, 0) = ScalarPrior::Box(-0.2, 0.2).WithGaussian(0.0, 1.0);
   }
-  for (int n = 1; n <= p.horizon; ++n) p.mutable_output_prior(n, 0) = ScalarPrior::Box(-0.5, 0.5).WithGaussian(0.0, 1.0);
+  for (int n = 1; n <= p.horizon; ++n)
+    p.mutable_output_prior(n, 0) = ScalarPrior::Box(-0.5, 0.5).WithGaussian(0.0, 1.0);
   return p;
 }
 
@@ -277,8 +279,7 @@ TEST(BadInput, EachDefectIsRejectedNamingTheField) {
       {"Problem.initial_covariance", [](Problem& p) { p.initial_covariance = -Eigen::MatrixXd::Identity(3, 3); }},
       {"Problem.input_priors[2].variance", [](Problem& p) { p.input_priors[2].variance = -1.0; }},
       {"Problem.input_priors[3].variance", [](Problem& p) { p.input_priors[3].variance = 0.0; }},
-      {"Problem.input_priors[0]: lower = 0.3 must be < upper = 0.2",
-       [](Problem& p) { p.input_priors[0].lower = 0.3; }},
+      {"Problem.input_priors[0]: lower = 0.3 must be < upper = 0.2", [](Problem& p) { p.input_priors[0].lower = 0.3; }},
       {"Problem.output_priors[4].slope", [](Problem& p) { p.output_priors[4].slope = -2.0; }},
       {"Problem.output_priors[6].mean", [](Problem& p) { p.output_priors[6].mean = NAN; }},
       {"Problem.output_priors[5].upper", [](Problem& p) { p.output_priors[5].upper = NAN; }},
@@ -347,8 +348,7 @@ TEST(BadInput, RejectedUpdateLeavesTheSessionUnchanged) {
   EXPECT_THAT((*session)->Update(wrong_shape), StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("horizon")));
   Problem flipped = SmallProblem();
   flipped.input_priors[4].lower = 1.0;  // lower > upper
-  EXPECT_THAT((*session)->Update(flipped),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("input_priors[4]")));
+  EXPECT_THAT((*session)->Update(flipped), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("input_priors[4]")));
   Problem non_finite = SmallProblem();
   non_finite.output_priors[3].upper = NAN;
   EXPECT_THAT((*session)->Update(non_finite), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("upper")));
@@ -400,7 +400,8 @@ TEST(NumericalSafety, IllConditionedProblemsNeverReturnNaN) {
     if (algorithm == Algorithm::kIbffd) {
       for (auto& prior : p.output_priors) prior.kind = PriorKind::kNone;
     } else {
-      for (int n = 1; n <= p.horizon; ++n) p.mutable_output_prior(n, 1) = ScalarPrior::AtMost(1e-6).WithGaussian(0, 1e-10);
+      for (int n = 1; n <= p.horizon; ++n)
+        p.mutable_output_prior(n, 1) = ScalarPrior::AtMost(1e-6).WithGaussian(0, 1e-10);
     }
     SolverOptions options;
     options.algorithm = algorithm;
@@ -500,7 +501,8 @@ TEST(NoInputs, EveryAlgorithmSolvesAModelWithoutInputs) {
     ASSERT_TRUE(solved.ok()) << solved.status();
     EXPECT_EQ(solved->status, SolveStatus::kConverged) << solved->Describe();
     EXPECT_EQ(plan.inputs.size(), 0);
-    EXPECT_LE((plan.states.row(0).transpose() - want).cwiseAbs().maxCoeff(), 1e-9 * std::max(1.0, want.cwiseAbs().maxCoeff()))
+    EXPECT_LE((plan.states.row(0).transpose() - want).cwiseAbs().maxCoeff(),
+              1e-9 * std::max(1.0, want.cwiseAbs().maxCoeff()))
         << AlgorithmName(algorithm);
   }
 }

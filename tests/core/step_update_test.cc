@@ -106,9 +106,8 @@ std::vector<Refusal> RefusalsFor(const Problem& p) {
     u.state = Eigen::VectorXd::Zero(M);
     (*u.state)(1) = kNaN;
   });
-  add("input index out of range", absl::StatusCode::kInvalidArgument, "update.inputs[0].index", [&](StepUpdate& u) {
-    u.inputs.push_back({.index = p.num_inputs, .priors = std::vector<ScalarPrior>(N)});
-  });
+  add("input index out of range", absl::StatusCode::kInvalidArgument, "update.inputs[0].index",
+      [&](StepUpdate& u) { u.inputs.push_back({.index = p.num_inputs, .priors = std::vector<ScalarPrior>(N)}); });
   add("output priors for too few steps", absl::StatusCode::kInvalidArgument, "update.outputs[0].prior",
       [&](StepUpdate& u) { u.outputs.push_back(GaussianTargets(0, N, 0.0, 0.0)); });
   add("a non-finite target after a valid entry", absl::StatusCode::kInvalidArgument, "update.outputs[1].prior",
@@ -121,8 +120,8 @@ std::vector<Refusal> RefusalsFor(const Problem& p) {
     u.outputs.push_back(GaussianTargets(0, N + 1, 1.0, 0.0));
     u.outputs.back().priors[3].rounds_with_next = true;
   });
-  add("previous_input on a session without input differences", absl::StatusCode::kInvalidArgument,
-      "previous_input", [&](StepUpdate& u) { u.previous_input = Eigen::VectorXd::Zero(p.num_inputs); });
+  add("previous_input on a session without input differences", absl::StatusCode::kInvalidArgument, "previous_input",
+      [&](StepUpdate& u) { u.previous_input = Eigen::VectorXd::Zero(p.num_inputs); });
   add("reference on a linear session", absl::StatusCode::kInvalidArgument, "reference",
       [&](StepUpdate& u) { u.reference = Eigen::VectorXd::Zero(1); });
   return out;
@@ -149,10 +148,12 @@ TEST(StepUpdate, PriorsAnotherAlgorithmWouldNeedAreRefusedWhenTheAlgorithmIsForc
   const Problem base = BoxedProblem();  // input boxes only: IBFFD
   SolverOptions forced;
   forced.algorithm = Algorithm::kIbffd;
-  absl::StatusOr<std::unique_ptr<Session>> refused = Session::Create(base, forced), twin = Session::Create(base, forced);
+  absl::StatusOr<std::unique_ptr<Session>> refused = Session::Create(base, forced),
+                                           twin = Session::Create(base, forced);
   ASSERT_TRUE(refused.ok() && twin.ok());
   StepUpdate bounded;  // an output box: IBFFD cannot take it
-  bounded.outputs.push_back({.index = 0, .priors = std::vector<ScalarPrior>(base.horizon + 1, ScalarPrior::Box(-1, 1))});
+  bounded.outputs.push_back(
+      {.index = 0, .priors = std::vector<ScalarPrior>(base.horizon + 1, ScalarPrior::Box(-1, 1))});
   EXPECT_FALSE((*refused)->Apply(bounded).ok());
   ExpectSamePlan(SolvePeriod(**refused), SolvePeriod(**twin));
 }
@@ -182,8 +183,8 @@ TEST(StepUpdate, AnInputMappedSessionRefusesWhatItsCallerCannotChange) {
   std::vector<Refusal> refusals;
   refusals.push_back({"input priors", {}, absl::StatusCode::kFailedPrecondition, "update.inputs"});
   refusals.back().update.inputs.push_back({.index = 0, .priors = std::vector<ScalarPrior>(N)});
-  refusals.push_back({"an output the caller does not have", {}, absl::StatusCode::kInvalidArgument,
-                      "update.outputs[0].index"});
+  refusals.push_back(
+      {"an output the caller does not have", {}, absl::StatusCode::kInvalidArgument, "update.outputs[0].index"});
   refusals.back().update.outputs.push_back(GaussianTargets(base.num_outputs, N + 1, 0.0, 0.0));
   refusals.push_back({"previous_input of the wrong size", {}, absl::StatusCode::kFailedPrecondition, "previous_input"});
   refusals.back().update.previous_input = Eigen::VectorXd::Zero(base.num_inputs + 1);
@@ -212,7 +213,7 @@ TEST(StepUpdate, AShiftOnInputDifferencesKeepsTheAppliedInputFree) {
   ASSERT_TRUE(session);
   const int K = base.num_outputs, N = base.horizon;
   const Problem before = session->problem();
-  ASSERT_TRUE(before.output_prior(1, K).has_gaussian());  // the prior on u[0]
+  ASSERT_TRUE(before.output_prior(1, K).has_gaussian());   // the prior on u[0]
   ASSERT_FALSE(before.output_prior(0, K).has_gaussian());  // u[-1]: given, no prior
   StepUpdate shift;
   shift.shift = true;

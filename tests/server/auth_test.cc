@@ -101,7 +101,8 @@ TEST_F(AuthTest, AnotherPrincipalCannotSeeListAttachToSolveOnOrCloseASession) {
   const auto same_as_unknown = [&](const absl::Status& got, const absl::Status& for_unknown) {
     EXPECT_EQ(got.code(), absl::StatusCode::kNotFound) << got;
     EXPECT_EQ(got.code(), for_unknown.code());
-    EXPECT_EQ(got.message().substr(got.message().find(':')), for_unknown.message().substr(for_unknown.message().find(':')));
+    EXPECT_EQ(got.message().substr(got.message().find(':')),
+              for_unknown.message().substr(for_unknown.message().find(':')));
   };
   same_as_unknown(bob->GetSession(id).status(), bob->GetSession(unknown).status());
   same_as_unknown(bob->Solve(id, step).status(), bob->Solve(unknown, step).status());

@@ -33,9 +33,12 @@ struct SpecField {
 
 std::vector<SpecField> SpecFields() {
   return {
-      {"spec.model.a[0].data[7]", [](v1::ProblemSpec* s, double v) { s->mutable_model()->mutable_a(0)->set_data(7, v); }},
-      {"spec.model.b[0].data[2]", [](v1::ProblemSpec* s, double v) { s->mutable_model()->mutable_b(0)->set_data(2, v); }},
-      {"spec.model.c[0].data[13]", [](v1::ProblemSpec* s, double v) { s->mutable_model()->mutable_c(0)->set_data(13, v); }},
+      {"spec.model.a[0].data[7]",
+       [](v1::ProblemSpec* s, double v) { s->mutable_model()->mutable_a(0)->set_data(7, v); }},
+      {"spec.model.b[0].data[2]",
+       [](v1::ProblemSpec* s, double v) { s->mutable_model()->mutable_b(0)->set_data(2, v); }},
+      {"spec.model.c[0].data[13]",
+       [](v1::ProblemSpec* s, double v) { s->mutable_model()->mutable_c(0)->set_data(13, v); }},
       {"spec.model.state_offset[4]",
        [](v1::ProblemSpec* s, double v) {
          for (int i = 0; i < 12; ++i) s->mutable_model()->add_state_offset(i == 4 ? v : 0.0);
@@ -57,17 +60,22 @@ std::vector<SpecField> SpecFields() {
        true, false},
       {"spec.input_priors[2].upper", [](v1::ProblemSpec* s, double v) { s->mutable_input_priors(2)->set_upper(0, v); },
        false, true},
-      {"spec.input_priors[0].weight", [](v1::ProblemSpec* s, double v) { s->mutable_input_priors(0)->set_weight(0, v); }},
+      {"spec.input_priors[0].weight",
+       [](v1::ProblemSpec* s, double v) { s->mutable_input_priors(0)->set_weight(0, v); }},
       {"spec.input_priors[0].target", [](v1::ProblemSpec* s, double v) { s->mutable_input_priors(0)->add_target(v); }},
-      {"spec.output_priors[3].lower", [](v1::ProblemSpec* s, double v) { s->mutable_output_priors(3)->set_lower(0, v); },
-       true, false},
-      {"spec.output_priors[4].upper", [](v1::ProblemSpec* s, double v) { s->mutable_output_priors(4)->set_upper(0, v); },
-       false, true},
-      {"spec.output_priors[5].weight", [](v1::ProblemSpec* s, double v) { s->mutable_output_priors(5)->set_weight(0, v); }},
-      {"spec.terminal.weight", [](v1::ProblemSpec* s, double v) { s->mutable_terminal()->mutable_weight()->set_data(0, v); }},
+      {"spec.output_priors[3].lower",
+       [](v1::ProblemSpec* s, double v) { s->mutable_output_priors(3)->set_lower(0, v); }, true, false},
+      {"spec.output_priors[4].upper",
+       [](v1::ProblemSpec* s, double v) { s->mutable_output_priors(4)->set_upper(0, v); }, false, true},
+      {"spec.output_priors[5].weight",
+       [](v1::ProblemSpec* s, double v) { s->mutable_output_priors(5)->set_weight(0, v); }},
+      {"spec.terminal.weight",
+       [](v1::ProblemSpec* s, double v) { s->mutable_terminal()->mutable_weight()->set_data(0, v); }},
       {"spec.terminal.target", [](v1::ProblemSpec* s, double v) { s->mutable_terminal()->set_target(3, v); }},
-      {"spec.options.objective_tolerance", [](v1::ProblemSpec* s, double v) { s->mutable_options()->set_objective_tolerance(v); }},
-      {"spec.options.violation_tolerance", [](v1::ProblemSpec* s, double v) { s->mutable_options()->set_violation_tolerance(v); }},
+      {"spec.options.objective_tolerance",
+       [](v1::ProblemSpec* s, double v) { s->mutable_options()->set_objective_tolerance(v); }},
+      {"spec.options.violation_tolerance",
+       [](v1::ProblemSpec* s, double v) { s->mutable_options()->set_violation_tolerance(v); }},
       {"spec.options.time_limit_ms", [](v1::ProblemSpec* s, double v) { s->mutable_options()->set_time_limit_ms(v); }},
       {"spec.options.elastic_slope", [](v1::ProblemSpec* s, double v) { s->mutable_options()->set_elastic_slope(v); }},
   };
@@ -198,8 +206,8 @@ TEST_F(HostileNumbersTest, DenormalAndHugeFiniteNumbersNeverLeaveTheServerAsNanO
       if (once.ok()) {
         ExpectFinite(*once);
       } else {
-        EXPECT_THAT(once.status().code(), ::testing::AnyOf(C::kInvalidArgument, C::kFailedPrecondition,
-                                                           C::kResourceExhausted))
+        EXPECT_THAT(once.status().code(),
+                    ::testing::AnyOf(C::kInvalidArgument, C::kFailedPrecondition, C::kResourceExhausted))
             << once.status();
         EXPECT_THAT(std::string(once.status().message()), HasSubstr("spec")) << once.status();
       }

@@ -93,7 +93,8 @@ std::vector<SpecCase> SpecCases() {
       {"an output's lower bound above what the inputs can reach",
        [](const core::Problem& m) {
          core::Problem p = m;
-         for (int n = 1; n <= p.horizon; ++n) p.mutable_output_prior(n, 0).lower = 3.0, p.mutable_output_prior(n, 0).upper = 4.0;
+         for (int n = 1; n <= p.horizon; ++n)
+           p.mutable_output_prior(n, 0).lower = 3.0, p.mutable_output_prior(n, 0).upper = 4.0;
          return p;
        },
        infeasible},
@@ -230,24 +231,30 @@ std::vector<StepCase> StepCases() {
        [](v1::Step* s) {
          for (int i = 0; i < kMasses; ++i) s->set_state(i, 3.9);
        },
-       {v1::SOLVE_STATUS_INFEASIBLE}, true},
+       {v1::SOLVE_STATUS_INFEASIBLE},
+       true},
       {"position 1 at 3.99, velocity 1 at 3.9 (barely out of reach)",
        [](v1::Step* s) {
          s->set_state(0, 3.99);
          s->set_state(6, 3.9);
        },
-       {v1::SOLVE_STATUS_INFEASIBLE}, true},
+       {v1::SOLVE_STATUS_INFEASIBLE},
+       true},
       {"time_limit_ms = 1e-6", [](v1::Step* s) { s->set_time_limit_ms(1e-6); }, {v1::SOLVE_STATUS_TIME_LIMIT}},
-      {"time_limit_ms = 1e-3", [](v1::Step* s) { s->set_time_limit_ms(1e-3); },
+      {"time_limit_ms = 1e-3",
+       [](v1::Step* s) { s->set_time_limit_ms(1e-3); },
        {v1::SOLVE_STATUS_TIME_LIMIT, v1::SOLVE_STATUS_CONVERGED}},
-      {"max_iterations = 1", [](v1::Step* s) { s->set_max_iterations(1); },
-       {v1::SOLVE_STATUS_ITERATION_LIMIT, v1::SOLVE_STATUS_CONVERGED}, true},
+      {"max_iterations = 1",
+       [](v1::Step* s) { s->set_max_iterations(1); },
+       {v1::SOLVE_STATUS_ITERATION_LIMIT, v1::SOLVE_STATUS_CONVERGED},
+       true},
       {"infeasible state, max_iterations = 1",
        [](v1::Step* s) {
          for (int i = 0; i < kMasses; ++i) s->set_state(i, 3.9);
          s->set_max_iterations(1);
        },
-       {v1::SOLVE_STATUS_ITERATION_LIMIT}, true},
+       {v1::SOLVE_STATUS_ITERATION_LIMIT},
+       true},
       {"infeasible state, time_limit_ms = 1e-3",
        [](v1::Step* s) {
          for (int i = 0; i < kMasses; ++i) s->set_state(i, 3.9);

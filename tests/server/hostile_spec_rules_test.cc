@@ -135,8 +135,8 @@ std::vector<SpecRule> ModelRules() {
        C::kInvalidArgument, "spec.model.a[17]"},
       {"B of wrong shape", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_b(0)->set_cols(2); },
        C::kInvalidArgument, "spec.model.b[0]"},
-      {"B data long", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_b(0)->add_data(1.0); },
-       C::kInvalidArgument, "spec.model.b[0].data"},
+      {"B data long", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_b(0)->add_data(1.0); }, C::kInvalidArgument,
+       "spec.model.b[0].data"},
       {"no B", [](v1::ProblemSpec* s) { s->mutable_model()->clear_b(); }, C::kInvalidArgument, "spec.model.b"},
       {"two C matrices", [](v1::ProblemSpec* s) { *s->mutable_model()->add_c() = s->model().c(0); },
        C::kInvalidArgument, "spec.model.c"},
@@ -151,10 +151,13 @@ std::vector<SpecRule> ModelRules() {
          for (int i = 0; i < 13; ++i) s->mutable_model()->add_output_offset(0.0);
        },
        C::kInvalidArgument, "spec.model.output_offset"},
-      {"initial mean of wrong length", [](v1::ProblemSpec* s) { s->mutable_initial_state()->mutable_mean()->RemoveLast(); },
-       C::kInvalidArgument, "spec.initial_state.mean"},
+      {"initial mean of wrong length",
+       [](v1::ProblemSpec* s) { s->mutable_initial_state()->mutable_mean()->RemoveLast(); }, C::kInvalidArgument,
+       "spec.initial_state.mean"},
       {"covariance of wrong shape",
-       [](v1::ProblemSpec* s) { SetMatrix(s->mutable_initial_state()->mutable_covariance(), 2, 2, {1, 0, 0, 1}); },
+       [](v1::ProblemSpec* s) {
+         SetMatrix(s->mutable_initial_state()->mutable_covariance(), 2, 2, {1, 0, 0, 1});
+       },
        C::kInvalidArgument, "spec.initial_state.covariance"},
       {"covariance not symmetric",
        [](v1::ProblemSpec* s) {
@@ -173,8 +176,9 @@ std::vector<SpecRule> ModelRules() {
        C::kInvalidArgument, "spec.initial_state.covariance"},
       {"terminal target of wrong length", [](v1::ProblemSpec* s) { s->mutable_terminal()->add_target(0.0); },
        C::kInvalidArgument, "spec.terminal.target"},
-      {"terminal weight of wrong shape", [](v1::ProblemSpec* s) { s->mutable_terminal()->mutable_weight()->set_cols(4); },
-       C::kInvalidArgument, "spec.terminal.weight"},
+      {"terminal weight of wrong shape",
+       [](v1::ProblemSpec* s) { s->mutable_terminal()->mutable_weight()->set_cols(4); }, C::kInvalidArgument,
+       "spec.terminal.weight"},
       {"terminal weight not symmetric",
        [](v1::ProblemSpec* s) { s->mutable_terminal()->mutable_weight()->set_data(1, 123.0); }, C::kInvalidArgument,
        "spec.terminal.weight"},
@@ -231,7 +235,8 @@ std::vector<SpecRule> PriorRules() {
          for (int i = 0; i < 3; ++i) s->mutable_input_priors(1)->add_exponent(0.5);
        },
        C::kInvalidArgument, "spec.input_priors[1].exponent"},
-      {"unknown prior kind", [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_kind(static_cast<v1::PriorKind>(42)); },
+      {"unknown prior kind",
+       [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_kind(static_cast<v1::PriorKind>(42)); },
        C::kInvalidArgument, "spec.input_priors[0].kind"},
       {"unknown estimation",
        [](v1::ProblemSpec* s) { s->mutable_output_priors(3)->set_estimation(static_cast<v1::Estimation>(9)); },
@@ -338,10 +343,12 @@ std::vector<SpecRule> PriorRules() {
 
 std::vector<SpecRule> OptionRules() {
   return {
-      {"unknown algorithm", [](v1::ProblemSpec* s) { s->mutable_options()->set_algorithm(static_cast<v1::Algorithm>(99)); },
+      {"unknown algorithm",
+       [](v1::ProblemSpec* s) { s->mutable_options()->set_algorithm(static_cast<v1::Algorithm>(99)); },
        C::kInvalidArgument, "spec.options.algorithm"},
-      {"iteration cap over --max_iterations", [](v1::ProblemSpec* s) { s->mutable_options()->set_max_iterations(100001); },
-       C::kResourceExhausted, "spec.options.max_iterations"},
+      {"iteration cap over --max_iterations",
+       [](v1::ProblemSpec* s) { s->mutable_options()->set_max_iterations(100001); }, C::kResourceExhausted,
+       "spec.options.max_iterations"},
       {"negative objective tolerance", [](v1::ProblemSpec* s) { s->mutable_options()->set_objective_tolerance(-1e-9); },
        C::kInvalidArgument, "spec.options.objective_tolerance"},
       {"negative violation tolerance", [](v1::ProblemSpec* s) { s->mutable_options()->set_violation_tolerance(-1.0); },
@@ -373,22 +380,26 @@ std::vector<SpecRule> InputMapRules() {
          *s->add_input_levels() = s->input_levels(0);
        },
        C::kInvalidArgument, "spec.input_levels[1].input"},
-      {"one level", [](v1::ProblemSpec* s) {
+      {"one level",
+       [](v1::ProblemSpec* s) {
          ThreeLevelInput(s);
          s->mutable_input_levels(0)->set_count(1);
        },
        C::kInvalidArgument, "spec.input_levels[0].count"},
-      {"levels over the limit", [](v1::ProblemSpec* s) {
+      {"levels over the limit",
+       [](v1::ProblemSpec* s) {
          ThreeLevelInput(s);
          s->mutable_input_levels(0)->set_count(65);
        },
        C::kResourceExhausted, "spec.input_levels[0].count"},
-      {"infinite lowest level", [](v1::ProblemSpec* s) {
+      {"infinite lowest level",
+       [](v1::ProblemSpec* s) {
          ThreeLevelInput(s);
          s->mutable_input_levels(0)->set_lowest(-kInf);
        },
        C::kInvalidArgument, "spec.input_levels[0].lowest"},
-      {"zero spacing", [](v1::ProblemSpec* s) {
+      {"zero spacing",
+       [](v1::ProblemSpec* s) {
          ThreeLevelInput(s);
          s->mutable_input_levels(0)->set_spacing(0.0);
        },
@@ -430,22 +441,26 @@ std::vector<SpecRule> InputMapRules() {
 
 std::vector<SpecRule> KeepOutRules() {
   return {
-      {"first output out of range", [](v1::ProblemSpec* s) {
+      {"first output out of range",
+       [](v1::ProblemSpec* s) {
          KeepOut(s);
          s->mutable_keep_out()->set_first_output(12);
        },
        C::kInvalidArgument, "spec.keep_out.first_output"},
-      {"second output out of range", [](v1::ProblemSpec* s) {
+      {"second output out of range",
+       [](v1::ProblemSpec* s) {
          KeepOut(s);
          s->mutable_keep_out()->set_second_output(40);
        },
        C::kInvalidArgument, "spec.keep_out.second_output"},
-      {"the same output twice", [](v1::ProblemSpec* s) {
+      {"the same output twice",
+       [](v1::ProblemSpec* s) {
          KeepOut(s);
          s->mutable_keep_out()->set_second_output(0);
        },
        C::kInvalidArgument, "spec.keep_out.second_output"},
-      {"no region", [](v1::ProblemSpec* s) {
+      {"no region",
+       [](v1::ProblemSpec* s) {
          KeepOut(s);
          s->mutable_keep_out()->clear_regions();
        },
@@ -456,7 +471,8 @@ std::vector<SpecRule> KeepOutRules() {
          for (int i = 0; i < 256; ++i) *s->mutable_keep_out()->add_regions() = r;
        },
        C::kResourceExhausted, "spec.keep_out.regions"},
-      {"rectangle order out of range", [](v1::ProblemSpec* s) {
+      {"rectangle order out of range",
+       [](v1::ProblemSpec* s) {
          KeepOut(s);
          s->mutable_keep_out()->set_rectangle_order(33);
        },
@@ -465,18 +481,20 @@ std::vector<SpecRule> KeepOutRules() {
        C::kInvalidArgument, "spec.keep_out.regions[0].shape"},
       {"zero half axis", [](v1::ProblemSpec* s) { KeepOut(s)->set_half_axis_a(0.0); }, C::kInvalidArgument,
        "spec.keep_out.regions[0].half_axis_a"},
-      {"negative second half axis", [](v1::ProblemSpec* s) { KeepOut(s)->set_half_axis_b(-1.0); },
-       C::kInvalidArgument, "spec.keep_out.regions[0].half_axis_b"},
+      {"negative second half axis", [](v1::ProblemSpec* s) { KeepOut(s)->set_half_axis_b(-1.0); }, C::kInvalidArgument,
+       "spec.keep_out.regions[0].half_axis_b"},
       {"negative margin", [](v1::ProblemSpec* s) { KeepOut(s)->set_margin(-0.1); }, C::kInvalidArgument,
        "spec.keep_out.regions[0].margin"},
       {"negative slope", [](v1::ProblemSpec* s) { KeepOut(s)->set_slope(-1.0); }, C::kInvalidArgument,
        "spec.keep_out.regions[0].slope"},
-      {"linearisations over the limit", [](v1::ProblemSpec* s) {
+      {"linearisations over the limit",
+       [](v1::ProblemSpec* s) {
          KeepOut(s);
          s->mutable_keep_out()->set_max_linearisations(10001);
        },
        C::kInvalidArgument, "spec.keep_out.max_linearisations"},
-      {"negative step tolerance", [](v1::ProblemSpec* s) {
+      {"negative step tolerance",
+       [](v1::ProblemSpec* s) {
          KeepOut(s);
          s->mutable_keep_out()->set_step_tolerance(-1.0);
        },
@@ -489,79 +507,111 @@ std::vector<SpecRule> GpRules() {
     return SpecRule{rule, std::move(mutate), code, field, /*gp=*/true};
   };
   return {
-      gp("GP with a linear model too", [](v1::ProblemSpec* s) { s->mutable_model()->set_num_states(1); },
-         C::kInvalidArgument, "spec.model"),
-      gp("GP with input priors", [](v1::ProblemSpec* s) { s->add_input_priors(); }, C::kInvalidArgument,
-         "spec.input_priors"),
-      gp("GP with output priors", [](v1::ProblemSpec* s) { s->add_output_priors(); }, C::kInvalidArgument,
-         "spec.output_priors"),
-      gp("GP with a terminal cost", [](v1::ProblemSpec* s) { s->mutable_terminal(); }, C::kInvalidArgument,
-         "spec.terminal"),
-      gp("GP with input levels", [](v1::ProblemSpec* s) { s->add_input_levels()->set_count(2); }, C::kInvalidArgument,
-         "spec.input_levels"),
-      gp("GP with input differences", [](v1::ProblemSpec* s) { s->mutable_input_differences(); }, C::kInvalidArgument,
-         "spec.input_differences"),
-      gp("GP with keep-out regions", [](v1::ProblemSpec* s) { s->mutable_keep_out()->add_regions(); },
-         C::kInvalidArgument, "spec.keep_out"),
-      gp("GP with a linear solver option", [](v1::ProblemSpec* s) { s->mutable_options()->set_max_iterations(10); },
-         C::kInvalidArgument, "spec.options"),
-      gp("GP without model", [](v1::ProblemSpec* s) { s->mutable_gp()->clear_model(); }, C::kInvalidArgument,
-         "spec.gp.model"),
-      gp("GP lags over the limit", [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->set_input_lags(65); },
-         C::kInvalidArgument, "spec.gp.model.output_lags/input_lags"),
-      gp("GP data both logged and as pairs",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->add_logged_outputs(1.0); }, C::kInvalidArgument,
-         "spec.gp.model: give the training data either"),
-      gp("GP regressors of wrong width",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_regressors()->set_cols(3); },
-         C::kInvalidArgument, "spec.gp.model.regressors"),
-      gp("GP targets fewer than regressors",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_targets()->RemoveLast(); },
-         C::kInvalidArgument, "spec.gp.model.targets"),
-      gp("GP points over the limit",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_regressors()->set_rows(5001); },
-         C::kResourceExhausted, "spec.gp.model.regressors.rows"),
-      gp("GP kernel length scales of wrong length",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_kernel()->add_length_scales(1.0); },
-         C::kInvalidArgument, "spec.gp.model.kernel.length_scales"),
-      gp("GP kernel with zero noise",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_kernel()->set_noise_variance(0.0); },
-         C::kInvalidArgument, "spec.gp.model.kernel.noise_variance"),
-      gp("GP zero horizon", [](v1::ProblemSpec* s) { s->mutable_gp()->set_horizon(0); }, C::kInvalidArgument,
-         "spec.gp.horizon"),
-      gp("GP horizon over the limit", [](v1::ProblemSpec* s) { s->mutable_gp()->set_horizon(10001); },
-         C::kResourceExhausted, "spec.gp.horizon"),
-      gp("GP zero output weight", [](v1::ProblemSpec* s) { s->mutable_gp()->set_output_weight(0.0); },
-         C::kInvalidArgument, "spec.gp.output_weight"),
-      gp("GP input bounds crossed", [](v1::ProblemSpec* s) { s->mutable_gp()->set_input_min(2.0); },
-         C::kInvalidArgument, "spec.gp.input_max"),
-      gp("GP rate bounds not bracketing zero", [](v1::ProblemSpec* s) { s->mutable_gp()->set_rate_min(0.1); },
-         C::kInvalidArgument, "spec.gp.rate_min/rate_max"),
-      gp("GP output bounds crossed", [](v1::ProblemSpec* s) { s->mutable_gp()->set_output_max(-20.0); },
-         C::kInvalidArgument, "spec.gp.output_max"),
-      gp("GP negative sigma multiple", [](v1::ProblemSpec* s) { s->mutable_gp()->set_sigma_multiple(-1.0); },
-         C::kInvalidArgument, "spec.gp.sigma_multiple"),
-      gp("GP infinite input bound", [](v1::ProblemSpec* s) { s->mutable_gp()->set_input_max(kInf); },
-         C::kInvalidArgument, "spec.gp.input_max"),
-      gp("GP SCP iterations over the limit",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_scp()->set_max_iterations(10001); }, C::kInvalidArgument,
-         "spec.gp.scp.max_iterations"),
-      gp("GP negative SCP penalty", [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_scp()->set_penalty(-1.0); },
-         C::kInvalidArgument, "spec.gp.scp.penalty"),
-      gp("GP trust radius below the stopping radius",
-         [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_scp()->set_initial_trust_radius(1e-9); },
-         C::kInvalidArgument, "spec.gp.scp.initial_trust_radius"),
-      gp("GP reference of wrong length",
-         [](v1::ProblemSpec* s) {
-           s->mutable_gp()->add_reference(0.0);
-           s->mutable_gp()->add_reference(0.0);
-         },
-         C::kInvalidArgument, "spec.gp.reference"),
-      gp("GP with an initial covariance",
-         [](v1::ProblemSpec* s) { SetMatrix(s->mutable_initial_state()->mutable_covariance(), 2, 2, {1, 0, 0, 1}); },
-         C::kInvalidArgument, "spec.initial_state.covariance"),
-      gp("GP past window of wrong length", [](v1::ProblemSpec* s) { s->mutable_initial_state()->add_mean(0.0); },
-         C::kInvalidArgument, "spec.initial_state.mean"),
+      gp(
+          "GP with a linear model too", [](v1::ProblemSpec* s) { s->mutable_model()->set_num_states(1); },
+          C::kInvalidArgument, "spec.model"),
+      gp(
+          "GP with input priors", [](v1::ProblemSpec* s) { s->add_input_priors(); }, C::kInvalidArgument,
+          "spec.input_priors"),
+      gp(
+          "GP with output priors", [](v1::ProblemSpec* s) { s->add_output_priors(); }, C::kInvalidArgument,
+          "spec.output_priors"),
+      gp(
+          "GP with a terminal cost", [](v1::ProblemSpec* s) { s->mutable_terminal(); }, C::kInvalidArgument,
+          "spec.terminal"),
+      gp(
+          "GP with input levels", [](v1::ProblemSpec* s) { s->add_input_levels()->set_count(2); }, C::kInvalidArgument,
+          "spec.input_levels"),
+      gp(
+          "GP with input differences", [](v1::ProblemSpec* s) { s->mutable_input_differences(); }, C::kInvalidArgument,
+          "spec.input_differences"),
+      gp(
+          "GP with keep-out regions", [](v1::ProblemSpec* s) { s->mutable_keep_out()->add_regions(); },
+          C::kInvalidArgument, "spec.keep_out"),
+      gp(
+          "GP with a linear solver option", [](v1::ProblemSpec* s) { s->mutable_options()->set_max_iterations(10); },
+          C::kInvalidArgument, "spec.options"),
+      gp(
+          "GP without model", [](v1::ProblemSpec* s) { s->mutable_gp()->clear_model(); }, C::kInvalidArgument,
+          "spec.gp.model"),
+      gp(
+          "GP lags over the limit", [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->set_input_lags(65); },
+          C::kInvalidArgument, "spec.gp.model.output_lags/input_lags"),
+      gp(
+          "GP data both logged and as pairs",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->add_logged_outputs(1.0); }, C::kInvalidArgument,
+          "spec.gp.model: give the training data either"),
+      gp(
+          "GP regressors of wrong width",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_regressors()->set_cols(3); },
+          C::kInvalidArgument, "spec.gp.model.regressors"),
+      gp(
+          "GP targets fewer than regressors",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_targets()->RemoveLast(); },
+          C::kInvalidArgument, "spec.gp.model.targets"),
+      gp(
+          "GP points over the limit",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_regressors()->set_rows(5001); },
+          C::kResourceExhausted, "spec.gp.model.regressors.rows"),
+      gp(
+          "GP kernel length scales of wrong length",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_kernel()->add_length_scales(1.0); },
+          C::kInvalidArgument, "spec.gp.model.kernel.length_scales"),
+      gp(
+          "GP kernel with zero noise",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_model()->mutable_kernel()->set_noise_variance(0.0); },
+          C::kInvalidArgument, "spec.gp.model.kernel.noise_variance"),
+      gp(
+          "GP zero horizon", [](v1::ProblemSpec* s) { s->mutable_gp()->set_horizon(0); }, C::kInvalidArgument,
+          "spec.gp.horizon"),
+      gp(
+          "GP horizon over the limit", [](v1::ProblemSpec* s) { s->mutable_gp()->set_horizon(10001); },
+          C::kResourceExhausted, "spec.gp.horizon"),
+      gp(
+          "GP zero output weight", [](v1::ProblemSpec* s) { s->mutable_gp()->set_output_weight(0.0); },
+          C::kInvalidArgument, "spec.gp.output_weight"),
+      gp(
+          "GP input bounds crossed", [](v1::ProblemSpec* s) { s->mutable_gp()->set_input_min(2.0); },
+          C::kInvalidArgument, "spec.gp.input_max"),
+      gp(
+          "GP rate bounds not bracketing zero", [](v1::ProblemSpec* s) { s->mutable_gp()->set_rate_min(0.1); },
+          C::kInvalidArgument, "spec.gp.rate_min/rate_max"),
+      gp(
+          "GP output bounds crossed", [](v1::ProblemSpec* s) { s->mutable_gp()->set_output_max(-20.0); },
+          C::kInvalidArgument, "spec.gp.output_max"),
+      gp(
+          "GP negative sigma multiple", [](v1::ProblemSpec* s) { s->mutable_gp()->set_sigma_multiple(-1.0); },
+          C::kInvalidArgument, "spec.gp.sigma_multiple"),
+      gp(
+          "GP infinite input bound", [](v1::ProblemSpec* s) { s->mutable_gp()->set_input_max(kInf); },
+          C::kInvalidArgument, "spec.gp.input_max"),
+      gp(
+          "GP SCP iterations over the limit",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_scp()->set_max_iterations(10001); }, C::kInvalidArgument,
+          "spec.gp.scp.max_iterations"),
+      gp(
+          "GP negative SCP penalty", [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_scp()->set_penalty(-1.0); },
+          C::kInvalidArgument, "spec.gp.scp.penalty"),
+      gp(
+          "GP trust radius below the stopping radius",
+          [](v1::ProblemSpec* s) { s->mutable_gp()->mutable_scp()->set_initial_trust_radius(1e-9); },
+          C::kInvalidArgument, "spec.gp.scp.initial_trust_radius"),
+      gp(
+          "GP reference of wrong length",
+          [](v1::ProblemSpec* s) {
+            s->mutable_gp()->add_reference(0.0);
+            s->mutable_gp()->add_reference(0.0);
+          },
+          C::kInvalidArgument, "spec.gp.reference"),
+      gp(
+          "GP with an initial covariance",
+          [](v1::ProblemSpec* s) {
+            SetMatrix(s->mutable_initial_state()->mutable_covariance(), 2, 2, {1, 0, 0, 1});
+          },
+          C::kInvalidArgument, "spec.initial_state.covariance"),
+      gp(
+          "GP past window of wrong length", [](v1::ProblemSpec* s) { s->mutable_initial_state()->add_mean(0.0); },
+          C::kInvalidArgument, "spec.initial_state.mean"),
   };
 }
 
@@ -590,9 +640,7 @@ TEST_F(HostileSpecRulesTest, EveryRuleOfTheModelTheInitialStateAndTheTerminalCos
   ExpectEveryRuleRefused(ModelRules(), "spec rules: model, initial state, terminal cost");
 }
 
-TEST_F(HostileSpecRulesTest, EveryRuleOfAPrior) {
-  ExpectEveryRuleRefused(PriorRules(), "spec rules: priors");
-}
+TEST_F(HostileSpecRulesTest, EveryRuleOfAPrior) { ExpectEveryRuleRefused(PriorRules(), "spec rules: priors"); }
 
 TEST_F(HostileSpecRulesTest, EveryRuleOfTheOptions) { ExpectEveryRuleRefused(OptionRules(), "spec rules: options"); }
 
@@ -643,7 +691,8 @@ TEST_F(HostileSpecRulesTest, EveryRuleOfAFitGpModelRequest) {
          m->add_logged_inputs(0.0);
        },
        C::kInvalidArgument, "model.logged_outputs"},
-      {"points over the limit", [](v1::FitGpModelRequest* r) { r->mutable_model()->mutable_regressors()->set_rows(5001); },
+      {"points over the limit",
+       [](v1::FitGpModelRequest* r) { r->mutable_model()->mutable_regressors()->set_rows(5001); },
        C::kResourceExhausted, "model.regressors.rows"},
       {"regressors data short",
        [](v1::FitGpModelRequest* r) { r->mutable_model()->mutable_regressors()->mutable_data()->RemoveLast(); },
@@ -688,13 +737,12 @@ std::vector<StepRule> StepRules() {
        "step.max_iterations"},
       {"state of wrong length", [](v1::Step* s) { s->mutable_state()->RemoveLast(); }, C::kFailedPrecondition,
        "step.state"},
-      {"previous input without input differences", [](v1::Step* s) { s->add_previous_input(0.0); },
-       C::kInvalidArgument, "step.previous_input"},
+      {"previous input without input differences", [](v1::Step* s) { s->add_previous_input(0.0); }, C::kInvalidArgument,
+       "step.previous_input"},
       {"reference on a linear session", [](v1::Step* s) { s->add_reference(0.0); }, C::kInvalidArgument,
        "step.reference"},
-      {"update of an input that does not exist",
-       [](v1::Step* s) { s->mutable_update()->add_inputs()->set_index(3); }, C::kInvalidArgument,
-       "step.update.inputs[0].index"},
+      {"update of an input that does not exist", [](v1::Step* s) { s->mutable_update()->add_inputs()->set_index(3); },
+       C::kInvalidArgument, "step.update.inputs[0].index"},
       {"update of an output that does not exist",
        [](v1::Step* s) { s->mutable_update()->add_outputs()->set_index(4'000'000'000u); }, C::kInvalidArgument,
        "step.update.outputs[0].index = 4000000000: must be"},  // echoed as sent, not clamped to an int

@@ -22,10 +22,14 @@ struct Method {
   const char* request;
 };
 constexpr Method kMethods[] = {
-    {"CreateSession", "nupmpc.v1.CreateSessionRequest"}, {"Solve", "nupmpc.v1.SolveRequest"},
-    {"SolveOnce", "nupmpc.v1.SolveOnceRequest"},         {"GetSession", "nupmpc.v1.GetSessionRequest"},
-    {"ListSessions", "nupmpc.v1.ListSessionsRequest"},   {"CloseSession", "nupmpc.v1.CloseSessionRequest"},
-    {"GetServerInfo", "nupmpc.v1.GetServerInfoRequest"}, {"FitGpModel", "nupmpc.v1.FitGpModelRequest"},
+    {"CreateSession", "nupmpc.v1.CreateSessionRequest"},
+    {"Solve", "nupmpc.v1.SolveRequest"},
+    {"SolveOnce", "nupmpc.v1.SolveOnceRequest"},
+    {"GetSession", "nupmpc.v1.GetSessionRequest"},
+    {"ListSessions", "nupmpc.v1.ListSessionsRequest"},
+    {"CloseSession", "nupmpc.v1.CloseSessionRequest"},
+    {"GetServerInfo", "nupmpc.v1.GetServerInfoRequest"},
+    {"FitGpModel", "nupmpc.v1.FitGpModelRequest"},
     {"Control", "nupmpc.v1.ControlRequest"},
 };
 

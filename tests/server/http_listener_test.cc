@@ -34,13 +34,16 @@ constexpr milliseconds kAnswerTimeout{10000};
 class HttpListenerTest : public ::testing::Test {
  protected:
   void Start(HttpListenerLimits limits) {
-    auto started = HttpListener::Start("127.0.0.1", 0, [this](const HttpRequestHead& request) {
-      ++handled_;
-      if (request.path == "/throw") throw std::runtime_error("the handler failed");
-      HttpResponse response;
-      response.body = "path " + request.path + "\n";
-      return response;
-    }, limits);
+    auto started = HttpListener::Start(
+        "127.0.0.1", 0,
+        [this](const HttpRequestHead& request) {
+          ++handled_;
+          if (request.path == "/throw") throw std::runtime_error("the handler failed");
+          HttpResponse response;
+          response.body = "path " + request.path + "\n";
+          return response;
+        },
+        limits);
     ASSERT_TRUE(started.ok()) << started.status();
     listener_ = *std::move(started);
   }

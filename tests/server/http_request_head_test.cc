@@ -44,11 +44,11 @@ TEST(HttpRequestHead, AnnouncedBodiesAreSeen) {
 }
 
 TEST(HttpRequestHead, MalformedHeadsAreRefusedWith400) {
-  for (const char* head : {"GET /metrics\r\n\r\n", "GET metrics HTTP/1.1\r\n\r\n", "GET  /metrics HTTP/1.1\r\n\r\n",
-                                 "GET /metrics SPDY/3\r\n\r\n", "GET / HTTP/1.1\r\nno colon here\r\n\r\n",
-                                 "GET / HTTP/1.1\r\nContent-Length : 5\r\n\r\n", "GET / HTTP/1.1\r\n: empty name\r\n\r\n",
-                                 "GET / HTTP/1.1\r\nContent-Length: -1\r\n\r\n",
-                                 "GET / HTTP/1.1\r\nContent-Length: 1x\r\n\r\n"}) {
+  for (const char* head :
+       {"GET /metrics\r\n\r\n", "GET metrics HTTP/1.1\r\n\r\n", "GET  /metrics HTTP/1.1\r\n\r\n",
+        "GET /metrics SPDY/3\r\n\r\n", "GET / HTTP/1.1\r\nno colon here\r\n\r\n",
+        "GET / HTTP/1.1\r\nContent-Length : 5\r\n\r\n", "GET / HTTP/1.1\r\n: empty name\r\n\r\n",
+        "GET / HTTP/1.1\r\nContent-Length: -1\r\n\r\n", "GET / HTTP/1.1\r\nContent-Length: 1x\r\n\r\n"}) {
     const HeadParse parse = ParseRequestHead(head, {});
     EXPECT_EQ(parse.state, HeadParseState::kRefused) << head;
     EXPECT_EQ(parse.status, 400) << head;

@@ -85,9 +85,9 @@ TEST(SplitGrpcTcpAddress, TakesHostPortAndBracketedIpv6AndLeavesOtherFormsToGrpc
   EXPECT_EQ(v6->host, "::");
   EXPECT_EQ(v6->port, 7);
   EXPECT_EQ(SplitGrpcTcpAddress("localhost:0")->port, 0);
-  for (const char* other : {"unix:/run/nupmpc.sock", "unix:8080", "unix-abstract:1234", "vsock:3:5000",
-                            "ipv4:127.0.0.1:5", "dns:///localhost:5", "::1:5", ":5", "localhost", "host:70000",
-                            "[::1:5", "host:x"}) {
+  for (const char* other :
+       {"unix:/run/nupmpc.sock", "unix:8080", "unix-abstract:1234", "vsock:3:5000", "ipv4:127.0.0.1:5",
+        "dns:///localhost:5", "::1:5", ":5", "localhost", "host:70000", "[::1:5", "host:x"}) {
     EXPECT_FALSE(SplitGrpcTcpAddress(other).has_value()) << other;
   }
 }

@@ -107,8 +107,8 @@ TEST_F(LoadTest, NewReferencesMoveEveryOutputsTargetAndChangeThePlan) {
   EXPECT_NE(without->objective(), with->objective());
   // And a closed-loop level with them runs without errors.
   loadtest::LevelConfig config = ShortLevel(2);
-  absl::StatusOr<loadtest::LevelReport> r =
-      loadtest::RunLevel(target_, {&workload_.spec, &workload_.states, /*closed_loop=*/true, /*new_references=*/true}, config);
+  absl::StatusOr<loadtest::LevelReport> r = loadtest::RunLevel(
+      target_, {&workload_.spec, &workload_.states, /*closed_loop=*/true, /*new_references=*/true}, config);
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_TRUE(r->tally.errors.empty());
   EXPECT_GT(r->tally.latency_ms.size(), 0u);
@@ -217,7 +217,8 @@ std::vector<v1::ControlResponse> StepThrough(v1::MpcService::Stub& stub, const W
 TEST_F(LoadTest, BarePeerSolvesEveryStepAsTheServerDoes) {
   absl::StatusOr<std::unique_ptr<loadtest::EchoControlServer>> bare = loadtest::EchoControlServer::StartSolving();
   ASSERT_TRUE(bare.ok()) << bare.status();
-  const auto bare_stub = v1::MpcService::NewStub(grpc::CreateChannel((*bare)->target(), grpc::InsecureChannelCredentials()));
+  const auto bare_stub =
+      v1::MpcService::NewStub(grpc::CreateChannel((*bare)->target(), grpc::InsecureChannelCredentials()));
   const std::vector<v1::ControlResponse> from_server = StepThrough(client_->stub(), workload_, 2);
   const std::vector<v1::ControlResponse> from_bare = StepThrough(*bare_stub, workload_, 2);
   ASSERT_EQ(from_server.size(), 2 * workload_.states.size());
@@ -292,7 +293,7 @@ TEST_F(LoadTest, MoreStreamsThanTheQueueHoldsGetResourceExhausted) {
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_GT(r->tally.errors["RESOURCE_EXHAUSTED"], 0u);
   EXPECT_GT(r->tally.latency_ms.size(), 0u);  // and the admitted ones were solved
-  EXPECT_EQ(r->tally.errors.size(), 1u);       // nothing else went wrong
+  EXPECT_EQ(r->tally.errors.size(), 1u);      // nothing else went wrong
 }
 
 TEST_F(LoadTest, IdleSessionsGrowTheServersMemoryAndGiveItBack) {
@@ -379,7 +380,8 @@ TEST(LevelRounds, MergedRoundsCountEveryAnswerOverTheirSummedTime) {
 }
 
 TEST(FleetRounds, MergedOverEveryCallAndEverySolvedStep) {
-  const auto round = [](std::vector<double> call_ms, double measured_s, std::uint64_t solved, std::uint64_t iterations) {
+  const auto round = [](std::vector<double> call_ms, double measured_s, std::uint64_t solved,
+                        std::uint64_t iterations) {
     loadtest::FleetReport r;
     r.sessions = 4;
     r.calls = call_ms.size();
@@ -401,7 +403,7 @@ TEST(FleetRounds, MergedOverEveryCallAndEverySolvedStep) {
   EXPECT_DOUBLE_EQ(merged.steps_per_s, 16.0);
   EXPECT_EQ(merged.iterations, 52u);
   EXPECT_DOUBLE_EQ(merged.mean_iterations, 52.0 / 40);  // not the mean of the rounds' means (1.5)
-  EXPECT_EQ(merged.call_p50_ms, 5.0);  // over all calls, not a mean of the rounds' medians
+  EXPECT_EQ(merged.call_p50_ms, 5.0);                   // over all calls, not a mean of the rounds' medians
   EXPECT_EQ(merged.call_p99_ms, 10.0);
   EXPECT_EQ(merged.step_errors, 2u);
 }
@@ -435,7 +437,8 @@ TEST_F(LoadTest, AFleetInTwoCallsInFlightStepsEachSessionInOneOfThem) {
   EXPECT_LT(r->measured_s, 1.6);
   EXPECT_DOUBLE_EQ(r->steps_per_s, static_cast<double>(r->answered) / r->measured_s);
   for (const int refused : {0, 4}) {
-    const absl::StatusOr<loadtest::FleetReport> bad = loadtest::RunFleetLevel(target_, {}, Plan(true), 3, refused, 0.1, 0);
+    const absl::StatusOr<loadtest::FleetReport> bad =
+        loadtest::RunFleetLevel(target_, {}, Plan(true), 3, refused, 0.1, 0);
     EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument) << refused;
   }
 }
@@ -469,8 +472,8 @@ TEST(UsableCores, TheServersCoresAtMostTheCpusItMayRunOn) {
   EXPECT_EQ(loadtest::UsableCores(2, "0"), 1);    // --threads 1 pinned to one CPU: two gRPC threads share it
   EXPECT_EQ(loadtest::UsableCores(2, "0-3"), 2);  // more CPUs than solver cores
   EXPECT_EQ(loadtest::UsableCores(4, "0,2-3"), 3);
-  EXPECT_EQ(loadtest::UsableCores(2, ""), 2);     // a server that does not report its CPUs
-  EXPECT_EQ(loadtest::UsableCores(2, "x"), 2);    // nor readably
+  EXPECT_EQ(loadtest::UsableCores(2, ""), 2);   // a server that does not report its CPUs
+  EXPECT_EQ(loadtest::UsableCores(2, "x"), 2);  // nor readably
 }
 
 TEST(StarvedAStream, AClosedLoopStreamOutsideAFactorTwoOfTheMean) {
@@ -484,13 +487,13 @@ TEST(StarvedAStream, AClosedLoopStreamOutsideAFactorTwoOfTheMean) {
     return l;
   };
   EXPECT_FALSE(loadtest::StarvedAStream(level(true, 64, 0.98, 1.02)));
-  EXPECT_FALSE(loadtest::StarvedAStream(level(true, 64, 0.5, 2.0)));   // the bound itself is fair
-  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.49, 1.01)));  // one stream under half the mean
-  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.0, 1.03)));   // one never answered
-  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.86, 2.01)));   // one served over twice the mean
-  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.0, 2.5)));     // one stream took most
+  EXPECT_FALSE(loadtest::StarvedAStream(level(true, 64, 0.5, 2.0)));    // the bound itself is fair
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.49, 1.01)));   // one stream under half the mean
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 64, 0.0, 1.03)));    // one never answered
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.86, 2.01)));    // one served over twice the mean
+  EXPECT_TRUE(loadtest::StarvedAStream(level(true, 8, 0.0, 2.5)));      // one stream took most
   EXPECT_FALSE(loadtest::StarvedAStream(level(true, 8, 0.4, 1.6, 5)));  // 5 answers a stream: noise
-  EXPECT_FALSE(loadtest::StarvedAStream(level(false, 64, 0.0, 3.0)));  // open loop: arrivals decide
+  EXPECT_FALSE(loadtest::StarvedAStream(level(false, 64, 0.0, 3.0)));   // open loop: arrivals decide
   EXPECT_FALSE(loadtest::StarvedAStream(level(true, 1, 1.0, 1.0)));
 }
 

@@ -29,9 +29,7 @@ class LogCapture {
     spdlog::set_default_logger(logger);
   }
   ~LogCapture() { spdlog::set_default_logger(previous_); }
-  std::vector<std::string> Lines() const {
-    return absl::StrSplit(out_.str(), '\n', absl::SkipEmpty());
-  }
+  std::vector<std::string> Lines() const { return absl::StrSplit(out_.str(), '\n', absl::SkipEmpty()); }
 
  private:
   std::ostringstream out_;
@@ -118,7 +116,8 @@ TEST_F(ServerLogTest, AccessLinesAtDebugSessionEventsAtInfoSlowSolvesAtWarn) {
     auto created = (*client)->CreateSession(SpecOrDie(inst.problem));
     ASSERT_TRUE(created.ok());
     v1::Step step;
-    step.mutable_state()->Add(inst.closed_loop->x1[0].data(), inst.closed_loop->x1[0].data() + inst.closed_loop->x1[0].size());
+    step.mutable_state()->Add(inst.closed_loop->x1[0].data(),
+                              inst.closed_loop->x1[0].data() + inst.closed_loop->x1[0].size());
     ASSERT_TRUE((*client)->Solve(created->session_id(), step).ok());
     ASSERT_TRUE((*client)->CloseSession(created->session_id()).ok());
     server_->Shutdown();
@@ -143,7 +142,8 @@ TEST_F(ServerLogTest, AccessLinesAtDebugSessionEventsAtInfoSlowSolvesAtWarn) {
     EXPECT_EQ(count("info", "closed"), 1);
     EXPECT_EQ(count("warning", "slow solve"), 1);
     for (const nlohmann::json& line : lines) {
-      if (line["level"] != "warning" || line["msg"].get<std::string>().find("slow solve") == std::string::npos) continue;
+      if (line["level"] != "warning" || line["msg"].get<std::string>().find("slow solve") == std::string::npos)
+        continue;
       EXPECT_NE(line["msg"].get<std::string>().find("M=12 L=3 K=12 N=30"), std::string::npos) << line.dump();
       EXPECT_NE(line["msg"].get<std::string>().find("iterations"), std::string::npos) << line.dump();
     }

@@ -125,7 +125,8 @@ TEST_F(MetricsEndpointTest, CountersAndHistogramsAreWhatWasDone) {
     iterations += r.iterations();
     solve_seconds += r.solve_ms() / 1000.0;
   }
-  const std::string algorithm = Lower(v1::Algorithm_Name(results[0].algorithm()).substr(std::string("ALGORITHM_").size()));
+  const std::string algorithm =
+      Lower(v1::Algorithm_Name(results[0].algorithm()).substr(std::string("ALGORITHM_").size()));
   EXPECT_EQ(m.at("nupmpc_solves_total{status=\"converged\",algorithm=\"" + algorithm + "\"}"), 9);
   for (const char* h : {"nupmpc_solve_duration_seconds", "nupmpc_queue_wait_seconds", "nupmpc_step_latency_seconds",
                         "nupmpc_solve_iterations"}) {

@@ -108,7 +108,8 @@ TEST_F(MetricsPortHostileTest, AHugeBodyIsRefusedUnreadAndDoesNotGrowTheServer) 
   constexpr std::size_t kBody = std::size_t{256} << 20;
   const int fd = ConnectLoopback(metrics_port_);
   ASSERT_GE(fd, 0);
-  ASSERT_TRUE(SendAll(fd, "POST /metrics HTTP/1.1\r\nHost: x\r\nContent-Length: " + std::to_string(kBody) + "\r\n\r\n"));
+  ASSERT_TRUE(
+      SendAll(fd, "POST /metrics HTTP/1.1\r\nHost: x\r\nContent-Length: " + std::to_string(kBody) + "\r\n\r\n"));
   const std::string chunk(1 << 20, 'x');
   std::size_t sent = 0;
   while (sent < kBody && SendAll(fd, chunk)) sent += chunk.size();
@@ -117,7 +118,7 @@ TEST_F(MetricsPortHostileTest, AHugeBodyIsRefusedUnreadAndDoesNotGrowTheServer) 
   EXPECT_LT(sent, kBody);
   const long peak_after = KibibytesOf(server_->pid(), "VmHWM");
   EXPECT_LT(peak_after - peak_before, 32 * 1024) << "peak RSS grew from " << peak_before << " to " << peak_after
-                                                  << " KiB while " << sent << " bytes of a body were sent";
+                                                 << " KiB while " << sent << " bytes of a body were sent";
   ExpectAnswers("/healthz");
 }
 

@@ -19,7 +19,7 @@ TEST(PrometheusText, LabelValuesAndNumbersAreWrittenAsTheFormatWants) {
   EXPECT_EQ(FormatPrometheusValue(3), "3");
   EXPECT_EQ(FormatPrometheusValue(0.5), "0.5");
   EXPECT_EQ(FormatPrometheusValue(1e15), "1000000000000000");  // counts: exact, no exponent
-  EXPECT_EQ(FormatPrometheusValue(1e20), "1e+20");              // beyond 2^53: not an exact count
+  EXPECT_EQ(FormatPrometheusValue(1e20), "1e+20");             // beyond 2^53: not an exact count
   EXPECT_EQ(FormatPrometheusValue(std::numeric_limits<double>::infinity()), "+Inf");
   EXPECT_EQ(FormatPrometheusValue(-std::numeric_limits<double>::infinity()), "-Inf");
   EXPECT_EQ(FormatPrometheusValue(std::numeric_limits<double>::quiet_NaN()), "NaN");
@@ -58,8 +58,7 @@ TEST(PrometheusText, TheTestParserRefusesMalformedText) {
   EXPECT_FALSE(ParsePrometheusText("# TYPE y counter\ny one\n").ok());
   EXPECT_FALSE(ParsePrometheusText("# TYPE h histogram\nh_bucket{le=\"1\"} 2\nh_bucket{le=\"+Inf\"} 1\n").ok());
   EXPECT_FALSE(ParsePrometheusText("# TYPE h histogram\nh_bucket{le=\"1\"} 2\n").ok());
-  EXPECT_FALSE(
-      ParsePrometheusText("# TYPE h histogram\nh_bucket{le=\"+Inf\"} 2\nh_sum 1\nh_count 3\n").ok());
+  EXPECT_FALSE(ParsePrometheusText("# TYPE h histogram\nh_bucket{le=\"+Inf\"} 2\nh_sum 1\nh_count 3\n").ok());
   EXPECT_TRUE(ParsePrometheusText("# TYPE h histogram\nh_bucket{le=\"+Inf\"} 3\nh_sum 1\nh_count 3\n").ok());
 }
 

@@ -59,7 +59,8 @@ TEST(ReadTiming, AStepArrivingBeforeItsPredecessorsAnswerWasWrittenSendsItBackAh
 TEST(ReadTiming, OnlyAReadStartedAfterASolveIsJudgedByHowSoonItCompletes) {
   // A read started ahead waits through the solve: how soon it completes says nothing.
   ReadTiming t;
-  for (int i = 0; i < ReadTiming::kClosedLoopSteps; ++i) t.StepArrived(false, /*read_after=*/false, microseconds(1), false);
+  for (int i = 0; i < ReadTiming::kClosedLoopSteps; ++i)
+    t.StepArrived(false, /*read_after=*/false, microseconds(1), false);
   EXPECT_FALSE(t.ahead());
   ClosedLoopStep(t, /*read_after=*/true);
   EXPECT_FALSE(t.ahead());  // a read after the solve that waited for the client: a closed loop

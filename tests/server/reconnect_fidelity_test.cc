@@ -284,7 +284,7 @@ TEST_F(ReconnectFidelityTest, GpSessionKeepsItsLatestReference) {
   for (std::size_t k = 0; k < steps.size(); ++k) {
     Set({-0.1 * static_cast<double>(k), 0.05 * static_cast<double>(k)}, steps[k].mutable_state());
   }
-  steps[1].add_reference(-0.3);                      // constant
+  steps[1].add_reference(-0.3);                            // constant
   Set(Ramp(H, -0.3, 0.02), steps[2].mutable_reference());  // per step; kept by the next steps
   const v1::Step next = steps.back();
   steps.pop_back();

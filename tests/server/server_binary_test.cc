@@ -32,9 +32,9 @@ namespace {
 
 // The deployed binary with NUPMPC_THREADS set: the environment configures it too.
 std::unique_ptr<ServerProcess> StartServer(const char* threads_env) {
-  return std::make_unique<ServerProcess>(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
-                                         std::vector<std::string>{"--log_level=warn", "--grace_period_s=2"},
-                                         std::vector<std::pair<std::string, std::string>>{{"NUPMPC_THREADS", threads_env}});
+  return std::make_unique<ServerProcess>(
+      NUPMPC_SERVER_BINARY, FreeLoopbackPort(), std::vector<std::string>{"--log_level=warn", "--grace_period_s=2"},
+      std::vector<std::pair<std::string, std::string>>{{"NUPMPC_THREADS", threads_env}});
 }
 
 bool WaitUntilServing(const std::shared_ptr<grpc::Channel>& channel) {
@@ -95,7 +95,8 @@ TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
   auto health = grpc::health::v1::Health::NewStub(channel);
   ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::SERVING);
   Client client(channel);
-  absl::StatusOr<ProblemFile> masses = LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  absl::StatusOr<ProblemFile> masses =
+      LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
   ASSERT_TRUE(masses.ok()) << masses.status();
   const v1::ProblemSpec& spec = masses->spec;
   auto created = client.CreateSession(spec);
@@ -158,7 +159,8 @@ TEST(ServerBinaryTest, AfterTheDrainDelayAnIdleConnectionAndStreamDoNotHoldTheEx
                        {"--log_level=warn", "--grace_period_s=" + std::to_string(kGraceS), "--drain_delay_s=0.2"});
   auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
   ASSERT_TRUE(WaitUntilServing(channel));
-  absl::StatusOr<ProblemFile> masses = LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  absl::StatusOr<ProblemFile> masses =
+      LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
   ASSERT_TRUE(masses.ok()) << masses.status();
   // An open Control stream, its first step answered, then idle.
   Client client(channel);
@@ -211,7 +213,8 @@ std::pair<int, std::string> RunUntilExit(const std::vector<std::string>& flags) 
   std::string written;
   std::array<char, 4096> chunk{};
   for (;;) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     pollfd readable{.fd = errors[0], .events = POLLIN, .revents = 0};
     const int ready = left.count() > 0 ? poll(&readable, 1, static_cast<int>(left.count())) : 0;
     if (ready < 0 && errno == EINTR) continue;
@@ -250,7 +253,8 @@ bool AcceptsConnections(int port) {
 TEST(ServerBinaryTest, ASecondServerOnAPortInUseRefusesToStart) {
   const int metrics_port = FreeLoopbackPort();
   const std::string metrics_address = "--metrics_address=127.0.0.1:" + std::to_string(metrics_port);
-  ServerProcess first(NUPMPC_SERVER_BINARY, FreeLoopbackPort(), {"--log_level=warn", "--grace_period_s=1", metrics_address});
+  ServerProcess first(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
+                      {"--log_level=warn", "--grace_period_s=1", metrics_address});
   auto channel = grpc::CreateChannel(first.target(), grpc::InsecureChannelCredentials());
   ASSERT_TRUE(WaitUntilServing(channel));
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
@@ -262,15 +266,15 @@ TEST(ServerBinaryTest, ASecondServerOnAPortInUseRefusesToStart) {
   const auto [grpc_status, grpc_errors] = RunUntilExit({"--address=" + first.target(), "--log_level=warn"});
   EXPECT_EQ(grpc_status, 1) << grpc_errors;
   EXPECT_THAT(grpc_errors, ::testing::HasSubstr("could not listen on --address " + first.target() + ": " +
-                                                 first.target() + " is in use by another process"))
+                                                first.target() + " is in use by another process"))
       << grpc_errors;
 
-  const auto [metrics_status, metrics_errors] = RunUntilExit(
-      {"--address=127.0.0.1:0", "--log_level=warn", metrics_address});
+  const auto [metrics_status, metrics_errors] =
+      RunUntilExit({"--address=127.0.0.1:0", "--log_level=warn", metrics_address});
   EXPECT_EQ(metrics_status, 1) << metrics_errors;
   const std::string metrics_in_use = "127.0.0.1:" + std::to_string(metrics_port);
   EXPECT_THAT(metrics_errors, ::testing::HasSubstr("could not listen on --metrics_address " + metrics_in_use + ": " +
-                                                       metrics_in_use + " is in use by another process"))
+                                                   metrics_in_use + " is in use by another process"))
       << metrics_errors;
 
   EXPECT_TRUE(Client(channel).GetServerInfo().ok());  // the first one serves on
@@ -314,7 +318,8 @@ TEST(ServerBinaryTest, AnAddressThatDoesNotResolveIsRefusedAtStartup) {
     if (flag == "--metrics_address") args.push_back("--address=127.0.0.1:0");
     const auto [status, errors] = RunUntilExit(args);
     EXPECT_EQ(status, 1) << errors;
-    EXPECT_THAT(errors, ::testing::HasSubstr("could not listen on " + flag + " no-such-host.invalid:5: the host "
+    EXPECT_THAT(errors, ::testing::HasSubstr("could not listen on " + flag +
+                                             " no-such-host.invalid:5: the host "
                                              "'no-such-host.invalid' does not resolve"))
         << errors;
   }

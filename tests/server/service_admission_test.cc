@@ -3,15 +3,15 @@
 // RESOURCE_EXHAUSTED naming the limit before anything is allocated; the server and its
 // other sessions keep serving, and closing sessions gives the budget back.
 #include <chrono>
-#include <cstdio>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <string>
 #include <vector>
 
 #include "gmock/gmock.h"
-#include "server/observability/process_memory.h"
 #include "server/convert/session_cost.h"
+#include "server/observability/process_memory.h"
 #include "tests/server/service_fixture.h"
 #include "tests/util/random_problem.h"
 

@@ -13,8 +13,8 @@
 #include "gtest/gtest.h"
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/instances/spec_from_problem.h"
-#include "server/grpc_server.h"
 #include "server/convert/spec_conversion.h"
+#include "server/grpc_server.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::testing {

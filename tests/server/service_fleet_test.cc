@@ -57,7 +57,9 @@ class FleetTest : public ServiceTest {
     EXPECT_TRUE(client_->CloseSession(id).ok());
     return {r->inputs().begin(), r->inputs().end()};
   }
-  static std::vector<double> Plan(const v1::FleetAnswer& a) { return {a.result().inputs().begin(), a.result().inputs().end()}; }
+  static std::vector<double> Plan(const v1::FleetAnswer& a) {
+    return {a.result().inputs().begin(), a.result().inputs().end()};
+  }
 
   // Holds `id`'s strand, as a long solve of the session would, until ReleaseSession. A test
   // releases it at its end in any case (an absl::Cleanup declared after its calls'
@@ -282,7 +284,8 @@ TEST_F(FleetTest, AUnaryBurstForABusySessionIsSolvedInOrderAndOnlyTheExcessRefus
   std::vector<v1::Step> sent;
   for (int t = 0; t < kWaiting + 4; ++t) {
     sent.push_back(StateStep(t));
-    answers.push_back(std::async(std::launch::async, [this, id, step = sent.back()] { return client_->Solve(id, step); }));
+    answers.push_back(
+        std::async(std::launch::async, [this, id, step = sent.back()] { return client_->Solve(id, step); }));
     if (t < kWaiting) {
       WaitForQueued(t + 1);
     } else {

@@ -307,8 +307,7 @@ TEST(GpSetUp, AStoppedSetUpSaysHowFarItGotAndCachesNothing) {
   server::GpModelCache cache;
   gp::FitOptions deadline;
   deadline.max_seconds = 0.2;
-  absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> session =
-      server::GpSessionFromSpec(spec, limits, &cache, deadline);
+  absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> session = server::GpSessionFromSpec(spec, limits, &cache, deadline);
   ASSERT_EQ(session.status().code(), absl::StatusCode::kDeadlineExceeded) << session.status();
   EXPECT_THAT(std::string(session.status().message()), HasSubstr("spec.gp.model: GP set-up stopped in step"));
   EXPECT_EQ(cache.live_models(), 0);

@@ -114,8 +114,8 @@ TEST_F(ServiceTest, KeepOutCombinesWithRateLimits) {
   }
   absl::StatusOr<v1::SolveResult> once = client_->SolveOnce(spec);
   ASSERT_TRUE(once.ok()) << once.status();
-  EXPECT_EQ(once->status(), v1::SOLVE_STATUS_CONVERGED)
-      << once->iterations() << " passes, " << once->linearisations() << " linearisations, " << once->solve_ms() << " ms";
+  EXPECT_EQ(once->status(), v1::SOLVE_STATUS_CONVERGED) << once->iterations() << " passes, " << once->linearisations()
+                                                        << " linearisations, " << once->solve_ms() << " ms";
   EXPECT_GE(MinClearance(*once), -1e-9);
   for (int l = 0; l < 2; ++l) {
     double previous = 0.0;  // previous_input defaults to zeros

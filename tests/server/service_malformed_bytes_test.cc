@@ -23,7 +23,7 @@ TEST_F(ServiceMalformedBytesTest, AControlStreamWhoseFirstMessageDoesNotParseEnd
 TEST_F(ServiceMalformedBytesTest, UnparseableRequestsAreInvalidArgumentWithAMessage) {
   std::string random_bytes;
   for (int i = 0; i < 4096; ++i) random_bytes.push_back(static_cast<char>((i * 7919 + 13) % 251));
-  const std::string nested_groups(100000, '\x0b');       // field 1, start group, 100k deep
+  const std::string nested_groups(100000, '\x0b');         // field 1, start group, 100k deep
   const std::string invalid_utf8_id = "\x0a\x02\xc3\x28";  // session_id = 0xC3 0x28
   struct Case {
     const char* method;

@@ -184,7 +184,8 @@ TEST_F(ModelUpdateTest, ARejectedUpdateNamesTheFieldAndLeavesTheSessionBitIdenti
   const Case cases[] = {
       {"step.model.a[0].matrix: expected 12x12, got 12x3",
        [](v1::ModelUpdate* m) { m->mutable_a(0)->mutable_matrix()->CopyFrom(m->b(0).matrix()); }},
-      {"step.model.b[29].step = 30: must be < horizon = 30", [](v1::ModelUpdate* m) { m->mutable_b(29)->set_step(30); }},
+      {"step.model.b[29].step = 30: must be < horizon = 30",
+       [](v1::ModelUpdate* m) { m->mutable_b(29)->set_step(30); }},
       // Echoed as sent (it was reported as 2147483647, clamped to an int).
       {"step.model.a[2].step = 4294967295: must be < horizon = 30",
        [](v1::ModelUpdate* m) { m->mutable_a(2)->set_step(4294967295u); }},
@@ -192,12 +193,14 @@ TEST_F(ModelUpdateTest, ARejectedUpdateNamesTheFieldAndLeavesTheSessionBitIdenti
        [](v1::ModelUpdate* m) { m->add_state_offsets(1.0); }},
       {"step.model.a[3].matrix.data[5] = nan: must be finite",
        [](v1::ModelUpdate* m) { m->mutable_a(3)->mutable_matrix()->set_data(5, std::nan("")); }},
-      {"step.model.b[1].matrix: 4294967295x0 is larger than any session's matrices", [](v1::ModelUpdate* m) {
+      {"step.model.b[1].matrix: 4294967295x0 is larger than any session's matrices",
+       [](v1::ModelUpdate* m) {
          m->mutable_b(1)->mutable_matrix()->set_rows(4294967295u);
          m->mutable_b(1)->mutable_matrix()->set_cols(0);
          m->mutable_b(1)->mutable_matrix()->clear_data();
        }},
-      {"step.model.c[0].matrix.data: expected 144 values", [](v1::ModelUpdate* m) {
+      {"step.model.c[0].matrix.data: expected 144 values",
+       [](v1::ModelUpdate* m) {
          v1::ModelUpdate::MatrixAt* c = m->add_c();
          c->mutable_matrix()->set_rows(12);
          c->mutable_matrix()->set_cols(12);
@@ -280,9 +283,15 @@ TEST_F(ModelUpdateTest, APerStepModelOverThePerSessionMemoryLimitIsRefusedAndCha
   server::ServerOptions options = DefaultOptions();
   absl::StatusOr<server::SessionCost> cost = server::SpecCost(spec, options.size_limits);
   ASSERT_TRUE(cost.ok()) << cost.status();
-  const core::Footprint per_step = core::EstimateFootprint(
-      {.num_states = 12, .num_inputs = 3, .num_outputs = 12, .horizon = 3000, .a_per_step = true,
-       .b_per_step = false, .c_per_step = false, .uncertain_initial_state = false, .terminal_cost = true});
+  const core::Footprint per_step = core::EstimateFootprint({.num_states = 12,
+                                                            .num_inputs = 3,
+                                                            .num_outputs = 12,
+                                                            .horizon = 3000,
+                                                            .a_per_step = true,
+                                                            .b_per_step = false,
+                                                            .c_per_step = false,
+                                                            .uncertain_initial_state = false,
+                                                            .terminal_cost = true});
   const std::int64_t time_invariant_peak = std::max(cost->build_bytes, cost->session_bytes());
   const std::int64_t per_step_peak =
       per_step.problem_bytes + per_step.carried_bytes + per_step.workspace_bytes + per_step.transient_bytes;
@@ -324,7 +333,8 @@ TEST_F(ModelUpdateTest, SessionsThatCannotTakeAModelSaySo) {
   absl::StatusOr<v1::SolveResult> refused = client_->Solve(created->session_id(), step);
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
-  EXPECT_THAT(std::string(refused.status().message()), HasSubstr("step.model: sessions with input_levels or input_differences"));
+  EXPECT_THAT(std::string(refused.status().message()),
+              HasSubstr("step.model: sessions with input_levels or input_differences"));
 }
 
 }  // namespace

@@ -51,7 +51,8 @@ TEST_F(ServiceTest, NonconvexPriorsReachTheCoreThroughTheApi) {
     return a.kind == b.kind && a.lower == b.lower && a.upper == b.upper && a.em == b.em && a.exponent == b.exponent &&
            (a.kind != core::PriorKind::kSmoothedNuv || a.radius == b.radius) && a.variance == b.variance;
   };
-  for (std::size_t i = 0; i < p.input_priors.size(); ++i) EXPECT_TRUE(same(p.input_priors[i], back->input_priors[i])) << i;
+  for (std::size_t i = 0; i < p.input_priors.size(); ++i)
+    EXPECT_TRUE(same(p.input_priors[i], back->input_priors[i])) << i;
   for (std::size_t i = 0; i < p.output_priors.size(); ++i) {
     EXPECT_TRUE(same(p.output_priors[i], back->output_priors[i])) << i;
   }
@@ -190,8 +191,8 @@ TEST_F(ServiceTest, AUnixDomainSocketAddressServesControlStreams) {
   // A controller on the same machine may skip TCP: --address unix:PATH.
   server_->Shutdown();
   server::ServerOptions options = DefaultOptions();
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            ("nupmpc-test-" + std::to_string(::getpid()) + ".sock")).string();
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("nupmpc-test-" + std::to_string(::getpid()) + ".sock")).string();
   options.address = "unix:" + path;
   absl::StatusOr<std::unique_ptr<server::GrpcServer>> started = server::GrpcServer::Start(options);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -313,7 +314,7 @@ TEST_F(ServiceTest, NewestStateWinsWhenTheClientSendsFasterThanTheServerSolves) 
   }
   EXPECT_TRUE(stream->Finish().ok());
   ASSERT_EQ(answered.size(), static_cast<std::size_t>(kBurst));  // every step answered exactly once
-  EXPECT_EQ(answered[kBurst], v1::SOLVE_STATUS_CONVERGED);      // the newest is solved
+  EXPECT_EQ(answered[kBurst], v1::SOLVE_STATUS_CONVERGED);       // the newest is solved
   int superseded = 0;
   for (const auto& [seq, status] : answered) superseded += status == v1::SOLVE_STATUS_SUPERSEDED;
   EXPECT_GE(superseded, 1);

@@ -1,13 +1,13 @@
 // Multi-level inputs and input-difference priors through the v1 API: the server's plan
 // is the core helpers' plan, reported in the client's own inputs, outputs and states;
 // sessions carry u[-1] from one step to the next; misuse is refused naming the field.
+#include "core/examples/scenarios/dac.h"
 #include "core/model/input_differences.h"
 #include "core/model/multilevel_inputs.h"
 #include "core/session/session.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "service_fixture.h"
-#include "core/examples/scenarios/dac.h"
 
 namespace nupmpc::testing {
 namespace {
@@ -43,9 +43,9 @@ TEST_F(ServiceTest, InputDifferencesGiveTheCoreHelpersPlanInTheClientsTerms) {
   const v1::ProblemSpec spec = WithRateLimit(SpecOrDie(p), 0.1);
   absl::StatusOr<v1::SolveResult> once = client_->SolveOnce(spec);
   ASSERT_TRUE(once.ok()) << once.status();
-  ASSERT_EQ(once->inputs_size(), kN);               // u, not Δu plus carried states
-  ASSERT_EQ(once->outputs_size(), kN + 1);          // the spec's one output
-  ASSERT_EQ(once->states_size(), (kN + 1) * 2);     // the spec's two states
+  ASSERT_EQ(once->inputs_size(), kN);            // u, not Δu plus carried states
+  ASSERT_EQ(once->outputs_size(), kN + 1);       // the spec's one output
+  ASSERT_EQ(once->states_size(), (kN + 1) * 2);  // the spec's two states
 
   auto augmented = core::AugmentWithInputDifferences(
       p, std::vector<core::ScalarPrior>(kN, core::ScalarPrior::Box(-kRate, kRate).WithGaussian(0.0, 1.0)),

@@ -34,10 +34,10 @@ std::vector<SpecCase> SpecCases() {
        C::kInvalidArgument, "spec.model.a[0]"},
       {"A data too short", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_a(0)->mutable_data()->RemoveLast(); },
        C::kInvalidArgument, "spec.model.a[0].data"},
-      {"NaN in A", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_a(0)->set_data(5, kNaN); },
-       C::kInvalidArgument, "spec.model.a[0].data[5]"},
-      {"Inf in B", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_b(0)->set_data(0, kInf); },
-       C::kInvalidArgument, "spec.model.b[0].data[0]"},
+      {"NaN in A", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_a(0)->set_data(5, kNaN); }, C::kInvalidArgument,
+       "spec.model.a[0].data[5]"},
+      {"Inf in B", [](v1::ProblemSpec* s) { s->mutable_model()->mutable_b(0)->set_data(0, kInf); }, C::kInvalidArgument,
+       "spec.model.b[0].data[0]"},
       {"two C matrices", [](v1::ProblemSpec* s) { *s->mutable_model()->add_c() = s->model().c(0); },
        C::kInvalidArgument, "spec.model.c"},
       {"state offset of wrong size", [](v1::ProblemSpec* s) { s->mutable_model()->add_state_offset(1.0); },
@@ -60,14 +60,14 @@ std::vector<SpecCase> SpecCases() {
          cov->set_data(0, kNaN);
        },
        C::kInvalidArgument, "spec.initial_state.covariance"},
-      {"missing input prior", [](v1::ProblemSpec* s) { s->mutable_input_priors()->RemoveLast(); },
-       C::kInvalidArgument, "spec.input_priors"},
+      {"missing input prior", [](v1::ProblemSpec* s) { s->mutable_input_priors()->RemoveLast(); }, C::kInvalidArgument,
+       "spec.input_priors"},
       {"negative weight", [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_weight(0, -1.0); },
        C::kInvalidArgument, "spec.input_priors[0].weight"},
-      {"NaN weight", [](v1::ProblemSpec* s) { s->mutable_input_priors(1)->set_weight(0, kNaN); },
-       C::kInvalidArgument, "spec.input_priors[1].weight"},
-      {"NaN target", [](v1::ProblemSpec* s) { s->mutable_output_priors(2)->add_target(kNaN); },
-       C::kInvalidArgument, "spec.output_priors[2].target"},
+      {"NaN weight", [](v1::ProblemSpec* s) { s->mutable_input_priors(1)->set_weight(0, kNaN); }, C::kInvalidArgument,
+       "spec.input_priors[1].weight"},
+      {"NaN target", [](v1::ProblemSpec* s) { s->mutable_output_priors(2)->add_target(kNaN); }, C::kInvalidArgument,
+       "spec.output_priors[2].target"},
       {"lower above upper",
        [](v1::ProblemSpec* s) {
          s->mutable_input_priors(0)->set_lower(0, 1.0);
@@ -108,9 +108,11 @@ std::vector<SpecCase> SpecCases() {
          c->add_exponent(1.5);
        },
        C::kInvalidArgument, "spec.input_priors[2].exponent"},
-      {"unknown estimation", [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_estimation(static_cast<v1::Estimation>(7)); },
+      {"unknown estimation",
+       [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_estimation(static_cast<v1::Estimation>(7)); },
        C::kInvalidArgument, "spec.input_priors[0].estimation"},
-      {"unknown prior kind", [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_kind(static_cast<v1::PriorKind>(42)); },
+      {"unknown prior kind",
+       [](v1::ProblemSpec* s) { s->mutable_input_priors(0)->set_kind(static_cast<v1::PriorKind>(42)); },
        C::kInvalidArgument, "spec.input_priors[0].kind"},
       {"asymmetric terminal weight",
        [](v1::ProblemSpec* s) { s->mutable_terminal()->mutable_weight()->set_data(1, 123.0); }, C::kInvalidArgument,
@@ -185,12 +187,11 @@ TEST_F(ServiceValidationTest, BadStepsLeaveTheSessionAsItWas) {
     const char* field;
   };
   const std::vector<StepCase> cases = {
-      {"state of wrong size", [](v1::Step* s) { s->mutable_state()->RemoveLast(); }, absl::StatusCode::kFailedPrecondition,
-       "step.state"},
+      {"state of wrong size", [](v1::Step* s) { s->mutable_state()->RemoveLast(); },
+       absl::StatusCode::kFailedPrecondition, "step.state"},
       {"NaN state", [](v1::Step* s) { s->set_state(0, kNaN); }, absl::StatusCode::kInvalidArgument, "step.state[0]"},
-      {"update of an input that does not exist",
-       [](v1::Step* s) { s->mutable_update()->add_inputs()->set_index(7); }, absl::StatusCode::kInvalidArgument,
-       "step.update.inputs[0].index"},
+      {"update of an input that does not exist", [](v1::Step* s) { s->mutable_update()->add_inputs()->set_index(7); },
+       absl::StatusCode::kInvalidArgument, "step.update.inputs[0].index"},
       {"NaN bound in an update",
        [](v1::Step* s) {
          auto* e = s->mutable_update()->add_outputs();

@@ -2,13 +2,14 @@
 // id the client drew (so CreateSession can be routed like every later call), and the
 // client's AddressedSession, which re-creates a lost session and answers every step for
 // the state that step sent.
+#include "client/session_routing.h"
+
 #include <algorithm>
 #include <cmath>
 #include <string>
 
 #include "absl/strings/ascii.h"
 #include "client/addressed_session.h"
-#include "client/session_routing.h"
 #include "gtest/gtest.h"
 #include "tests/server/service_fixture.h"
 

@@ -29,7 +29,8 @@ SessionStrand::Task Task(std::function<void()> run, std::atomic<int>* failures =
 // blocks its worker until Release(); then it runs `after`.
 class TaskInFlight {
  public:
-  TaskInFlight(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, std::function<void()> after = [] {})
+  TaskInFlight(
+      const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, std::function<void()> after = [] {})
       : released_(release_.get_future().share()) {
     std::future<void> running = started_.get_future();
     EXPECT_TRUE(SessionStrand::Submit(strand, pool, Task([this, after = std::move(after)] {

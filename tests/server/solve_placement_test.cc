@@ -2,13 +2,14 @@
 // solves are short runs on the gRPC thread that received it while a core is free, others
 // on the workers. The answers are the same either way, and long solves occupying every
 // worker hold back neither health checks nor another session's steps beyond one long solve.
+#include <pthread.h>
+#include <sched.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <mutex>
-#include <pthread.h>
-#include <sched.h>
 #include <thread>
 #include <vector>
 
@@ -148,18 +149,19 @@ TEST_F(SolvePlacementTest, LongSolvesOnEveryWorkerHoldBackHealthChecksAndShortSt
   const double shortest_long_ms = *std::min_element(long_solve_ms.begin(), long_solve_ms.end());
   const double longest_long_ms = *std::max_element(long_solve_ms.begin(), long_solve_ms.end());
   ASSERT_GT(shortest_long_ms, options.inline_solve_max_ms) << "the long instance must be long for this test";
-  std::printf("long solves %.1f-%.1f ms on the worker; health checks meanwhile p50 %.0f us, p99 %.0f us; short steps "
-              "at most %.1f ms\n",
-              shortest_long_ms, longest_long_ms, health->p50_us, health->p99_us,
-              *std::max_element(short_ms.begin(), short_ms.end()));
+  std::printf(
+      "long solves %.1f-%.1f ms on the worker; health checks meanwhile p50 %.0f us, p99 %.0f us; short steps "
+      "at most %.1f ms\n",
+      shortest_long_ms, longest_long_ms, health->p50_us, health->p99_us,
+      *std::max_element(short_ms.begin(), short_ms.end()));
   // Every long solve ran on a worker: in place, at most the short session's warm steps.
   EXPECT_LE(info->solves_in_place(), short_ms.size() - 1);
   // A check stuck behind a solve would wait for the rest of it: half a long solve at the
   // median, as checks arrive at random points of solves that follow each other without a
   // gap. The median, not the tail: the tail is the machine's scheduling (the suite runs
   // other tests beside this one), not the server's design.
-  EXPECT_LT(health->p50_us * 1e-3, 0.25 * shortest_long_ms)
-      << "health checks waited for solves: p50 " << health->p50_us << " µs, long solves from " << shortest_long_ms << " ms";
+  EXPECT_LT(health->p50_us * 1e-3, 0.25 * shortest_long_ms) << "health checks waited for solves: p50 " << health->p50_us
+                                                            << " µs, long solves from " << shortest_long_ms << " ms";
   EXPECT_LT(*std::max_element(short_ms.begin(), short_ms.end()), 2.0 * longest_long_ms)
       << "a short step waited longer than one long solve";
 }
@@ -234,8 +236,7 @@ TEST_F(SolveTime, ASolveSharingItsCoreRecordsItsOwnCpuTimeNotTheWallTime) {
   stop.store(true);
   spinner.join();
   ASSERT_EQ(pthread_setaffinity_np(pthread_self(), sizeof(allowed), &allowed), 0);
-  std::printf("4 solves sharing one CPU with a spinning thread: %.1f ms wall, %.1f ms CPU recorded\n", wall_ms,
-              cpu_ms);
+  std::printf("4 solves sharing one CPU with a spinning thread: %.1f ms wall, %.1f ms CPU recorded\n", wall_ms, cpu_ms);
   EXPECT_GT(cpu_ms, 0.0);
   EXPECT_LT(cpu_ms, 0.8 * wall_ms) << "the recorded solve time follows the wall clock, not the solve's CPU time";
 }
@@ -250,8 +251,8 @@ TEST_F(SolveTime, EveryShortSolveRecordsItsThreadsCpuTime) {
   int measured = 0;
   for (int t = 0; t < 8; ++t) {
     v1::SolveResult r;
-    const absl::Status solved = server::SolveStep(*entry, StepAt((t % 2 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean),
-                                                  {}, &r);
+    const absl::Status solved =
+        server::SolveStep(*entry, StepAt((t % 2 == 0 ? 1.0 : 0.5) * inst.problem.initial_mean), {}, &r);
     ASSERT_TRUE(solved.ok()) << solved;
     const double cpu_ms = entry->last_solve_cpu_ms.load();
     EXPECT_GT(cpu_ms, 0.0) << "step " << t;

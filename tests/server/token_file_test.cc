@@ -27,9 +27,9 @@ TEST(TokenFile, ParsesGrantsCommentsAndTheAdminRole) {
 
 TEST(TokenFile, ErrorsNameTheLineAndNeverTheToken) {
   const char* secret = "0123456789abcdef0123";
-  for (const std::string& text : {std::string("# header\n") + secret + "\n",  // no principal
-                                  std::string("\n\n") + secret + " alice root\n",  // unknown role
-                                  std::string("\n") + "short alice\n",             // guessable
+  for (const std::string& text : {std::string("# header\n") + secret + "\n",          // no principal
+                                  std::string("\n\n") + secret + " alice root\n",     // unknown role
+                                  std::string("\n") + "short alice\n",                // guessable
                                   std::string(secret) + " a\n" + secret + " b\n"}) {  // repeated
     auto grants = ParseTokenFile(text, "tokens.txt");
     ASSERT_FALSE(grants.ok()) << text;

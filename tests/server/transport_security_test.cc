@@ -83,7 +83,7 @@ TEST_F(TransportSecurityTest, ATlsClientIsServedAndAPlaintextOneIsNot) {
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_EQ(result->status(), v1::SOLVE_STATUS_CONVERGED);
 
-  EXPECT_EQ(InfoWith({}).code(), absl::StatusCode::kUnavailable);  // plaintext against TLS
+  EXPECT_EQ(InfoWith({}).code(), absl::StatusCode::kUnavailable);                      // plaintext against TLS
   EXPECT_EQ(InfoWith(TrustingCa("other_ca")).code(), absl::StatusCode::kUnavailable);  // unknown server CA
 }
 
@@ -134,8 +134,8 @@ TEST_F(TransportSecurityTest, ReplacedCertificateFilesAreServedWithoutARestart) 
   absl::StatusOr<KeyPair> rotated = pki_->Issue("rotated", "/CN=localhost", "other_ca", /*server=*/true);
   ASSERT_TRUE(rotated.ok()) << rotated.status();
   // Key first, then the certificate, each by rename (as cert-manager and certbot do).
-  for (const auto& [from, to] : {std::pair{rotated->key_file, server_files_.key_file},
-                                 std::pair{rotated->cert_file, server_files_.cert_file}}) {
+  for (const auto& [from, to] :
+       {std::pair{rotated->key_file, server_files_.key_file}, std::pair{rotated->cert_file, server_files_.cert_file}}) {
     std::filesystem::rename(from, to);
   }
   bool served_new = false;

@@ -25,7 +25,8 @@ class Blocker {
     EXPECT_TRUE(pool.TrySubmit([this, released = release_.get_future().share()] {
                       started_.set_value();  // the constructor is still waiting: `this` lives
                       released.wait();
-                    }).ok());
+                    })
+                    .ok());
     started_.get_future().wait();
   }
   void Release() { release_.set_value(); }
@@ -247,9 +248,16 @@ TEST(WorkerPool, ACoreHolderRunsTheShortTasksQueuedBehindItThenLeavesTheRestToWo
   EXPECT_TRUE(pool.TryRunHere(
       [&] {
         // Queued while this thread holds the only core: no worker may start them.
-        for (int i = 0; i < 3; ++i) ASSERT_TRUE(pool.TrySubmit([&, i] { record(i); }, 0.1, Placement::kAnyCoreHolder).ok());
+        for (int i = 0; i < 3; ++i)
+          ASSERT_TRUE(pool.TrySubmit([&, i] { record(i); }, 0.1, Placement::kAnyCoreHolder).ok());
         ASSERT_TRUE(pool.TrySubmit([&] { record(3); }, 0.1, Placement::kWorker).ok());
-        ASSERT_TRUE(pool.TrySubmit([&] { record(4); workers_done.set_value(); }, 0.1, Placement::kAnyCoreHolder).ok());
+        ASSERT_TRUE(pool.TrySubmit(
+                            [&] {
+                              record(4);
+                              workers_done.set_value();
+                            },
+                            0.1, Placement::kAnyCoreHolder)
+                        .ok());
       },
       /*drain_ms=*/10000.0));
   ASSERT_EQ(workers_done.get_future().wait_for(std::chrono::seconds(30)), std::future_status::ready);

@@ -10,6 +10,8 @@
 // Each call carries a deadline of GIVE_UP_S: a call the server never ends shows as the
 // client's own "Deadline Exceeded", which the scenario tells apart from the server's
 // first_message_timeout_s. Exit 0 with the list; 2 on bad arguments.
+#include <grpcpp/grpcpp.h>
+
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -18,8 +20,6 @@
 #include <mutex>
 #include <string>
 #include <vector>
-
-#include <grpcpp/grpcpp.h>
 
 #include "absl/status/status.h"
 #include "nlohmann/json.hpp"
@@ -87,9 +87,9 @@ int main(int argc, char** argv) {
   const double give_up_s = argc > 4 ? std::atof(argv[4]) : 30.0;
   if (count < 1 || per_connection < 1 || !(give_up_s > 0)) return Usage();
 
-  const auto give_up = std::chrono::system_clock::now() +
-                       std::chrono::duration_cast<std::chrono::system_clock::duration>(
-                           std::chrono::duration<double>(give_up_s));
+  const auto give_up =
+      std::chrono::system_clock::now() +
+      std::chrono::duration_cast<std::chrono::system_clock::duration>(std::chrono::duration<double>(give_up_s));
   std::vector<std::unique_ptr<v1::MpcService::Stub>> stubs;
   for (int first = 0; first < count; first += per_connection) {
     grpc::ChannelArguments args;
@@ -98,7 +98,8 @@ int main(int argc, char** argv) {
         v1::MpcService::NewStub(grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args)));
   }
   std::vector<std::unique_ptr<SilentStream>> streams;
-  for (int i = 0; i < count; ++i) streams.push_back(std::make_unique<SilentStream>(*stubs[i / per_connection], give_up));
+  for (int i = 0; i < count; ++i)
+    streams.push_back(std::make_unique<SilentStream>(*stubs[i / per_connection], give_up));
   nlohmann::json endings = nlohmann::json::array();
   for (const auto& stream : streams) endings.push_back(stream->AwaitEnding());
   std::printf("%s\n", endings.dump().c_str());

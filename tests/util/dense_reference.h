@@ -11,12 +11,12 @@ namespace nupmpc::testing {
 // Independent of the message passing: the reference for the recursions.
 struct DensePosterior {
   Eigen::VectorXd x0_mean;
-  Eigen::MatrixXd x0_cov;   ///< zero when x0 is fixed
-  Eigen::MatrixXd u_mean;   ///< L × N
-  Eigen::MatrixXd u_var;    ///< L × N
-  Eigen::MatrixXd y_mean;   ///< K × (N+1), outputs including offsets
-  Eigen::MatrixXd y_var;    ///< K × (N+1)
-  double objective = 0.0;   ///< J at the posterior mean
+  Eigen::MatrixXd x0_cov;  ///< zero when x0 is fixed
+  Eigen::MatrixXd u_mean;  ///< L × N
+  Eigen::MatrixXd u_var;   ///< L × N
+  Eigen::MatrixXd y_mean;  ///< K × (N+1), outputs including offsets
+  Eigen::MatrixXd y_var;   ///< K × (N+1)
+  double objective = 0.0;  ///< J at the posterior mean
 };
 
 DensePosterior SolveDense(const core::Problem& problem);

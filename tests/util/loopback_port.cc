@@ -48,7 +48,7 @@ bool Bindable(int port) {
 int FreeLoopbackPort() {
   const PortRange ephemeral = EphemeralRange();
   const PortRange usable = ephemeral.first - kLowestPort >= kLeastPorts ? PortRange{kLowestPort, ephemeral.first - 1}
-                                                                       : PortRange{ephemeral.last + 1, 65535};
+                                                                        : PortRange{ephemeral.last + 1, 65535};
   if (usable.first > usable.last) return 0;
   std::mt19937 random(std::random_device{}());
   std::uniform_int_distribution<int> draw(usable.first, usable.last);

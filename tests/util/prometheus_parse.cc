@@ -14,7 +14,8 @@ namespace {
 
 const std::regex kName("[a-zA-Z_:][a-zA-Z0-9_:]*");
 // name, optional {label="value",...}, value
-const std::regex kSample(R"re(([a-zA-Z_:][a-zA-Z0-9_:]*)(\{((?:[a-zA-Z_][a-zA-Z0-9_]*="(?:[^"\\]|\\.)*",?)*)\})? (\S+))re");
+const std::regex kSample(
+    R"re(([a-zA-Z_:][a-zA-Z0-9_:]*)(\{((?:[a-zA-Z_][a-zA-Z0-9_]*="(?:[^"\\]|\\.)*",?)*)\})? (\S+))re");
 const std::regex kLabel(R"re(([a-zA-Z_][a-zA-Z0-9_]*)="((?:[^"\\]|\\.)*)")re");
 
 absl::StatusOr<double> ParseValue(const std::string& s) {
@@ -111,7 +112,8 @@ absl::StatusOr<ParsedMetrics> ParsePrometheusText(const std::string& text) {
     const auto inf = out.samples.find(family + "_bucket{le=\"+Inf\"}");
     const auto count = out.samples.find(family + "_count");
     if (inf != out.samples.end() && count != out.samples.end() && inf->second != count->second) {
-      return absl::InvalidArgumentError(absl::StrCat(family, ": +Inf bucket ", inf->second, " but _count ", count->second));
+      return absl::InvalidArgumentError(
+          absl::StrCat(family, ": +Inf bucket ", inf->second, " but _count ", count->second));
     }
   }
   return out;

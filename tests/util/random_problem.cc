@@ -41,8 +41,8 @@ core::Problem RandomGaussianProblem(const RandomProblemSpec& spec) {
   for (int n = 0; n <= N; ++n) {
     for (int k = 0; k < K; ++k) {
       // Every fourth output is free (no factor), the rest are Gaussian references.
-      p.mutable_output_prior(n, k) = (n + k) % 4 == 3 ? core::ScalarPrior::Free()
-                                                      : core::ScalarPrior::Gaussian(normal(rng), uniform(rng));
+      p.mutable_output_prior(n, k) =
+          (n + k) % 4 == 3 ? core::ScalarPrior::Free() : core::ScalarPrior::Gaussian(normal(rng), uniform(rng));
     }
   }
   if (spec.terminal) {

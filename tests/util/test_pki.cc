@@ -48,8 +48,9 @@ absl::StatusOr<KeyPair> TestPki::Issue(const std::string& name, const std::strin
       !s.ok()) {
     return s;
   }
-  if (absl::Status s = Run(absl::StrCat("openssl x509 -req -days 2 -in ", base, ".csr -CA ", CaFile(ca), " -CAkey ",
-                                        dir_, "/", ca, ".key -CAcreateserial -out ", base, ".pem -extfile ", extensions));
+  if (absl::Status s =
+          Run(absl::StrCat("openssl x509 -req -days 2 -in ", base, ".csr -CA ", CaFile(ca), " -CAkey ", dir_, "/", ca,
+                           ".key -CAcreateserial -out ", base, ".pem -extfile ", extensions));
       !s.ok()) {
     return s;
   }

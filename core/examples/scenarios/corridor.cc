@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/examples/scenarios/timed_solve.h"
 #include "core/model/input_differences.h"
 #include "core/model/multilevel_inputs.h"
-#include "core/examples/scenarios/timed_solve.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::examples {
@@ -40,11 +40,16 @@ core::Problem CorridorPlant(double slope) {
 
 const char* CorridorVersionName(CorridorVersion version) {
   switch (version) {
-    case CorridorVersion::kL2: return "l2_input";
-    case CorridorVersion::kRateLimit: return "rate_limit";
-    case CorridorVersion::kSparseInput: return "sparse_input";
-    case CorridorVersion::kThreeLevels: return "three_levels";
-    case CorridorVersion::kSparseChanges: return "sparse_changes";
+    case CorridorVersion::kL2:
+      return "l2_input";
+    case CorridorVersion::kRateLimit:
+      return "rate_limit";
+    case CorridorVersion::kSparseInput:
+      return "sparse_input";
+    case CorridorVersion::kThreeLevels:
+      return "three_levels";
+    case CorridorVersion::kSparseChanges:
+      return "sparse_changes";
   }
   return "unknown";
 }
@@ -72,9 +77,9 @@ absl::StatusOr<core::Problem> CorridorProblem(CorridorVersion version) {
     case CorridorVersion::kRateLimit: {
       // [KL]: only the half-space on Δu; a weak Gaussian on Δu picks one plan among the
       // many feasible ones.
-      NUPMPC_ASSIGN_OR_RETURN(problem, core::AugmentWithInputDifferences(
-                                           plant, std::vector(K, ScalarPrior::AtLeast(-0.03).WithGaussian(0.0, 10.0)),
-                                           no_previous_input));
+      NUPMPC_ASSIGN_OR_RETURN(
+          problem, core::AugmentWithInputDifferences(
+                       plant, std::vector(K, ScalarPrior::AtLeast(-0.03).WithGaussian(0.0, 10.0)), no_previous_input));
       break;
     }
     case CorridorVersion::kSparseChanges: {

@@ -31,14 +31,14 @@ inline constexpr double kCorridorHalfWidth = 0.2;
 double CorridorTarget(int step);
 
 struct CorridorRun {
-  Eigen::VectorXd inputs;   ///< u[0..K-1]
-  Eigen::VectorXd outputs;  ///< y[0..K] (simulated from the inputs)
+  Eigen::VectorXd inputs;               ///< u[0..K-1]
+  Eigen::VectorXd outputs;              ///< y[0..K] (simulated from the inputs)
   double max_corridor_violation = 0.0;  ///< largest distance of y[1..K] outside the corridor
-  int nonzero_inputs = 0;   ///< |u| > 1e-6
-  int input_switches = 0;   ///< |Δu| > 1e-6 (with u[-1] = 0)
-  double min_input_change = 0.0;  ///< smallest Δu
-  double level_gap = 0.0;   ///< largest distance of u to {-1, 0, 1}
-  double discrete_gap = 0.0;  ///< binaries before rounding (version 4)
+  int nonzero_inputs = 0;               ///< |u| > 1e-6
+  int input_switches = 0;               ///< |Δu| > 1e-6 (with u[-1] = 0)
+  double min_input_change = 0.0;        ///< smallest Δu
+  double level_gap = 0.0;               ///< largest distance of u to {-1, 0, 1}
+  double discrete_gap = 0.0;            ///< binaries before rounding (version 4)
   int iterations = 0;
   double seconds = 0.0;
 };

@@ -43,8 +43,8 @@ struct DacOnlineRun {
   Eigen::VectorXd nup_outputs, exhaustive_outputs;  ///< y[1..steps] of each closed loop
   Eigen::VectorXd target;                           ///< target[1..steps]
   double nup_mse = 0.0, exhaustive_mse = 0.0;
-  double largest_gap = 0.0;    ///< largest pre-rounding distance to {0, 1} over all windows
-  double nup_seconds = 0.0;    ///< total time of the NUP solves
+  double largest_gap = 0.0;  ///< largest pre-rounding distance to {0, 1} over all windows
+  double nup_seconds = 0.0;  ///< total time of the NUP solves
 };
 
 // Receding horizon ([KL] Fig. 19): at every step a window of `window` steps is planned

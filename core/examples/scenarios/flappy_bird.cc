@@ -98,8 +98,9 @@ double WorstSlitViolation(const std::vector<Wall>& walls, const Eigen::VectorXd&
     if (const Wall* wall = WallAt(walls, n)) {
       const double y = height(n);
       const auto outside = [y](double lo, double hi) { return std::max({lo - y, y - hi, 0.0}); };
-      worst = std::max(worst, std::min(outside(wall->upper_low, wall->upper_high),
-                                       outside(wall->upper_low - wall->separation, wall->upper_high - wall->separation)));
+      worst =
+          std::max(worst, std::min(outside(wall->upper_low, wall->upper_high),
+                                   outside(wall->upper_low - wall->separation, wall->upper_high - wall->separation)));
     }
   }
   return worst;

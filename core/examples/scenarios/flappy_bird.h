@@ -21,9 +21,9 @@ namespace nupmpc::examples {
 
 struct FlappyParameters {
   double mass = 1.0;
-  double period = 0.1;    ///< T
-  double gravity = 0.2;   ///< g
-  double slope = 100.0;   ///< γ of the slit boxes
+  double period = 0.1;   ///< T
+  double gravity = 0.2;  ///< g
+  double slope = 100.0;  ///< γ of the slit boxes
   double start_height = 5.0;
 };
 
@@ -38,8 +38,8 @@ struct Wall {
 std::vector<Wall> RandomWalls(int steps, int count, unsigned seed);
 
 struct FlappyRun {
-  Eigen::VectorXd flaps;   ///< u[0..K-1] ∈ {0, 1}
-  Eigen::VectorXd height;  ///< y[0..K], simulated from the flaps
+  Eigen::VectorXd flaps;              ///< u[0..K-1] ∈ {0, 1}
+  Eigen::VectorXd height;             ///< y[0..K], simulated from the flaps
   double worst_slit_violation = 0.0;  ///< largest distance of y outside both slits, over wall steps
   int iterations = 0;
   double discrete_gap = 0.0;

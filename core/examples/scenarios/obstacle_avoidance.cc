@@ -24,9 +24,7 @@ core::Problem ObstaclePlant(int horizon, double T) {
   return p;
 }
 
-std::vector<KeepOutRegion> SingleCircleScene(double slope) {
-  return {KeepOutRegion::Circle({1.5, 1.5}, 0.75, slope)};
-}
+std::vector<KeepOutRegion> SingleCircleScene(double slope) { return {KeepOutRegion::Circle({1.5, 1.5}, 0.75, slope)}; }
 
 std::vector<KeepOutRegion> MixedShapesScene(double slope) {
   constexpr double kPi = std::numbers::pi;
@@ -61,9 +59,8 @@ absl::StatusOr<ObstacleRun> PlanAroundObstacles(int horizon, const std::vector<K
       run.min_clearance = std::min(run.min_clearance, core::KeepOutClearance(region, run.positions.row(n)));
     }
   }
-  run.goal_error = (run.plan.states.row(horizon).transpose() - Eigen::Vector4d(0.0, 3.0, 0.0, 3.0))
-                       .cwiseAbs()
-                       .maxCoeff();
+  run.goal_error =
+      (run.plan.states.row(horizon).transpose() - Eigen::Vector4d(0.0, 3.0, 0.0, 3.0)).cwiseAbs().maxCoeff();
   return run;
 }
 

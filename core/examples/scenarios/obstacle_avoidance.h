@@ -27,11 +27,11 @@ std::vector<core::KeepOutRegion> SingleCircleScene(double slope);
 std::vector<core::KeepOutRegion> MixedShapesScene(double slope);
 
 struct ObstacleRun {
-  core::Solution plan;           ///< of the linearised problem (plant outputs first)
+  core::Solution plan;  ///< of the linearised problem (plant outputs first)
   core::SequentialSummary summary;
-  Eigen::MatrixXd positions;     ///< (N+1) × 2
-  double min_clearance = 0.0;    ///< smallest KeepOutClearance over steps 1..N and regions
-  double goal_error = 0.0;       ///< ‖x[N] - (0,3,0,3)‖∞
+  Eigen::MatrixXd positions;   ///< (N+1) × 2
+  double min_clearance = 0.0;  ///< smallest KeepOutClearance over steps 1..N and regions
+  double goal_error = 0.0;     ///< ‖x[N] - (0,3,0,3)‖∞
 };
 
 // Plans around `regions`, starting from the obstacle-free plan (the straight line).

@@ -103,8 +103,8 @@ core::NonlinearModel RaceModel(const Track& track, const Vehicle& vehicle, int s
   // x[n+1] = x[n] + ds f_s(x[n], u[n]) (eqs. 109, 113) with, for e = 1 - κz and
   // g = e / (v cos θ) = dt/ds:  z' = e tan θ,  θ' = e tan δ / (ℓ cos θ) - κ,
   // v' = g a,  a' = g u1,  δ' = g u0,  t' = g.
-  model.transition = [kappa, ds, ell](int n, const Eigen::VectorXd& x, const Eigen::VectorXd& u,
-                                      Eigen::VectorXd* next, Eigen::MatrixXd* A, Eigen::MatrixXd* B) {
+  model.transition = [kappa, ds, ell](int n, const Eigen::VectorXd& x, const Eigen::VectorXd& u, Eigen::VectorXd* next,
+                                      Eigen::MatrixXd* A, Eigen::MatrixXd* B) {
     const double k = kappa[n], z = x(0), th = x(1), v = x(2), a = x(3), d = x(4);
     const double e = 1 - k * z, c = std::cos(th), s = std::sin(th), td = std::tan(d);
     const double g = e / (v * c);
@@ -203,8 +203,9 @@ absl::StatusOr<RaceRun> RaceLap(const Track& track, const Vehicle& vehicle, int 
   trust.input_proximal_stddev = Eigen::VectorXd::Constant(2, settings.proximal_stddev);
   NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::Linearisation> linearisation,
                           core::MakeModelLinearisation(model, problem, trust));
-  NUPMPC_ASSIGN_OR_RETURN(std::unique_ptr<core::SequentialSolver> solver,
-                          core::SequentialSolver::Create(std::move(linearisation), settings.solver, settings.sequential));
+  NUPMPC_ASSIGN_OR_RETURN(
+      std::unique_ptr<core::SequentialSolver> solver,
+      core::SequentialSolver::Create(std::move(linearisation), settings.solver, settings.sequential));
   RaceRun run;
   NUPMPC_ASSIGN_OR_RETURN(run.summary, solver->Solve(guess, &run.plan));
   run.lap_time = run.plan.states(steps, 5);

@@ -56,11 +56,11 @@ core::NonlinearModel RaceModel(const Track& track, const Vehicle& vehicle, int s
 double TotalAccelerationSquared(const Eigen::VectorXd& outputs);
 
 struct RaceRun {
-  core::Solution plan;            ///< states (K+1)×6, inputs K×2, outputs (K+1)×4
+  core::Solution plan;  ///< states (K+1)×6, inputs K×2, outputs (K+1)×4
   core::SequentialSummary summary;
-  double lap_time = 0.0;          ///< t[K]
+  double lap_time = 0.0;              ///< t[K]
   double max_output_violation = 0.0;  ///< largest excess over the z, a, δ, a_tot² bounds
-  double model_defect = 0.0;      ///< largest |x[n+1] - f(x[n], u[n])|
+  double model_defect = 0.0;          ///< largest |x[n+1] - f(x[n], u[n])|
 };
 
 // How the lap is solved: sequential linearisation with a trust region on the speed (the

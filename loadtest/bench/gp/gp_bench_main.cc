@@ -36,12 +36,13 @@ using nupmpc::bench::ClosedLoopTrace;
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-gp-bench",
-    .summary = "nupmpc-gp-bench: [Nghiem] Table I on this machine. For each training-set size N, a GP model of "
-               "the tanh plant drives two closed loops, one with linGP-SCP on the NUP core and one with Ipopt on "
-               "the full GP-MPC NLP (same run, same noise); prints the time per MPC step (mean, std, median), "
-               "the SCP's time in its NUP subproblems, the speed-up, tracking error and constraint satisfaction "
-               "of both loops and the largest difference between the two solvers' plans. --csv DIR writes the "
-               "closed-loop trajectories for plot_gp.py.",
+    .summary =
+        "nupmpc-gp-bench: [Nghiem] Table I on this machine. For each training-set size N, a GP model of "
+        "the tanh plant drives two closed loops, one with linGP-SCP on the NUP core and one with Ipopt on "
+        "the full GP-MPC NLP (same run, same noise); prints the time per MPC step (mean, std, median), "
+        "the SCP's time in its NUP subproblems, the speed-up, tracking error and constraint satisfaction "
+        "of both loops and the largest difference between the two solvers' plans. --csv DIR writes the "
+        "closed-loop trajectories for plot_gp.py.",
     .usage = "nupmpc-gp-bench [--sizes 500,...,1500] [--steps 100] [--csv DIR] [--no_ipopt]",
     .max_arguments = 0,
 };
@@ -84,16 +85,18 @@ int main(int argc, char** argv) {
   start.signal_variance = 1.0;
   start.length_scales = Eigen::Vector2d(1.0, 1.0);
   start.noise_variance = 0.01;
-  absl::StatusOr<nupmpc::gp::FitResult> fit = nupmpc::gp::FitHyperparameters(fit_data->regressors, fit_data->targets, start);
+  absl::StatusOr<nupmpc::gp::FitResult> fit =
+      nupmpc::gp::FitHyperparameters(fit_data->regressors, fit_data->targets, start);
   if (!fit.ok()) {
     std::fprintf(stderr, "fit: %s\n", fit.status().ToString().c_str());
     return 1;
   }
-  std::printf("hyper-parameters (ML on %d points, %d L-BFGS iterations, %.2f s): sf2 = %.4g, l = (%.4g, %.4g), sn2 = %.4g "
-              "(noise std %.4f; true 0.025)\n",
-              absl::GetFlag(FLAGS_fit_points), fit->iterations, fit->seconds, fit->kernel.signal_variance,
-              fit->kernel.length_scales(0), fit->kernel.length_scales(1), fit->kernel.noise_variance,
-              std::sqrt(fit->kernel.noise_variance));
+  std::printf(
+      "hyper-parameters (ML on %d points, %d L-BFGS iterations, %.2f s): sf2 = %.4g, l = (%.4g, %.4g), sn2 = %.4g "
+      "(noise std %.4f; true 0.025)\n",
+      absl::GetFlag(FLAGS_fit_points), fit->iterations, fit->seconds, fit->kernel.signal_variance,
+      fit->kernel.length_scales(0), fit->kernel.length_scales(1), fit->kernel.noise_variance,
+      std::sqrt(fit->kernel.noise_variance));
   std::printf("\n%6s | %-26s | %-26s | %-26s | %7s | %-17s | %-17s | %9s %9s\n", "N", "linGP-SCP ms mean/std/med",
               "linGP-inner ms mean/std/med", "Ipopt ms mean/std/med", "speedup", "RMSE scp/ipopt", "max viol scp/ipopt",
               "max du", "J gap");
@@ -118,23 +121,28 @@ int main(int argc, char** argv) {
     }
     const Stats scp = Summarise(run->scp.step_seconds), inner = Summarise(run->scp.inner_seconds),
                 ipopt = Summarise(run->ipopt.step_seconds);
-    std::printf("%6d | %8.3f %7.3f %8.3f | %8.3f %7.3f %8.3f | %8.2f %7.2f %8.2f | %6.1fx | %.4f / %.4f | %.1e / %.1e | %9.2e %9.2e\n",
-                n, scp.mean, scp.std, scp.median, inner.mean, inner.std, inner.median, ipopt.mean, ipopt.std,
-                ipopt.median, scp.median > 0 ? ipopt.median / scp.median : 0.0, run->scp.tracking_rmse,
-                run->ipopt.tracking_rmse, run->scp.max_violation, run->ipopt.max_violation, run->max_plan_difference,
-                run->max_objective_gap);
+    std::printf(
+        "%6d | %8.3f %7.3f %8.3f | %8.3f %7.3f %8.3f | %8.2f %7.2f %8.2f | %6.1fx | %.4f / %.4f | %.1e / %.1e | %9.2e "
+        "%9.2e\n",
+        n, scp.mean, scp.std, scp.median, inner.mean, inner.std, inner.median, ipopt.mean, ipopt.std, ipopt.median,
+        scp.median > 0 ? ipopt.median / scp.median : 0.0, run->scp.tracking_rmse, run->ipopt.tracking_rmse,
+        run->scp.max_violation, run->ipopt.max_violation, run->max_plan_difference, run->max_objective_gap);
     if (run->scp.unconverged > 0 || run->ipopt.unconverged > 0) {
-      std::printf("       (steps not converged: linGP-SCP %d, Ipopt %d)\n", run->scp.unconverged, run->ipopt.unconverged);
+      std::printf("       (steps not converged: linGP-SCP %d, Ipopt %d)\n", run->scp.unconverged,
+                  run->ipopt.unconverged);
     }
     if (!csv_dir.empty()) {
       const absl::Status written = nupmpc::examples::WriteCsv(
-          csv_dir + "/gp_closed_loop_N" + std::to_string(n) + ".csv",
-          {{"reference", run->scp.reference}, {"y_scp", run->scp.y}, {"u_scp", run->scp.u},
-           {"y_ipopt", run->ipopt.y}, {"u_ipopt", run->ipopt.u}});
+          csv_dir + "/gp_closed_loop_N" + std::to_string(n) + ".csv", {{"reference", run->scp.reference},
+                                                                       {"y_scp", run->scp.y},
+                                                                       {"u_scp", run->scp.u},
+                                                                       {"y_ipopt", run->ipopt.y},
+                                                                       {"u_ipopt", run->ipopt.u}});
       if (!written.ok()) std::fprintf(stderr, "%s\n", written.ToString().c_str());
     }
   }
-  std::printf("\nspeedup = Ipopt median / linGP-SCP median per MPC step; max du = largest ‖u_scp - u_ipopt‖∞ on the same "
-              "step problem; J gap = largest relative excess of the SCP plan's exact cost over Ipopt's\n");
+  std::printf(
+      "\nspeedup = Ipopt median / linGP-SCP median per MPC step; max du = largest ‖u_scp - u_ipopt‖∞ on the same "
+      "step problem; J gap = largest relative excess of the SCP plan's exact cost over Ipopt's\n");
   return 0;
 }

@@ -24,12 +24,12 @@ struct GpClosedLoopOptions {
 };
 
 struct ClosedLoopTrace {
-  Eigen::VectorXd y, u, reference;   ///< measured output, applied input, reference per step
-  std::vector<double> step_seconds;  ///< solver time per MPC step
+  Eigen::VectorXd y, u, reference;    ///< measured output, applied input, reference per step
+  std::vector<double> step_seconds;   ///< solver time per MPC step
   std::vector<double> inner_seconds;  ///< linGP-SCP: time in the NUP subproblems
   int unconverged = 0;                ///< steps the solver did not report converged
-  double max_violation = 0.0;  ///< largest exact-GP constraint violation of any plan applied
-  double tracking_rmse = 0.0;  ///< of y - reference over all steps
+  double max_violation = 0.0;         ///< largest exact-GP constraint violation of any plan applied
+  double tracking_rmse = 0.0;         ///< of y - reference over all steps
 };
 
 struct GpComparison {

@@ -210,8 +210,7 @@ absl::StatusOr<std::unique_ptr<IpoptGpMpc>> IpoptGpMpc::Create(const gp::GpModel
 }
 
 absl::StatusOr<IpoptGpMpcResult> IpoptGpMpc::Solve(const Eigen::VectorXd& past_outputs,
-                                                   const Eigen::VectorXd& past_inputs,
-                                                   const Eigen::VectorXd& reference,
+                                                   const Eigen::VectorXd& past_inputs, const Eigen::VectorXd& reference,
                                                    const Eigen::VectorXd& initial_inputs) {
   if (initial_inputs.size() != impl_->horizon) return absl::InvalidArgumentError("initial_inputs: expected H values");
   const Eigen::VectorXd r =
