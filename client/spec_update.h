@@ -7,7 +7,7 @@
 //
 // This is the client's mirror of the server's step semantics (server/sessions/step_solver.cc
 // SolveStep and what it calls; the proto's Step, PriorUpdate and InputDifferences
-// comments): change one, change the other, and tests/server/reconnect_fidelity_test.cc
+// comments): change one, change the other, and tests/server/service/reconnect_fidelity_test.cc
 // checks that they still agree. Proto only: the client never includes core/ or server/.
 
 #include "nupmpc/v1/nupmpc.pb.h"

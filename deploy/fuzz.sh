@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Fuzzing (libFuzzer, clang from Debian): builds the targets of fuzz/ in build-asan/
+# Fuzzing (libFuzzer, clang from Debian): builds the targets of tests/fuzz/ in build-asan/
 # (AddressSanitizer + UBSan, coverage instrumentation on every library: deploy/sanitizer-tree.sh)
 # and runs each for SECONDS (default 60), as many at once as there are CPUs. Corpora are
 # seeded from the fuzz seed problem and the benchmark instances (nupmpc-fuzz-seeds) and grow
 # in build-asan/fuzz/corpus/ from run to run; a crash, a sanitizer report, a hang or a
-# violated property (fuzz/fuzz_limits.h) is kept in build-asan/fuzz/findings/ and fails the
+# violated property (tests/fuzz/fuzz_limits.h) is kept in build-asan/fuzz/findings/ and fails the
 # script. Prints per target: executions, coverage (edges), corpus size, findings.
 #   deploy/fuzz.sh [SECONDS] [TARGET...]
 #   targets: spec_solve_fuzzer step_fuzzer control_stream_fuzzer problem_file_fuzzer

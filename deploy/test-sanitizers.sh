@@ -7,7 +7,7 @@
 #      suites), EveryInstanceThroughSolveOnce... (the long-horizon instances: 90 s under ASan;
 #      its code paths run in the other service tests) and IdleSessionsGrow... (ASan's
 #      quarantine keeps freed memory, so RSS cannot fall as the test requires).
-#   2. Fuzzing: every target of fuzz/ for NUPMPC_FUZZ_SECONDS (default 60) each, from the
+#   2. Fuzzing: every target of tests/fuzz/ for NUPMPC_FUZZ_SECONDS (default 60) each, from the
 #      same tree (deploy/fuzz.sh).
 #   3. ThreadSanitizer (build-tsan/): the worker pool, the session strands, the Control
 #      stream, the service's unary and streaming calls, SolveFleet and steps solved on

@@ -33,7 +33,7 @@ struct ProblemShape {
 // algorithm given (or the largest over all), with and without polish. The bytes are heap
 // bytes including the allocator's per-block overhead and the transient peaks of Create
 // and Solve (the eigen-decomposition of a terminal weight, Eigen's GEMM blocking for
-// large M). Measured against glibc's heap in tests/core/footprint_test.cc: measured ≤
+// large M). Measured against glibc's heap in tests/core/session/footprint_test.cc: measured ≤
 // estimate ≤ 3 × measured over a grid of shapes and algorithms.
 struct Footprint {
   std::int64_t problem_bytes = 0;    ///< the Problem (one copy, held by the session): model matrices, priors

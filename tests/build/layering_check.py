@@ -23,7 +23,7 @@ import sys
 SERVER_ROOMS = ["server/convert", "server/scheduling", "server/observability", "server/http", "server/auth",
                 "server/sessions", "server/state", "server/rpc", "server"]
 ROOMS = ["core/gp", "core/examples", "core", "cli", "proto", *SERVER_ROOMS, "client", "loadtest/instances",
-         "loadtest/bench/gp", "loadtest/bench", "loadtest", "fuzz", "tests"]
+         "loadtest/bench/gp", "loadtest/bench", "loadtest", "tests/fuzz", "tests"]
 # What a session is made of: the rooms below the state every RPC shares.
 SESSION_ROOMS = {"server/sessions", "server/convert", "server/scheduling", "server/auth", "server/observability",
                  "core", "core/gp", "proto"}
@@ -55,7 +55,7 @@ ALLOWED = {
     "loadtest/bench": {"loadtest/bench", "loadtest/instances", "core", "cli"},
     "loadtest/bench/gp": {"loadtest/bench/gp", "core", "core/gp", "core/examples", "cli"},
     # The fuzz targets drive the server's code paths and the client's readers in-process.
-    "fuzz": {"fuzz", "client", "proto", "core", *SERVER_ROOMS},
+    "tests/fuzz": {"tests/fuzz", "client", "proto", "core", *SERVER_ROOMS},
     "tests": set(ROOMS),
 }
 

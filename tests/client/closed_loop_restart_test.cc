@@ -37,11 +37,6 @@ std::unique_ptr<ServerProcess> StartServer(int port) {
                                          std::vector<std::string>{"--log_level=warn", "--threads=1"});
 }
 
-bool WaitUntilServing(int port) {
-  auto channel = grpc::CreateChannel(Target(port), grpc::InsecureChannelCredentials());
-  return channel->WaitForConnected(std::chrono::system_clock::now() + std::chrono::seconds(30));
-}
-
 // masses_N30 as a ProblemSpec file: no recorded states, so the CLI simulates the plant
 // with the inputs it applies. `initial_state` replaces x[0] when given.
 // ctest runs each test of this file as its own process, in parallel: every scratch file
@@ -134,7 +129,7 @@ CliRun RunCli(int port, const std::string& spec, std::vector<std::string> flags,
 CliRun RunThroughRestart(std::chrono::milliseconds down_for, int steps, int kill_at) {
   const int port = FreeLoopbackPort();
   auto server = StartServer(port);
-  EXPECT_TRUE(WaitUntilServing(port));
+  EXPECT_TRUE(WaitUntilServing(Target(port)));
   const std::string spec = WriteSpec("masses_N30_spec.json");
   std::thread restarter;
   CliRun run = RunCli(port, spec, {"--steps=" + std::to_string(steps), "--reconnect_budget_s=25"}, [&](int step) {
@@ -189,7 +184,7 @@ TEST(ClosedLoopRestart, ServerKilledAndBackAfter5s) {
 TEST(ClosedLoopRestart, GivesUpWhenTheBudgetIsSpent) {
   const int port = FreeLoopbackPort();
   auto server = StartServer(port);
-  ASSERT_TRUE(WaitUntilServing(port));
+  ASSERT_TRUE(WaitUntilServing(Target(port)));
   const std::string spec = WriteSpec("masses_N30_spec.json");
   const CliRun run = RunCli(port, spec, {"--steps=400", "--reconnect_budget_s=1"}, [&](int step) {
     if (step == 20) server->Kill();
@@ -221,7 +216,7 @@ TEST(ClosedLoopNoPlan, AStepWithoutAPlanHoldsTheLastInput) {
 
   const int port = FreeLoopbackPort();
   const std::unique_ptr<ServerProcess> server = StartServer(port);
-  ASSERT_TRUE(WaitUntilServing(port));
+  ASSERT_TRUE(WaitUntilServing(Target(port)));
   const CliRun run = RunCli(port, path.string(), {}, [](int) {});
   EXPECT_EQ(run.exit_code, 0) << run.stderr_text;
   ASSERT_EQ(run.steps.size(), 3u) << run.stderr_text;

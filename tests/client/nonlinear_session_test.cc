@@ -22,7 +22,7 @@
 #include "client/examples/race_track.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/server/service_fixture.h"
+#include "tests/server/service/service_fixture.h"
 #include "tests/util/server_process.h"
 #include "tests/util/status_matchers.h"
 

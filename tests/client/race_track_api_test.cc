@@ -12,7 +12,7 @@
 #include "client/examples/race_track.h"
 #include "core/examples/scenarios/race_track.h"
 #include "gtest/gtest.h"
-#include "tests/server/service_fixture.h"
+#include "tests/server/service/service_fixture.h"
 #include "tests/util/status_matchers.h"
 
 namespace nupmpc::testing {
@@ -20,7 +20,7 @@ namespace {
 
 namespace ex = api_examples;
 
-// K = 100 spatial steps, as the core's own test of the example (tests/core/examples_test.cc):
+// K = 100 spatial steps, as the core's own test of the example (tests/core/examples/examples_test.cc):
 // a few seconds per lap; the programs default to K = 1000 (core) and 100 (API).
 constexpr int kSteps = 100;
 

@@ -1,6 +1,6 @@
 // ApplyStepToSpec (client/spec_update.h) on specs alone: shifts of per-step and constant
 // arrays, entries after the shift, GP references of length 1 and H, Δu's carried input,
-// and what a superseded step leaves. tests/server/reconnect_fidelity_test.cc checks the
+// and what a superseded step leaves. tests/server/service/reconnect_fidelity_test.cc checks the
 // same semantics against the server.
 #include "client/spec_update.h"
 

@@ -37,15 +37,11 @@ std::unique_ptr<ServerProcess> StartServer(const char* threads_env) {
       std::vector<std::pair<std::string, std::string>>{{"NUPMPC_THREADS", threads_env}});
 }
 
-bool WaitUntilServing(const std::shared_ptr<grpc::Channel>& channel) {
-  return channel->WaitForConnected(std::chrono::system_clock::now() + std::chrono::seconds(10));
-}
-
 TEST(ServerBinaryTest, HealthReflectionEnvironmentAndGracefulSigterm) {
   const std::unique_ptr<ServerProcess> started = StartServer(/*threads_env=*/"3");
   ServerProcess& server = *started;
   auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
-  ASSERT_TRUE(WaitUntilServing(channel));
+  ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
 
   auto health = grpc::health::v1::Health::NewStub(channel);
   grpc::ClientContext health_context;
@@ -91,7 +87,7 @@ TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
   ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(), {"--log_level=warn", "--grace_period_s=2"},
                        {{"NUPMPC_DRAIN_DELAY_S", "60"}});
   auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
-  ASSERT_TRUE(WaitUntilServing(channel));
+  ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   auto health = grpc::health::v1::Health::NewStub(channel);
   ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::SERVING);
   Client client(channel);
@@ -135,7 +131,7 @@ TEST(ServerBinaryTest, OneSigtermServesOutTheDrainDelayThenExits) {
   ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
                        {"--log_level=warn", "--grace_period_s=1", "--drain_delay_s=1"});
   auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
-  ASSERT_TRUE(WaitUntilServing(channel));
+  ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   auto health = grpc::health::v1::Health::NewStub(channel);
   ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::SERVING);
   const auto signalled = std::chrono::steady_clock::now();
@@ -158,7 +154,7 @@ TEST(ServerBinaryTest, AfterTheDrainDelayAnIdleConnectionAndStreamDoNotHoldTheEx
   ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
                        {"--log_level=warn", "--grace_period_s=" + std::to_string(kGraceS), "--drain_delay_s=0.2"});
   auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
-  ASSERT_TRUE(WaitUntilServing(channel));
+  ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   absl::StatusOr<ProblemFile> masses =
       LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
   ASSERT_TRUE(masses.ok()) << masses.status();
@@ -256,7 +252,7 @@ TEST(ServerBinaryTest, ASecondServerOnAPortInUseRefusesToStart) {
   ServerProcess first(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
                       {"--log_level=warn", "--grace_period_s=1", metrics_address});
   auto channel = grpc::CreateChannel(first.target(), grpc::InsecureChannelCredentials());
-  ASSERT_TRUE(WaitUntilServing(channel));
+  ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
   while (!AcceptsConnections(metrics_port) && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));

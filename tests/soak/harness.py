@@ -6,74 +6,43 @@ states, a keep-out and a GP-MPC problem) and percentiles."""
 import os
 import pathlib
 import re
-import signal
-import subprocess
 import sys
-import tempfile
-import time
 import urllib.request
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
-for _path in (str(REPO / "client" / "python"), os.environ.get("NUPMPC_PYTHON_STUBS", str(REPO / "build" / "python")),
-              str(REPO / "tests" / "util")):
+for _path in (str(REPO / "client" / "python"), os.environ.get("NUPMPC_PYTHON_STUBS", str(REPO / "build" / "python"))):
     if _path not in sys.path:
         sys.path.insert(0, _path)
 
 import numpy as np  # noqa: E402
-from loopback_port import free_ports  # noqa: E402
 
 import nupmpc  # noqa: E402
 from nupmpc._proto import pb  # noqa: E402
+from nupmpc.local_server import LocalServer, default_binary  # noqa: E402
 
-SERVER_BINARY = os.environ.get("NUPMPC_SERVER_BINARY", str(REPO / "build" / "bin" / "nupmpc-server"))
+SERVER_BINARY = default_binary()
 BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO / "benchmarks")))
 MASSES = BENCHMARKS / "masses_N30.json"
 
 
 class HarnessError(RuntimeError):
-    """The set-up failed (no binary, no server): a failed run, never a skipped one."""
+    """The set-up failed (a tool exited with an error): a failed run, never a skipped one.
+    A server that cannot start raises nupmpc.local_server.LocalServerError, no less fatal."""
 
 
-class Server:
-    """nupmpc-server on a loopback port with its metrics endpoint; restart() starts a new
-    process on the same ports (what a supervisor does after a crash)."""
+class Server(LocalServer):
+    """nupmpc-server on a loopback port with its metrics endpoint, started at once, and the
+    figures the soak reads from it; start() after kill() brings a new process up on the
+    same ports (what a supervisor does after a crash)."""
 
     def __init__(self, *flags, cpus=None):
-        """cpus: the CPUs the server may run on (sched_setaffinity before exec); None: any."""
-        if not os.access(SERVER_BINARY, os.X_OK):
-            raise HarnessError(f"no server binary at {SERVER_BINARY} (build nupmpc-server or set NUPMPC_SERVER_BINARY)")
-        self.flags = list(flags)
-        self.cpus = cpus
-        self.port, self.metrics_port = free_ports(2)
-        self.target = f"127.0.0.1:{self.port}"
-        self.log = tempfile.NamedTemporaryFile(prefix="nupmpc-soak-server-", suffix=".log", delete=False)
-        self.process = None
-        self.start()
-
-    def start(self):
-        self.process = subprocess.Popen(
-            [SERVER_BINARY, "--address", self.target, "--metrics_address", f"127.0.0.1:{self.metrics_port}",
-             *self.flags], stdout=self.log, stderr=subprocess.STDOUT,
-            preexec_fn=None if self.cpus is None else lambda: os.sched_setaffinity(0, self.cpus))
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            if self.process.poll() is not None:
-                raise HarnessError(f"nupmpc-server exited with {self.process.returncode}:\n{self.log_text()}")
-            try:
-                urllib.request.urlopen(f"http://127.0.0.1:{self.metrics_port}/readyz", timeout=0.5).read()
-                return
-            except OSError:
-                time.sleep(0.02)
-        raise HarnessError(f"nupmpc-server not ready on {self.target} within 20 s:\n{self.log_text()}")
-
-    @property
-    def pid(self):
-        return self.process.pid
-
-    def log_text(self, tail=4000):
-        self.log.flush()
-        with open(self.log.name, errors="replace") as f:
-            return f.read()[-tail:]
+        """cpus: the CPUs the server may run on (None: any)."""
+        super().__init__(SERVER_BINARY, *flags, metrics=True, cpus=cpus)
+        try:
+            self.start()
+        except BaseException:
+            self.stop()
+            raise
 
     def rss_bytes(self):
         """VmRSS from /proc: the kernel's figure, independent of the server's own report."""
@@ -88,7 +57,7 @@ class Server:
 
     def metrics(self):
         """/metrics as {'name{labels}': value}."""
-        text = urllib.request.urlopen(f"http://127.0.0.1:{self.metrics_port}/metrics", timeout=5).read().decode()
+        text = urllib.request.urlopen(f"{self.metrics_url}/metrics", timeout=5).read().decode()
         values = {}
         for line in text.splitlines():
             if line and not line.startswith("#"):
@@ -104,29 +73,6 @@ class Server:
             if base == prefix and all(f'{k}="{v}"' in rest for k, v in labels.items()):
                 total += value
         return total
-
-    def kill(self):
-        self.process.kill()
-        self.process.wait()
-
-    def terminate(self, timeout_s=30):
-        """SIGTERM; the exit code (None if it did not exit within timeout_s)."""
-        self.process.send_signal(signal.SIGTERM)
-        try:
-            return self.process.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            return None
-
-    def stop(self):
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
-        self.log.close()
-        os.unlink(self.log.name)
 
 
 def masses():

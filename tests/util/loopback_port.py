@@ -4,7 +4,9 @@ Drawn at random from below the kernel's ephemeral range (or above it where nothi
 below), not bound to port 0: the kernel picks the source port of every outgoing
 connection from that range, so a port it handed out could be taken by a connection of a
 test running beside this one before the server binds it, or while the server is down for
-a restart. tests/util/loopback_port.cc does the same for the C++ tests.
+a restart. tests/util/loopback_port.cc does the same for the C++ tests, and
+client/python/nupmpc/local_server.py (free_loopback_ports) for the Python package's
+server launcher, which the package cannot import from here.
 
     python3 tests/util/loopback_port.py [COUNT]   prints COUNT distinct ports (1)
 """

@@ -8,6 +8,9 @@
 #include <cstdlib>
 #include <thread>
 
+#include "grpcpp/create_channel.h"
+#include "grpcpp/security/credentials.h"
+
 namespace nupmpc::testing {
 
 ServerProcess::ServerProcess(const std::string& binary, int port, const std::vector<std::string>& flags,
@@ -49,6 +52,14 @@ int ServerProcess::StopWith(int signal) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   return -1;
+}
+
+bool WaitUntilServing(const std::shared_ptr<grpc::Channel>& channel, std::chrono::seconds timeout) {
+  return channel->WaitForConnected(std::chrono::system_clock::now() + timeout);
+}
+
+bool WaitUntilServing(const std::string& target, std::chrono::seconds timeout) {
+  return WaitUntilServing(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()), timeout);
 }
 
 }  // namespace nupmpc::testing

@@ -6,10 +6,13 @@
 
 #include <sys/types.h>
 
+#include <chrono>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "grpcpp/channel.h"
 #include "tests/util/loopback_port.h"
 
 namespace nupmpc::testing {
@@ -37,6 +40,12 @@ class ServerProcess {
   int port_;
   pid_t pid_ = -1;
 };
+
+// Whether `channel` (or a plaintext channel to `target`) connects within `timeout`: the
+// server a test started listens.
+bool WaitUntilServing(const std::shared_ptr<grpc::Channel>& channel,
+                      std::chrono::seconds timeout = std::chrono::seconds(30));
+bool WaitUntilServing(const std::string& target, std::chrono::seconds timeout = std::chrono::seconds(30));
 
 }  // namespace nupmpc::testing
 
