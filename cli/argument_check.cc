@@ -43,7 +43,7 @@ std::string ValueError(const absl::CommandLineFlag& flag, absl::string_view valu
 
 std::string SuggestFlag(absl::string_view name) {
   // Abseil's flags are spelt with underscores; people often type dashes or capitals.
-  const std::string normalised = absl::AsciiStrToLower(absl::StrReplaceAll(name, {{"-", "_"}}));
+  std::string normalised = absl::AsciiStrToLower(absl::StrReplaceAll(name, {{"-", "_"}}));
   if (normalised.empty()) return "";
   if (normalised != name && FindOwnFlag(normalised) != nullptr) return normalised;
   std::vector<std::string> candidates = {"help"};

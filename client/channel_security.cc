@@ -22,7 +22,7 @@ absl::StatusOr<std::string> ReadFile(const char* option, const std::string& path
 // Adds `authorization: Bearer TOKEN` to every call of the channel.
 class BearerTokenPlugin final : public grpc::MetadataCredentialsPlugin {
  public:
-  explicit BearerTokenPlugin(std::string token) : header_(absl::StrCat("Bearer ", token)) {}
+  explicit BearerTokenPlugin(const std::string& token) : header_(absl::StrCat("Bearer ", token)) {}
   bool IsBlocking() const override { return false; }
   grpc::Status GetMetadata(grpc::string_ref /*service_url*/, grpc::string_ref /*method_name*/,
                            const grpc::AuthContext& /*channel_auth_context*/,
@@ -108,10 +108,10 @@ std::shared_ptr<grpc::Channel> CreateChannel(const std::string& target,
 }
 
 absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target, const ChannelSecurity& security,
-                                                             grpc::ChannelArguments args) {
+                                                             const grpc::ChannelArguments& args) {
   absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
   if (!credentials.ok()) return credentials.status();
-  return CreateChannel(target, *credentials, security, std::move(args));
+  return CreateChannel(target, *credentials, security, args);
 }
 
 absl::StatusOr<ChannelSecurity> ChannelSecurityFromEnvironment() {

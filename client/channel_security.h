@@ -37,7 +37,7 @@ std::shared_ptr<grpc::Channel> CreateChannel(const std::string& target,
                                              const ChannelSecurity& security, grpc::ChannelArguments args);
 // The same with credentials made here (errors as ChannelCredentialsFor's).
 absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target, const ChannelSecurity& security,
-                                                             grpc::ChannelArguments args);
+                                                             const grpc::ChannelArguments& args);
 
 // ChannelSecurity from the environment, for command-line tools and tests: NUPMPC_TLS (1:
 // on), NUPMPC_TLS_CA_FILE, NUPMPC_TLS_CERT_FILE, NUPMPC_TLS_KEY_FILE,

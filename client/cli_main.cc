@@ -84,6 +84,7 @@ std::string U0(const v1::SolveResult& r, int L) {
 
 std::string Vector(const std::vector<double>& v) {
   std::vector<std::string> parts;
+  parts.reserve(v.size());
   for (const double value : v) parts.push_back(absl::StrCat(value));
   return absl::StrCat("[", absl::StrJoin(parts, ","), "]");
 }

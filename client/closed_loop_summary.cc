@@ -56,11 +56,13 @@ ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps) 
 namespace {
 std::string ByStatusText(const std::map<std::string, int>& by_status) {
   std::vector<std::string> parts;
+  parts.reserve(by_status.size());
   for (const auto& [status, count] : by_status) parts.push_back(absl::StrCat(status, " ", count));
   return absl::StrJoin(parts, ", ");
 }
 std::string ByStatusJson(const std::map<std::string, int>& by_status) {
   std::vector<std::string> parts;
+  parts.reserve(by_status.size());
   for (const auto& [status, count] : by_status) parts.push_back(absl::StrCat("\"", status, "\":", count));
   return absl::StrJoin(parts, ",");
 }

@@ -168,9 +168,9 @@ class NonlinearSession {
   };
   NonlinearSession(NonlinearModel model, NonlinearSessionOptions options, v1::ProblemSpec base, int horizon);
 
-  // The model linearised along `point` (absolute steps from t0), into `model` (a
+  // The model linearised along `point` (absolute steps from t0), into `update` (a
   // ModelUpdate for Step, or written into the spec at creation).
-  absl::Status LinearisedModel(const Point& point, std::int64_t t0, v1::ModelUpdate* model) const;
+  absl::Status LinearisedModel(const Point& point, std::int64_t t0, v1::ModelUpdate* update) const;
   // The region's priors around `point` at proximal `scale`: output entries for the extra
   // outputs, input entries merged with the base's Gaussian part.
   // `base` holds the user's input priors the merges start from.

@@ -82,7 +82,7 @@ absl::Status RideOutOutage(
   const auto start = now();
   int attempts = 0;
   bool answered = false;
-  const absl::Status outage = RetryWithBackoff(
+  absl::Status outage = RetryWithBackoff(
       options, cause, [&](std::chrono::milliseconds timeout) { return recreate_and_resend(timeout, &answered); },
       &attempts);
   const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(now() - start);

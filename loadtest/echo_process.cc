@@ -29,6 +29,7 @@ absl::StatusOr<std::unique_ptr<EchoProcess>> EchoProcess::Spawn(const std::vecto
     return Errno("pipe");
   }
   std::vector<char*> args;
+  args.reserve(argv.size() + 1);
   for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
   args.push_back(nullptr);
   const pid_t pid = fork();

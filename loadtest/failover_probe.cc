@@ -124,6 +124,7 @@ absl::StatusOr<StreamsProbeReport> RunStreamsProbe(const ProbeWorkload& work, co
       start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config.duration_s));
   std::vector<StreamOutcome> outcomes(static_cast<std::size_t>(config.streams));
   std::vector<std::thread> threads;
+  threads.reserve(static_cast<std::size_t>(config.streams));
   for (int i = 0; i < config.streams; ++i) {
     threads.emplace_back([&, i] { outcomes[static_cast<std::size_t>(i)] = RunOneStream(work, config, i, until); });
   }

@@ -21,7 +21,7 @@ absl::StatusOr<std::shared_ptr<grpc::Channel>> OwnConnection(const std::string& 
   grpc::ChannelArguments args;
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   args.SetMaxReceiveMessageSize(-1);
-  return CreateChannel(target, security, std::move(args));
+  return CreateChannel(target, security, args);
 }
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }

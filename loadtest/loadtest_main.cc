@@ -508,7 +508,7 @@ int main(int argc, char** argv) {
                      report.inline_core.sessions > 0 ? report.inline_core.median_ms : header.baseline.median_ms}}) {
       if (!peer->has_value()) continue;
       if (!json) lt::PrintPeerLevel(label, **peer, busy_ms);
-      *slot = std::make_shared<const lt::LevelReport>(**std::move(peer));
+      *slot = std::make_shared<const lt::LevelReport>(std::move(**peer));
     }
     if (!json) lt::PrintRatios(report);
     reports.push_back(std::move(report));

@@ -121,8 +121,8 @@ void PrintLevel(const RunHeader& h, const LevelReport& l) {
            absl::StrFormat("%.0f%%", 100.0 * l.solves_per_s / h.capacity_per_s));
 }
 
-void PrintPeerLevel(const char* label, const LevelReport& l, double busy_ms) {
-  PrintRow(label, l, "-", (l.p50_ms - busy_ms) * 1e3, "-");
+void PrintPeerLevel(const char* label, const LevelReport& peer, double busy_ms) {
+  PrintRow(label, peer, "-", (peer.p50_ms - busy_ms) * 1e3, "-");
 }
 
 void PrintRatios(const LevelReport& l) {

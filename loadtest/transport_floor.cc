@@ -39,7 +39,7 @@ absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, 
                                                      const ChannelSecurity& security) {
   grpc::ChannelArguments arguments;
   arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // not shared with the streams' channels
-  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = CreateChannel(target, security, std::move(arguments));
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = CreateChannel(target, security, arguments);
   if (!channel.ok()) return channel.status();
   grpc::GenericStub stub(*std::move(channel));
   grpc::CompletionQueue cq;

@@ -162,6 +162,7 @@ int RunGeneratedScaling(const BenchOptions& options, double gemm40) {
   // A solve at N = 30000 takes seconds: at most three rounds.
   MeasureInterleaved(entries, std::min(options.repeat, 3), results);
   std::vector<const InstanceResult*> rows;
+  rows.reserve(results.size());
   for (const InstanceResult& r : results) rows.push_back(&r);
   PrintScaling(rows, kM, gemm40, options.json);
   return failures;

@@ -29,7 +29,7 @@ class PerStep {
  public:
   static absl::StatusOr<PerStep> Make(const google::protobuf::RepeatedField<double>& values, int steps,
                                       double default_value, const std::string& path) {
-    if (values.size() != 0 && values.size() != 1 && values.size() != steps) {
+    if (!values.empty() && values.size() != 1 && values.size() != steps) {
       return Invalid(path, ": expected 0, 1 or ", steps, " values (one per step), got ", values.size());
     }
     for (int i = 0; i < values.size(); ++i) {

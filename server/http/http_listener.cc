@@ -146,7 +146,7 @@ void HttpListener::Watch(int fd, std::uint32_t events, int operation) const {
 }
 
 void HttpListener::Run() {
-  std::array<epoll_event, kMaxEventsPerWait> events;
+  std::array<epoll_event, kMaxEventsPerWait> events{};
   while (true) {
     const int ready = epoll_wait(epoll_fd_, events.data(), kMaxEventsPerWait, MillisecondsToNextDeadline(Clock::now()));
     for (int i = 0; i < ready; ++i) {
@@ -230,7 +230,7 @@ void HttpListener::OnReadable(int fd, Connection& connection) {
     return;
   }
   // Reads at most one byte past the head limit: enough to know it was exceeded.
-  std::array<char, 4096> buffer;
+  std::array<char, 4096> buffer{};
   bool peer_done = false;  // closed its sending side (a complete request is still answered) or failed
   while (connection.received.size() <= limits_.head.max_head_bytes) {
     const std::size_t room = limits_.head.max_head_bytes + 1 - connection.received.size();
@@ -313,7 +313,7 @@ void HttpListener::OnWritable(int fd, Connection& connection) {
 }
 
 void HttpListener::Linger(int fd, Connection& connection) {
-  std::array<char, 4096> buffer;
+  std::array<char, 4096> buffer{};
   while (connection.lingered <= limits_.linger_bytes) {
     const ssize_t n = recv(fd, buffer.data(), buffer.size(), 0);
     if (n > 0) {

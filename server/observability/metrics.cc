@@ -53,12 +53,12 @@ namespace {
 std::size_t SolveIndex(v1::SolveStatus status, v1::Algorithm algorithm) {
   const auto s = std::clamp<int>(status, 0, Metrics::kStatusCount - 1);
   const auto a = std::clamp<int>(algorithm, 0, Metrics::kAlgorithmCount - 1);
-  return static_cast<std::size_t>(s * Metrics::kAlgorithmCount + a);
+  return static_cast<std::size_t>(s) * Metrics::kAlgorithmCount + static_cast<std::size_t>(a);
 }
 
 std::size_t ErrorIndex(Rpc rpc, absl::StatusCode code) {
   const auto c = std::clamp<int>(static_cast<int>(code), 0, Metrics::kCodeCount - 1);
-  return static_cast<std::size_t>(static_cast<int>(rpc) * Metrics::kCodeCount + c);
+  return static_cast<std::size_t>(rpc) * Metrics::kCodeCount + static_cast<std::size_t>(c);
 }
 
 }  // namespace

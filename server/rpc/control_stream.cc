@@ -269,7 +269,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
         v1::ControlResponse hello;
         hello.set_sequence(first.sequence());
         hello.set_session_id(entry_->id);
-        QueueWriteLocked(std::move(hello));
+        QueueWriteLocked(hello);
       }
       read_more = ShouldReadLocked();
       if (read_more) ++reads_starting_;
@@ -290,7 +290,7 @@ std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRe
     v1::ControlResponse superseded;
     superseded.set_sequence(parked_->sequence());
     superseded.mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
-    QueueWriteLocked(std::move(superseded));
+    QueueWriteLocked(superseded);
   }
   parked_ = std::move(request);
   return TakeParkedLocked();
@@ -343,14 +343,16 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
       read_after_solve = false;
       ReadHeldBack();
     }
-    const absl::Status queued = SessionStrand::Submit(
-        entry_->strand, state_->pool,
-        {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
-           self->Solve(std::move(request), queued_at, /*pump=*/true);
-         },
-         [self = shared_from_this(), sequence](absl::Status refused) { self->FailQueuedSolve(sequence, refused); },
-         entry_->last_solve_ms.load(std::memory_order_relaxed),
-         short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker});
+    const absl::Status queued =
+        SessionStrand::Submit(entry_->strand, state_->pool,
+                              {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
+                                 self->Solve(std::move(request), queued_at, /*pump=*/true);
+                               },
+                               [self = shared_from_this(), sequence](const absl::Status& refused) {
+                                 self->FailQueuedSolve(sequence, refused);
+                               },
+                               entry_->last_solve_ms.load(std::memory_order_relaxed),
+                               short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker});
     if (queued.ok()) return;
     std::optional<v1::ControlRequest> next;
     {
@@ -407,7 +409,7 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (status.ok()) {
-      QueueWriteLocked(std::move(response));
+      QueueWriteLocked(response);
     } else {
       QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
     }
@@ -419,7 +421,7 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
   if (pump) Pump();
 }
 
-void ControlStream::QueueWriteLocked(v1::ControlResponse response) {
+void ControlStream::QueueWriteLocked(const v1::ControlResponse& response) {
   grpc::ByteBuffer bytes;
   if (!SerializeRaw(response, &bytes).ok()) {  // cannot happen for a message we built; never send nothing
     (void)SerializeRaw(ErrorResponse(response.sequence(), grpc::Status(grpc::StatusCode::INTERNAL, "unserializable")),

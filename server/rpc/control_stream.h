@@ -102,7 +102,7 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump);
   // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
-  void QueueWriteLocked(v1::ControlResponse response);
+  void QueueWriteLocked(const v1::ControlResponse& response);
   // Whether to start the next read now: not while the client leaves max_stream_answers
   // answers unread (then reading_ is kPaused and OnWriteDone resumes). Called with mu_; a
   // caller that then reads counts the read in reads_starting_ before it lets go of mu_.

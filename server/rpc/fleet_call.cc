@@ -96,7 +96,7 @@ class FleetRun : public std::enable_shared_from_this<FleetRun> {
     const absl::Status queued = SessionStrand::Submit(
         entry->strand, state_->pool,
         {.run = solve,
-         .fail = [self = shared_from_this(), i](absl::Status refused) { self->AnswerError(i, refused); },
+         .fail = [self = shared_from_this(), i](const absl::Status& refused) { self->AnswerError(i, refused); },
          .expected_ms = entry->last_solve_ms.load(std::memory_order_relaxed),
          .superseded = [self = shared_from_this(), i] { return self->Superseded(i); },
          .answer_superseded = [self = shared_from_this(), i] { self->AnswerSuperseded(i); }});

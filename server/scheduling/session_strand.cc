@@ -34,7 +34,7 @@ absl::Status SessionStrand::Submit(const std::shared_ptr<SessionStrand>& strand,
     }
     strand->busy_ = true;
   }
-  const absl::Status started = Start(strand, pool, std::move(task));
+  absl::Status started = Start(strand, pool, std::move(task));
   if (!started.ok()) StartNext(strand, pool);  // tasks may have queued up behind the refused one
   return started;
 }
@@ -105,12 +105,12 @@ bool SessionStrand::RunNowIfIdle(const std::shared_ptr<SessionStrand>& strand, W
 }
 
 void SessionStrand::RunExclusive(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
-                                 std::function<void()> work) {
+                                 const std::function<void()>& work) {
   {
     std::lock_guard<std::mutex> lock(strand->mu_);
     if (strand->busy_) {
       // StartNext calls `fail` with the strand still held, so the work is exclusive either way.
-      strand->waiting_.push_front({work, [work](absl::Status) { work(); }, 0.0});
+      strand->waiting_.push_front({work, [work](const absl::Status&) { work(); }, 0.0});
       return;
     }
     strand->busy_ = true;

@@ -60,7 +60,8 @@ class SessionStrand {
   // if the strand is idle, else right after the task in flight, before those that wait (on
   // a worker, or on the thread that finds the pool refusing it). For short work that must
   // happen (closing a session: the waiting solves then find it closed).
-  static void RunExclusive(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool, std::function<void()> work);
+  static void RunExclusive(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool,
+                           const std::function<void()>& work);
 
   int waiting() const;
 

@@ -105,7 +105,7 @@ bool WorkerPool::TryRunHere(const std::function<void()>& task, double drain_ms) 
   if (drain_ms > 0.0) RunQueuedHere(drain_ms, /*release_when_empty=*/false);
   {
     struct Timed {
-      WorkerPool* pool;
+      WorkerPool* pool = nullptr;
       std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
       ~Timed() {
         pool->Record(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());

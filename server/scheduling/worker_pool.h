@@ -76,8 +76,8 @@ class WorkerPool {
  private:
   struct Task {
     std::function<void()> run;
-    double expected_ms;
-    Placement placement;
+    double expected_ms = 0.0;
+    Placement placement = Placement::kWorker;
   };
 
   void Run();

@@ -125,6 +125,7 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Find(const std::s
 }
 
 absl::Status SessionRegistry::Close(const std::string& id, std::function<void()> closed) {
+  // NOLINTNEXTLINE(performance-no-automatic-move): NUPMPC_RETURN_IF_ERROR's const local (core/util/status_macros.h)
   NUPMPC_RETURN_IF_ERROR(CheckSessionIdForm(id));
   std::shared_ptr<SessionEntry> entry;
   {

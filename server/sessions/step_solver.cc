@@ -16,9 +16,11 @@ namespace {
 // for a model that becomes per-step), then applies the update.
 absl::Status ReserveAndApply(SessionEntry& entry, const core::StepUpdate& update) {
   if (entry.compacted) {
+    // NOLINTNEXTLINE(performance-no-automatic-move): NUPMPC_RETURN_IF_ERROR's const local (core/util/status_macros.h)
     NUPMPC_RETURN_IF_ERROR(entry.memory.scratch.GrowTo(
         entry.memory.scratch_bytes, "session_id (allocating the idle session's solver scratch again)"));
   }
+  // NOLINTNEXTLINE(performance-no-automatic-move): NUPMPC_RETURN_IF_ERROR's const local (core/util/status_macros.h)
   if (update.changes_model()) NUPMPC_RETURN_IF_ERROR(ReserveModelStorage(*entry.solver, update.model, &entry.memory));
   return AsStepError(entry.solver->Apply(update));
 }

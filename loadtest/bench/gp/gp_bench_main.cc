@@ -32,8 +32,6 @@ ABSL_FLAG(bool, no_ipopt, false, "skip the Ipopt loop");
 
 namespace {
 
-using nupmpc::bench::ClosedLoopTrace;
-
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-gp-bench",
     .summary =
