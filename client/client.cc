@@ -25,6 +25,14 @@ std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target,
   args.SetMaxReceiveMessageSize(-1);
   args.SetMaxSendMessageSize(-1);
   if (own_subchannel) args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+  // HTTP/2 keepalive: a ping every 2 s, also without calls in flight, and the connection
+  // closed when one is not answered within 2 s, so a partition or a frozen server is found
+  // in seconds rather than by TCP's timers (minutes). nupmpc-server accepts pings this often;
+  // the Python client sends the same (client/python/nupmpc/security.py).
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 2000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 2000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
   return CreateChannel(target, credentials, security, args);
 }
 }  // namespace

@@ -24,6 +24,10 @@ int Milliseconds(double seconds) {
   return static_cast<int>(std::clamp(seconds * 1e3, 1.0, static_cast<double>(std::numeric_limits<int>::max())));
 }
 
+// The clients ping every 2 s (client/client.cc, client/python/nupmpc/security.py); pings
+// half that far apart are still accepted, so timer jitter never counts as abuse.
+constexpr std::chrono::milliseconds kClientPingIntervalAtLeast{1000};
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOptions& options) {
@@ -76,6 +80,20 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
   // (gRPC's own defaults: 120 s for a handshake, no limit for an idle connection).
   builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, Milliseconds(options.first_message_timeout_s));
   builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, Milliseconds(options.connection_idle_timeout_s));
+  // A client that vanished without a word (a partition, a frozen machine: its kernel may
+  // still acknowledge TCP) holds its streams and sessions until TCP's own timers end the
+  // connection, minutes later, or never while a stream is idle. Keepalive pings find it
+  // within keepalive_time_s + keepalive_timeout_s; without a limit on pings without data
+  // (gRPC's default stops after two), also on a stream that is idle between steps.
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, Milliseconds(options.keepalive_time_s));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, Milliseconds(options.keepalive_timeout_s));
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+  // The clients ping every few seconds, with or without calls; gRPC's default policy (at
+  // most one ping in five minutes, none without calls) would answer them with GOAWAY
+  // too_many_pings and drop their connections.
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
+                             static_cast<int>(kClientPingIntervalAtLeast.count()));
   // gRPC binds with SO_REUSEPORT by default, so a second server given a port in use would
   // start and silently take part of its connections; sessions live in one process, so a
   // client's later calls could then reach a server that does not know its session.

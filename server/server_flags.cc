@@ -55,6 +55,13 @@ ABSL_FLAG(
     "else the connection is closed / the stream ended with DEADLINE_EXCEEDED (env NUPMPC_FIRST_MESSAGE_TIMEOUT_S)");
 ABSL_FLAG(double, connection_idle_timeout_s, 600,
           "close client connections without calls for this long (env NUPMPC_CONNECTION_IDLE_TIMEOUT_S)");
+ABSL_FLAG(double, keepalive_time_s, 5,
+          "ping each client connection with calls open after this long without a frame from it "
+          "(env NUPMPC_KEEPALIVE_TIME_S)");
+ABSL_FLAG(double, keepalive_timeout_s, 5,
+          "close a connection whose ping is not answered within this long, ending its streams: a client that "
+          "vanished silently (partition, frozen machine) is found within keepalive_time_s + keepalive_timeout_s "
+          "(env NUPMPC_KEEPALIVE_TIMEOUT_S)");
 ABSL_FLAG(std::string, metrics_address, "",
           "HTTP endpoint for operators: GET /metrics (Prometheus text), /healthz, /readyz; HOST:PORT or :PORT "
           "(e.g. :9464); empty: off (env NUPMPC_METRICS_ADDRESS)");
@@ -160,6 +167,8 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                            "max_streams_per_connection",
                            "first_message_timeout_s",
                            "connection_idle_timeout_s",
+                           "keepalive_time_s",
+                           "keepalive_timeout_s",
                            "metrics_address",
                            "tls_cert_file",
                            "tls_key_file",
@@ -199,6 +208,8 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.max_streams_per_connection = absl::GetFlag(FLAGS_max_streams_per_connection);
   o.first_message_timeout_s = absl::GetFlag(FLAGS_first_message_timeout_s);
   o.connection_idle_timeout_s = absl::GetFlag(FLAGS_connection_idle_timeout_s);
+  o.keepalive_time_s = absl::GetFlag(FLAGS_keepalive_time_s);
+  o.keepalive_timeout_s = absl::GetFlag(FLAGS_keepalive_timeout_s);
   o.metrics_address = absl::GetFlag(FLAGS_metrics_address);
   o.tls.cert_file = absl::GetFlag(FLAGS_tls_cert_file);
   o.tls.key_file = absl::GetFlag(FLAGS_tls_key_file);
@@ -245,6 +256,10 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                                 RequireAtMost("first_message_timeout_s", o.first_message_timeout_s, 86400.0),
                                 RequireAtLeast("connection_idle_timeout_s", o.connection_idle_timeout_s, 0.001),
                                 RequireAtMost("connection_idle_timeout_s", o.connection_idle_timeout_s, 1e9),
+                                RequireAtLeast("keepalive_time_s", o.keepalive_time_s, 0.1),
+                                RequireAtMost("keepalive_time_s", o.keepalive_time_s, 86400.0),
+                                RequireAtLeast("keepalive_timeout_s", o.keepalive_timeout_s, 0.1),
+                                RequireAtMost("keepalive_timeout_s", o.keepalive_timeout_s, 86400.0),
                                 RequireAtLeast("tls_reload_interval_s", o.tls.reload_interval_s, 1),
                                 RequireAtLeast("max_sessions_per_principal", o.max_sessions_per_principal, 0),
                                 RequireAtLeast("max_streams_per_principal", o.max_streams_per_principal, 0),

@@ -34,13 +34,18 @@ struct ServerOptions {
   int max_streams_per_connection = 100;      ///< HTTP/2 concurrent streams (calls) per client connection
   double first_message_timeout_s = 10.0;     ///< a connection's handshake and a Control stream's first message
   double connection_idle_timeout_s = 600.0;  ///< a connection without calls this long is closed
-  std::string metrics_address;               ///< HTTP /metrics, /healthz, /readyz; empty: none
-  TlsFiles tls;                              ///< TLS / mTLS of the gRPC port; none by default
-  std::string auth_tokens_file;              ///< bearer tokens (server/auth/token_file.h); empty: none
-  int max_sessions_per_principal = 0;        ///< 0: only max_sessions
-  int max_streams_per_principal = 0;         ///< 0: only max_control_streams
-  bool list_all_sessions = false;            ///< without authentication: ListSessions shows every connection's
-  double slow_solve_ms = 0.0;                ///< solves slower than this are logged at warn; 0: none
+  // HTTP/2 keepalive of connections with calls open: a ping after keepalive_time_s without
+  // a frame from the client, the connection closed when it is not answered within
+  // keepalive_timeout_s. A peer that vanished without a word is found within their sum.
+  double keepalive_time_s = 5.0;
+  double keepalive_timeout_s = 5.0;
+  std::string metrics_address;         ///< HTTP /metrics, /healthz, /readyz; empty: none
+  TlsFiles tls;                        ///< TLS / mTLS of the gRPC port; none by default
+  std::string auth_tokens_file;        ///< bearer tokens (server/auth/token_file.h); empty: none
+  int max_sessions_per_principal = 0;  ///< 0: only max_sessions
+  int max_streams_per_principal = 0;   ///< 0: only max_control_streams
+  bool list_all_sessions = false;      ///< without authentication: ListSessions shows every connection's
+  double slow_solve_ms = 0.0;          ///< solves slower than this are logged at warn; 0: none
   SizeLimits size_limits;
 };
 

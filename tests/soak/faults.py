@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Fault scenarios against the real nupmpc-server binary (issue 23 §3), each with its own
+"""Fault scenarios against the real nupmpc-server binary, each with its own
 server process, a PASS/FAIL line and its figures:
 
   restart      SIGKILL and restart under 32 live Control streams (nupmpc-scaleout-probe,
@@ -12,6 +12,11 @@ server process, a PASS/FAIL line and its figures:
                Control streams that never send (build/bin/silent_streams, a test helper):
                all ended by the server's timeouts
   killed       a client killed mid-solve: the solve is cancelled, the worker free at once
+  frozen_client  a client stopped (SIGSTOP) with its Control stream open: the server's
+               keepalive pings find it and end the stream, closing its session, within
+               --keepalive_time_s + --keepalive_timeout_s
+  frozen_server  the server stopped (SIGSTOP) while a client waits for a plan: the client's
+               keepalive pings find it and the step fails with UNAVAILABLE within about 4 s
   slow_loris   connections holding half a gRPC message or half an HTTP/2 frame: ended and
                closed, others served meanwhile
   fair_share   64 Control streams on one worker and one CPU (nupmpc-loadtest): every stream
@@ -24,6 +29,7 @@ Exit 1 when any scenario fails. --quick: shorter phases (the ctest Faults.Quick)
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -366,6 +372,101 @@ def killed(quick):
     return r
 
 
+# The frozen client: a controller whose process stops (SIGSTOP, a frozen VM) with its
+# Control stream open and idle. Its kernel still acknowledges every TCP segment, so no TCP
+# timer ever ends the connection; only the server's HTTP/2 keepalive pings, unanswered,
+# show that nobody is there. The server must end the stream, and so close the session the
+# stream owned, within --keepalive_time_s + --keepalive_timeout_s (plus gRPC's timer
+# granularity); the slack here is for a loaded machine.
+FROZEN_KEEPALIVE_S = 1.0
+FROZEN_DETECTION_SLACK_S = 10.0
+FROZEN_CLIENT = """
+import sys, time
+sys.path[:0] = sys.argv[3:]
+import nupmpc
+instance = nupmpc.load_instance(sys.argv[2])
+with nupmpc.connect(sys.argv[1]) as client:
+    session = client.session(instance.spec, reconnect=nupmpc.ReconnectOptions(budget_s=0))
+    session.step(instance.closed_loop_states[0])
+    print("stepped", flush=True)
+    time.sleep(3600)
+"""
+
+
+def frozen_client(quick):
+    r = Result("frozen_client")
+    keepalive = str(FROZEN_KEEPALIVE_S)
+    server = harness.Server("--keepalive_time_s", keepalive, "--keepalive_timeout_s", keepalive)
+    victim = None
+    try:
+        victim = subprocess.Popen([sys.executable, "-c", FROZEN_CLIENT, server.target, str(harness.MASSES), *sys.path],
+                                  stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        r.check(victim.stdout.readline().strip() == "stepped", "the client never stepped")
+        r.check(server.metric_sum("nupmpc_control_streams") == 1, "the client's Control stream is not open")
+        victim.send_signal(signal.SIGSTOP)
+        frozen_at = time.monotonic()
+        bound_s = 2 * FROZEN_KEEPALIVE_S
+        ended = wait_for(lambda: server.metric_sum("nupmpc_control_streams") == 0, bound_s + FROZEN_DETECTION_SLACK_S)
+        detected_s = time.monotonic() - frozen_at
+        r.figures.update({"keepalive_time_s": FROZEN_KEEPALIVE_S, "keepalive_timeout_s": FROZEN_KEEPALIVE_S,
+                          "stream_ended_after_s": round(detected_s, 2) if ended else None,
+                          "sessions_left": server.metric_sum("nupmpc_active_sessions")})
+        r.check(ended, f"the frozen client's stream was still open {bound_s + FROZEN_DETECTION_SLACK_S:.0f} s "
+                       "after it froze")
+        r.check(wait_for(lambda: server.metric_sum("nupmpc_active_sessions") == 0, 10),
+                "the session the frozen stream owned was not closed")
+    finally:
+        if victim is not None:
+            victim.send_signal(signal.SIGCONT)
+            victim.kill()
+            victim.wait()
+        server.stop()
+    return r
+
+
+# The frozen server: the server's process stops (SIGSTOP) while a client waits for a plan.
+# Its kernel still acknowledges TCP, so only the client's keepalive pings (2 s, answered
+# within 2 s: client/python/nupmpc/security.py) find that nobody answers: the waiting step
+# fails with UNAVAILABLE within about 4 s instead of waiting for as long as the freeze lasts.
+CLIENT_KEEPALIVE_BOUND_S = 4.0
+
+
+def frozen_server(quick):
+    r = Result("frozen_server")
+    server = harness.Server()
+    frozen = False
+    try:
+        with nupmpc.connect(server.target) as client:
+            spec, states = harness.masses()
+            session = client.session(spec, reconnect=NO_RECONNECT)
+            session.step(states[0])
+            outcome = {}
+
+            def step_while_frozen():
+                try:
+                    session.step(states[1])
+                    outcome["plan"] = True
+                except nupmpc.NupmpcError as error:
+                    outcome["code"] = error.code.name
+                outcome["after_s"] = time.monotonic() - frozen_at
+
+            os.kill(server.pid, signal.SIGSTOP)
+            frozen, frozen_at = True, time.monotonic()
+            waiting = threading.Thread(target=step_while_frozen, daemon=True)
+            waiting.start()
+            waiting.join(CLIENT_KEEPALIVE_BOUND_S + FROZEN_DETECTION_SLACK_S)
+            r.figures.update({"step_ended_after_s": round(outcome["after_s"], 2) if "after_s" in outcome else None,
+                              "code": outcome.get("code")})
+            r.check("after_s" in outcome, f"the step still waited {CLIENT_KEEPALIVE_BOUND_S + FROZEN_DETECTION_SLACK_S:.0f} s "
+                                          "after the server froze")
+            r.check(outcome.get("code") == "UNAVAILABLE", f"the step ended with {outcome}, not UNAVAILABLE")
+    finally:
+        if frozen:
+            os.kill(server.pid, signal.SIGCONT)
+        server.stop()
+    return r
+
+
 def slow_loris(quick):
     r = Result("slow_loris")
     server = harness.Server("--threads", "2", *timeout_flags())
@@ -439,7 +540,7 @@ def fair_share(quick):
 
 
 SCENARIOS = {"restart": restart, "sigterm": sigterm, "slow_reader": slow_reader, "idle": idle, "killed": killed,
-             "slow_loris": slow_loris, "fair_share": fair_share}
+             "frozen_client": frozen_client, "frozen_server": frozen_server, "slow_loris": slow_loris, "fair_share": fair_share}
 
 
 def main():

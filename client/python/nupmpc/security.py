@@ -53,9 +53,20 @@ def channel_credentials(target, tls=False, ca_file=None, cert_file=None, key_fil
     return grpc.composite_channel_credentials(channel, grpc.metadata_call_credentials(_BearerToken(token)))
 
 
+# The clients' keepalive (the C++ client's are the same: client/client.cc).
+KEEPALIVE_TIME_MS = 2000
+KEEPALIVE_TIMEOUT_MS = 2000
+
+
 def channel_options(server_name=None, own_subchannel=False):
     # Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
     options = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+    # HTTP/2 keepalive: a ping every KEEPALIVE_TIME_MS, also without calls in flight, and a
+    # connection whose ping is not answered within KEEPALIVE_TIMEOUT_MS is closed, so a
+    # partition or a frozen server is found in seconds, not by TCP's timers (minutes). The
+    # server accepts pings this often (nupmpc-server's keepalive enforcement policy).
+    options += [("grpc.keepalive_time_ms", KEEPALIVE_TIME_MS), ("grpc.keepalive_timeout_ms", KEEPALIVE_TIMEOUT_MS),
+                ("grpc.keepalive_permit_without_calls", 1), ("grpc.http2.max_pings_without_data", 0)]
     if server_name:
         options.append(("grpc.ssl_target_name_override", server_name))
     if own_subchannel:
