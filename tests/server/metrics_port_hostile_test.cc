@@ -27,7 +27,8 @@ using std::chrono::milliseconds;
 using Clock = std::chrono::steady_clock;
 
 // Generous against a loaded machine: what is asserted is that an answer comes while the
-// attack goes on (before this change none came for as long as eight slow peers stayed).
+// attack goes on (a server with a thread per connection and eight threads answers none
+// for as long as eight slow peers stay).
 constexpr milliseconds kAnswerTimeout{10000};
 // The listener's read deadline is 5 s from the accept; the slack covers a loaded machine.
 constexpr milliseconds kSlowPeerClosedWithin{30000};
