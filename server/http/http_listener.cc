@@ -147,8 +147,10 @@ void HttpListener::Watch(int fd, std::uint32_t events, int operation) const {
 
 void HttpListener::Run() {
   std::array<epoll_event, kMaxEventsPerWait> events{};
+  Clock::time_point next_wake = Clock::time_point::max();
   while (true) {
-    const int ready = epoll_wait(epoll_fd_, events.data(), kMaxEventsPerWait, MillisecondsToNextDeadline(Clock::now()));
+    const int ready =
+        epoll_wait(epoll_fd_, events.data(), kMaxEventsPerWait, MillisecondsUntil(next_wake, Clock::now()));
     for (int i = 0; i < ready; ++i) {
       const int fd = events[i].data.fd;
       if (fd == wake_fd_) return;
@@ -168,24 +170,21 @@ void HttpListener::Run() {
       }
     }
     const Clock::time_point now = Clock::now();
-    CloseExpired(now);
+    next_wake = CloseExpired(now);
     if (accept_paused_ && now >= accept_resume_at_) {
       accept_paused_ = false;
       Watch(listen_fd_, EPOLLIN, EPOLL_CTL_MOD);
     }
+    if (accept_paused_) next_wake = std::min(next_wake, accept_resume_at_);
   }
 }
 
-int HttpListener::MillisecondsToNextDeadline(Clock::time_point now) const {
-  Clock::time_point next = Clock::time_point::max();
-  for (const auto& [fd, connection] : connections_) next = std::min(next, connection.deadline);
-  if (accept_paused_) next = std::min(next, accept_resume_at_);
+int HttpListener::MillisecondsUntil(Clock::time_point next, Clock::time_point now) {
   if (next == Clock::time_point::max()) return -1;
   if (next <= now) return 0;
   // Rounded up, so a wake-up never comes just before the deadline it waits for.
   return static_cast<int>(std::chrono::ceil<std::chrono::milliseconds>(next - now).count());
 }
-
 void HttpListener::AcceptAll() {
   while (true) {
     const int fd = accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
@@ -327,20 +326,28 @@ void HttpListener::Linger(int fd, Connection& connection) {
   Close(fd);
 }
 
-void HttpListener::CloseExpired(Clock::time_point now) {
+HttpListener::Clock::time_point HttpListener::CloseExpired(Clock::time_point now) {
+  Clock::time_point next = Clock::time_point::max();
   for (auto it = connections_.begin(); it != connections_.end();) {
     const int fd = it->first;
     Connection& connection = it->second;
     ++it;  // Answer and Close below may erase `connection`
-    if (connection.deadline > now) continue;
+    if (connection.deadline > now) {
+      next = std::min(next, connection.deadline);
+      continue;
+    }
     if (connection.phase == Phase::kReadingHead) {
       ++timed_out_;
       Answer(fd, connection, TextResponse(408, "request head not complete in time\n"), false);
+      // Answered at once, or now waiting on its write (or linger) deadline.
+      if (const auto left = connections_.find(fd); left != connections_.end())
+        next = std::min(next, left->second.deadline);
     } else {
       if (connection.phase == Phase::kWriting) ++timed_out_;
       Close(fd);
     }
   }
+  return next;
 }
 
 void HttpListener::Close(int fd) {

@@ -96,10 +96,12 @@ class HttpListener {
   HttpResponse Handle(const HttpRequestHead& head) const;
   void Answer(int fd, Connection& connection, const HttpResponse& response, bool head_only);
   void Linger(int fd, Connection& connection);
-  void CloseExpired(Clock::time_point now);
+  // Ends the connections whose deadline has passed; the earliest deadline of those left.
+  Clock::time_point CloseExpired(Clock::time_point now);
   bool EvictOldest();
   void Close(int fd);
-  int MillisecondsToNextDeadline(Clock::time_point now) const;
+  // epoll_wait's timeout until `next` (-1: none).
+  static int MillisecondsUntil(Clock::time_point next, Clock::time_point now);
   void Watch(int fd, std::uint32_t events, int operation) const;
 
   Handler handler_;

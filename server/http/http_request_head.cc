@@ -57,7 +57,10 @@ bool ApplyFieldLine(absl::string_view line, HttpRequestHead& head) {
 }  // namespace
 
 HeadParse ParseRequestHead(absl::string_view received, const HttpHeadLimits& limits) {
-  const std::string too_large = absl::StrCat("request head larger than ", limits.max_head_bytes, " bytes");
+  // Called after every read of an unfinished head: the refusal's text is built only when needed.
+  const auto too_large = [&limits] {
+    return Refuse(431, absl::StrCat("request head larger than ", limits.max_head_bytes, " bytes"));
+  };
   HeadParse parse;
   bool have_request_line = false;
   int fields = 0;
@@ -65,10 +68,10 @@ HeadParse ParseRequestHead(absl::string_view received, const HttpHeadLimits& lim
   while (true) {
     const std::size_t newline = received.find('\n', line_start);
     if (newline == absl::string_view::npos) {
-      if (received.size() >= limits.max_head_bytes) return Refuse(431, too_large);
+      if (received.size() >= limits.max_head_bytes) return too_large();
       return parse;  // kIncomplete
     }
-    if (newline + 1 > limits.max_head_bytes) return Refuse(431, too_large);
+    if (newline + 1 > limits.max_head_bytes) return too_large();
     absl::string_view line = received.substr(line_start, newline - line_start);
     if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
     line_start = newline + 1;

@@ -25,6 +25,7 @@
 #include "gtest/gtest.h"
 #include "protos/health_subset.grpc.pb.h"
 #include "protos/reflection_subset.grpc.pb.h"
+#include "tests/util/raw_http.h"
 #include "tests/util/server_process.h"
 
 namespace nupmpc::testing {
@@ -232,14 +233,9 @@ std::pair<int, std::string> RunUntilExit(const std::vector<std::string>& flags) 
 }
 
 bool AcceptsConnections(int port) {
-  const int sock = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(static_cast<std::uint16_t>(port));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  const bool connected = connect(sock, reinterpret_cast<const sockaddr*>(&address), sizeof(address)) == 0;
-  close(sock);
-  return connected;
+  const int sock = ConnectLoopback(port);
+  if (sock >= 0) close(sock);
+  return sock >= 0;
 }
 
 // Sessions live in one process: a second server given a port in use must not start and

@@ -1,56 +1,26 @@
 """Loopback ports for the server processes the Python tests and scripts start (and restart).
 
-Drawn at random from below the kernel's ephemeral range (or above it where nothing is
-below), not bound to port 0: the kernel picks the source port of every outgoing
-connection from that range, so a port it handed out could be taken by a connection of a
-test running beside this one before the server binds it, or while the server is down for
-a restart. tests/util/loopback_port.cc does the same for the C++ tests, and
-client/python/nupmpc/local_server.py (free_loopback_ports) for the Python package's
-server launcher, which the package cannot import from here.
+The rule (below the kernel's ephemeral range, never port 0) is the Python package's
+(client/python/nupmpc/local_server.py, free_loopback_ports), loaded from its file alone so
+that this works on a bare interpreter, without the package's dependencies;
+tests/util/loopback_port.cc follows it for the C++ tests.
 
     python3 tests/util/loopback_port.py [COUNT]   prints COUNT distinct ports (1)
 """
 
-import random
-import socket
+import importlib.util
+import pathlib
 import sys
 
-LOWEST_PORT = 10000  # ports under this are left to services
-LEAST_PORTS = 1000   # a narrower range below the ephemeral ports: use the one above
-
-
-def _ephemeral_range():
-    try:
-        with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
-            first, last = (int(v) for v in f.read().split())
-        if first <= last:
-            return first, last
-    except (OSError, ValueError):
-        pass
-    return 32768, 60999  # Linux's default
+_SOURCE = pathlib.Path(__file__).resolve().parents[2] / "client" / "python" / "nupmpc" / "local_server.py"
+_spec = importlib.util.spec_from_file_location("_nupmpc_local_server", _SOURCE)
+_local_server = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_local_server)
 
 
 def free_ports(count=1):
-    """`count` distinct loopback ports that bind now (without SO_REUSEADDR, so ports with
-    connections in TIME_WAIT are passed over)."""
-    first, last = _ephemeral_range()
-    usable = range(LOWEST_PORT, first) if first - LOWEST_PORT >= LEAST_PORTS else range(last + 1, 65536)
-    held = []  # held while drawing, so the ports are distinct
-    try:
-        for _ in range(1000):
-            s = socket.socket()
-            try:
-                s.bind(("127.0.0.1", random.choice(usable)))
-            except OSError:
-                s.close()
-                continue
-            held.append(s)
-            if len(held) == count:
-                return [h.getsockname()[1] for h in held]
-    finally:
-        for h in held:
-            h.close()
-    raise RuntimeError(f"no {count} free loopback ports in {usable.start}-{usable.stop - 1}")
+    """`count` distinct loopback ports that bind now."""
+    return _local_server.free_loopback_ports(count)
 
 
 def free_port():

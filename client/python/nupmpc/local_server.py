@@ -17,8 +17,8 @@ The port is drawn at random from below the kernel's ephemeral range (or above it
 nothing is below), never bound to port 0: the kernel picks the source port of every
 outgoing connection from that range, so a port it handed out could be taken by another
 process's connection before the server binds it, or while the server is down for a
-restart. tests/util/loopback_port.py and tests/util/loopback_port.cc follow the same rule
-(this package cannot import them: it is installed without the tests).
+restart. tests/util/loopback_port.py loads this rule from here; tests/util/loopback_port.cc
+follows it for the C++ tests.
 
 Ready means answering: grpc.health.v1 reports SERVING (the service needs no token, so
 servers started with --auth_tokens_file are probed too), or, when the server was given a
@@ -40,9 +40,10 @@ import tempfile
 import time
 import urllib.request
 from types import TracebackType
-from typing import IO, Iterable, Mapping
+from typing import IO, TYPE_CHECKING, Iterable, Mapping
 
-import grpc
+if TYPE_CHECKING:
+    import grpc
 
 __all__ = ["LocalServer", "LocalServerError", "ServerBinaryMissing", "default_binary", "free_loopback_ports",
            "BINARY_ENV"]
@@ -337,11 +338,17 @@ class _HealthProbe(_Probe):
     """grpc.health.v1.Health/Check for the whole server ("") on one plaintext channel."""
 
     def __init__(self, target: str) -> None:
+        # Imported here, so that free_loopback_ports works without grpc (tests/util/loopback_port.py
+        # loads this file on its own for scripts that run on a bare interpreter).
+        import grpc
+
         self.channel = grpc.insecure_channel(target, options=_PROBE_OPTIONS)
         # Raw bytes both ways: the request is empty, the answer is SERVING or not.
         self.check = self.channel.unary_unary(_HEALTH_CHECK)
 
     def ready(self, timeout_s: float) -> bool:
+        import grpc
+
         try:
             if self.check(b"", timeout=timeout_s, wait_for_ready=True) == _SERVING:
                 return True
