@@ -11,18 +11,26 @@
 //
 // FILE is an instance in the benchmarks/ format or a ProblemSpec in proto JSON.
 // --format table|json; with json, closed-loop prints one object per step and line with
-// step, objective, iterations, solve_ms, round_trip_ms, status, max_violation, has_plan,
-// u0 (the input applied: the plan's u[0], or the held one when the result has no plan),
-// then one summary object ("summary": true); with table, a summary after the steps.
+// step, t_s (seconds since the loop started, when the step returned), state (the x sent),
+// objective, iterations, solve_ms, round_trip_ms, status, max_violation, has_plan, held
+// (no plan this period: the input was held), u0 (the input applied: the plan's u[0], or
+// the held one), then one summary object ("summary": true); with table, a summary after
+// the steps, in words.
 //
-// closed-loop rides through a server restart: a broken stream is re-attached with
-// exponential back-off (50 ms doubling to --reconnect_max_backoff_ms, ±20 % jitter) for
-// at most --reconnect_budget_s per outage; each attempt is logged on stderr.
+// --period_ms P: a closed loop in real time. A step starts every P ms and returns by its
+// period: without an answer by then it is held (status "held"), and a late answer is
+// discarded; after K held periods in a row (K = max(3, 1 s / P)) the stream counts as
+// broken and is re-created in the background, for as long as the loop runs (back-off at
+// most 500 ms, attempts of at most 1 s; client/session.h). Without a period, steps run as
+// fast as answers come, and a broken stream is re-attached with exponential back-off (50 ms
+// doubling to --reconnect_max_backoff_ms, ±20 % jitter) for at most --reconnect_budget_s
+// per outage. Either way each reconnect attempt is logged on stderr.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
 #include <string>
+#include <thread>
 
 #include "absl/flags/flag.h"
 #include "absl/strings/str_cat.h"
@@ -46,6 +54,9 @@ ABSL_FLAG(int, deadline_ms, 0, "deadline of unary calls (0: none)");
 ABSL_FLAG(double, reconnect_budget_s, 30.0,
           "closed-loop: how long to keep trying to re-attach after the stream broke (per outage; 0: not at all)");
 ABSL_FLAG(int, reconnect_max_backoff_ms, 2000, "closed-loop: the longest wait between two reconnect attempts");
+ABSL_FLAG(int, period_ms, 0,
+          "closed-loop: the control period: a step every period, held when its answer has not come by the end of "
+          "it (0: no period, steps as fast as answers come)");
 
 namespace {
 
@@ -92,6 +103,14 @@ std::string Vector(const std::vector<double>& v) {
 // A number in JSON: null where it is not finite (a result without a plan has NaN objective).
 std::string JsonNumber(double value) {
   return std::isfinite(value) ? absl::StrFormat("%.17g", value) : std::string("null");
+}
+
+// A vector in JSON, every number exact (a reader may re-solve for a printed state).
+std::string JsonVector(const std::vector<double>& v) {
+  std::vector<std::string> parts;
+  parts.reserve(v.size());
+  for (const double value : v) parts.push_back(JsonNumber(value));
+  return absl::StrCat("[", absl::StrJoin(parts, ","), "]");
 }
 
 void PrintResult(const v1::SolveResult& r, int L, bool json) {
@@ -168,7 +187,9 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
                    a.result.ToString().c_str(), a.gave_up ? "; giving up" : "");
     }
   };
-  absl::StatusOr<std::unique_ptr<nupmpc::Session>> session = client.OpenSession(problem.spec, reconnect);
+  const std::chrono::milliseconds period(std::max(0, absl::GetFlag(FLAGS_period_ms)));
+  absl::StatusOr<std::unique_ptr<nupmpc::Session>> session =
+      client.OpenSession(problem.spec, reconnect, nupmpc::ControlPeriod{.period = period});
   if (!session.ok()) return Fail(session.status());
   const int L = static_cast<int>(problem.spec.model().num_inputs());
   const bool recorded = !problem.closed_loop_states.empty();
@@ -186,9 +207,14 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   // last one applied (zero before the first plan).
   std::vector<double> u(L, 0.0);
   using Clock = std::chrono::steady_clock;
-  Clock::time_point last_plan = Clock::now();
+  const Clock::time_point loop_start = Clock::now();
+  Clock::time_point last_plan = loop_start, next_step = loop_start;
   double longest_without_plan_s = 0.0;
   for (int t = 0; t < steps; ++t) {
+    // In real time: one step per period, never a burst to catch up after a late one.
+    std::this_thread::sleep_until(next_step);
+    next_step = std::max(next_step + period, Clock::now());
+    const std::string state = JsonVector(x);
     if (recorded) x = problem.closed_loop_states[t];
     v1::Step step;
     step.mutable_state()->Add(x.begin(), x.end());
@@ -206,11 +232,13 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
     record.push_back({r->status(), r->solve_ms(), rtt_ms, r->max_violation(), has_plan});
     if (json) {
       std::printf(
-          "{\"step\":%d,\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,\"solve_ms\":%.6f,"
-          "\"round_trip_ms\":%.6f,\"max_violation\":%s,\"warm_started\":%s,\"has_plan\":%s,\"u0\":%s}\n",
-          t, SolveStatusName(r->status()).c_str(), JsonNumber(r->objective()).c_str(), r->iterations(), r->solve_ms(),
+          "{\"step\":%d,\"t_s\":%.6f,\"state\":%s,\"status\":\"%s\",\"objective\":%s,\"iterations\":%u,"
+          "\"solve_ms\":%.6f,\"round_trip_ms\":%.6f,\"max_violation\":%s,\"warm_started\":%s,\"has_plan\":%s,"
+          "\"held\":%s,\"u0\":%s}\n",
+          t, std::chrono::duration<double>(Clock::now() - loop_start).count(), state.c_str(),
+          SolveStatusName(r->status()).c_str(), JsonNumber(r->objective()).c_str(), r->iterations(), r->solve_ms(),
           rtt_ms, JsonNumber(r->max_violation()).c_str(), r->warm_started() ? "true" : "false",
-          has_plan ? "true" : "false", Vector(u).c_str());
+          has_plan ? "true" : "false", has_plan ? "false" : "true", JsonVector(u).c_str());
     } else {
       std::printf("%5d %-16s %6u %10.4f %10.4f %18.10g %10.3g  %s%s\n", t, SolveStatusName(r->status()).c_str(),
                   r->iterations(), r->solve_ms(), rtt_ms, r->objective(), r->max_violation(), Vector(u).c_str(),
@@ -228,6 +256,8 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   summary.reconnect_attempts = reconnects.attempts;
   summary.reconnect_s = 1e-3 * static_cast<double>(reconnects.total.count());
   summary.longest_without_plan_s = longest_without_plan_s;
+  summary.late_answers = (*session)->late_answers();
+  summary.period_ms = static_cast<double>(period.count());
   // Not `"\n" + text`: GCC 12 warns about it (-Wrestrict, a false positive fixed in GCC 13).
   if (json) {
     std::fputs(nupmpc::SummaryJson(summary).c_str(), stdout);

@@ -15,23 +15,25 @@
 // the spec it holds (kept current with every answered step by ApplyStepToSpec, client/spec_update.h: state, references,
 // bounds, shifts, GP reference, Δu's u[-1]), and resends the step, so Step() returns that step's result (the warm start
 // is lost, nothing else). Only when the budget is spent does Step() fail, with UNAVAILABLE.
+// With a control period (OpenSession's ControlPeriod, client/session.h) a step instead
+// returns by its period, HELD (no plan) when the answer did not come in time, and the
+// session reconnects in the background for as long as the caller keeps stepping.
 //
 // Apply a result's inputs only when HasPlan(result): a result without a plan (CANCELLED,
-// SUPERSEDED, or a TIME_LIMIT / NUMERICAL_ERROR before any finite iterate) carries no
+// SUPERSEDED, HELD, or a TIME_LIMIT / NUMERICAL_ERROR before any finite iterate) carries no
 // inputs for this step's state; hold the last applied input (or a safe one) instead.
 // A result with a plan but another status than CONVERGED (ITERATION_LIMIT, INFEASIBLE,
 // ...) is still this step's plan: apply it and look at the status.
 
 #include <chrono>
-#include <future>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "client/channel_security.h"
 #include "client/reconnect.h"
+#include "client/session.h"
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 
@@ -40,8 +42,6 @@ namespace nupmpc {
 // Whether `result` carries a plan for the state of its step (SolveResult.has_plan): the
 // only results whose inputs a controller may apply.
 inline bool HasPlan(const v1::SolveResult& result) { return result.has_plan(); }
-
-class Session;
 
 class Client {
  public:
@@ -76,8 +76,9 @@ class Client {
 
   // Opens a Control stream that creates (and owns) a session for `spec`. The first attach
   // is tried once (a wrong address or spec fails at once); `reconnect` governs what
-  // happens when the stream breaks later.
-  absl::StatusOr<std::unique_ptr<Session>> OpenSession(const v1::ProblemSpec& spec, ReconnectOptions reconnect = {});
+  // happens when the stream breaks later, `period` how long a step may take (session.h).
+  absl::StatusOr<std::unique_ptr<Session>> OpenSession(const v1::ProblemSpec& spec, ReconnectOptions reconnect = {},
+                                                       ControlPeriod period = {});
 
   v1::MpcService::Stub& stub() { return *stub_; }
 
@@ -99,50 +100,6 @@ class Client {
   std::chrono::milliseconds default_deadline_;
   friend class Session;
   friend class AddressedSession;
-};
-
-class Session {
- public:
-  ~Session();
-  // One control period (blocking). If the stream broke, reconnects with back-off (see
-  // the top of this file) and resends the step.
-  absl::StatusOr<v1::SolveResult> Step(const v1::Step& step);
-  // The same on a separate thread; steps of one session still run one at a time.
-  std::future<absl::StatusOr<v1::SolveResult>> StepAsync(v1::Step step);
-  // Ends the stream (the server closes the session).
-  absl::Status Close();
-  std::string id() const;
-  int reconnects() const;
-  ReconnectStats reconnect_stats() const;
-
- private:
-  friend class Client;
-  Session(Client* client, v1::ProblemSpec spec, ReconnectOptions reconnect)
-      : client_(client),
-        channel_(client->channel_),
-        stub_(v1::MpcService::NewStub(channel_)),
-        spec_(std::move(spec)),
-        reconnect_(std::move(reconnect)) {}
-  // Opens a stream and creates the session, cancelled after `timeout`.
-  absl::Status ConnectLocked(std::chrono::milliseconds timeout);
-  // The stream's final status after a failed read or write.
-  absl::Status BrokenStreamStatusLocked(const char* what);
-  absl::StatusOr<v1::SolveResult> StepOnceLocked(const v1::Step& step);
-  void TearDownLocked();
-
-  Client* client_;
-  // The client's channel, until a reconnect replaces it with one of the session's own
-  // (see Session::Step).
-  std::shared_ptr<grpc::Channel> channel_;
-  std::unique_ptr<v1::MpcService::Stub> stub_;
-  v1::ProblemSpec spec_;  // kept current with every answered step (ApplyStepToSpec), for reconnects
-  mutable std::mutex mu_;
-  std::unique_ptr<grpc::ClientContext> context_;
-  std::unique_ptr<grpc::ClientReaderWriter<v1::ControlRequest, v1::ControlResponse>> stream_;
-  std::string id_;
-  std::uint64_t next_sequence_ = 1;
-  ReconnectOptions reconnect_;
-  ReconnectStats stats_;
 };
 
 }  // namespace nupmpc

@@ -32,7 +32,9 @@ ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps) 
   s.steps = static_cast<int>(steps.size());
   std::vector<double> solve_ms, round_trip_ms;
   for (const ClosedLoopStep& step : steps) {
-    if (step.status != v1::SOLVE_STATUS_CONVERGED) {
+    if (step.status == v1::SOLVE_STATUS_HELD) {
+      ++s.unanswered;  // no answer came in time: nothing was solved for it (as far as it knows)
+    } else if (step.status != v1::SOLVE_STATUS_CONVERGED) {
       ++s.not_converged;
       ++s.not_converged_by_status[SolveStatusName(step.status)];
     }
@@ -66,10 +68,30 @@ std::string ByStatusJson(const std::map<std::string, int>& by_status) {
   for (const auto& [status, count] : by_status) parts.push_back(absl::StrCat("\"", status, "\":", count));
   return absl::StrJoin(parts, ",");
 }
+
+// What happened, in one sentence.
+std::string StoryText(const ClosedLoopSummary& s) {
+  if (s.held == 0 && s.reconnects == 0) return "every step got its plan";
+  std::vector<std::string> parts;
+  if (s.unanswered > 0) {
+    parts.push_back(absl::StrFormat("%d periods of %.0f ms passed without an answer and the last input was held",
+                                    s.unanswered, s.period_ms));
+  }
+  if (const int others = s.held - s.unanswered; others > 0) {
+    parts.push_back(absl::StrCat(others, " answers carried no plan and the last input was held"));
+  }
+  if (s.reconnects > 0) {
+    parts.push_back(absl::StrFormat("the stream broke and the session was re-created %d time%s (%d attempts)",
+                                    s.reconnects, s.reconnects == 1 ? "" : "s", s.reconnect_attempts));
+  }
+  if (s.late_answers > 0) parts.push_back(absl::StrCat(s.late_answers, " late answers were discarded"));
+  return absl::StrCat(absl::StrJoin(parts, "; "),
+                      absl::StrFormat("; the longest time without a fresh plan was %.3f s", s.longest_without_plan_s));
+}
 }  // namespace
 
 std::string SummaryText(const ClosedLoopSummary& s) {
-  std::string convergence = "all converged";
+  std::string convergence = s.unanswered > 0 ? "every answered step converged" : "all converged";
   if (s.not_converged > 0) {
     convergence = absl::StrCat(s.not_converged, " not converged (", ByStatusText(s.not_converged_by_status), ")");
   }
@@ -77,24 +99,27 @@ std::string SummaryText(const ClosedLoopSummary& s) {
       s.held == 0 ? "0 steps" : absl::StrCat(s.held, " steps (", ByStatusText(s.held_by_status), "), last input held");
   return absl::StrFormat(
       "summary: %d steps, %s\n"
+      "  what happened        %s\n"
       "  without a plan       %s\n"
       "  reconnects           %d (%d attempts, %.3f s), longest without a fresh plan %.3f s\n"
       "  solve time (server)  median %.4f ms, max %.4f ms\n"
       "  round trip           median %.4f ms, p90 %.4f ms\n"
       "  max violation        %.3g\n",
-      s.steps, convergence, held, s.reconnects, s.reconnect_attempts, s.reconnect_s, s.longest_without_plan_s,
-      s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms, s.max_violation);
+      s.steps, convergence, StoryText(s), held, s.reconnects, s.reconnect_attempts, s.reconnect_s,
+      s.longest_without_plan_s, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms,
+      s.max_violation);
 }
 
 std::string SummaryJson(const ClosedLoopSummary& s) {
   return absl::StrFormat(
       "{\"summary\":true,\"steps\":%d,\"all_converged\":%s,\"not_converged\":{%s},\"held_steps\":%d,"
       "\"held\":{%s},\"reconnects\":%d,\"reconnect_attempts\":%d,\"reconnect_s\":%.6f,"
-      "\"longest_without_plan_s\":%.6f,\"median_solve_ms\":%.6f,"
+      "\"longest_without_plan_s\":%.6f,\"period_ms\":%.6g,\"late_answers\":%d,\"median_solve_ms\":%.6f,"
       "\"max_solve_ms\":%.6f,\"median_round_trip_ms\":%.6f,\"p90_round_trip_ms\":%.6f,\"max_violation\":%.6g}\n",
       s.steps, s.not_converged == 0 ? "true" : "false", ByStatusJson(s.not_converged_by_status), s.held,
       ByStatusJson(s.held_by_status), s.reconnects, s.reconnect_attempts, s.reconnect_s, s.longest_without_plan_s,
-      s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms, s.max_violation);
+      s.period_ms, s.late_answers, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms,
+      s.max_violation);
 }
 
 }  // namespace nupmpc

@@ -24,10 +24,11 @@ struct ClosedLoopStep {
 
 struct ClosedLoopSummary {
   int steps = 0;
-  int not_converged = 0;
+  int not_converged = 0;                               // answered steps (not HELD) whose status is not CONVERGED
   std::map<std::string, int> not_converged_by_status;  // status name → steps (with or without a plan)
   int held = 0;                                        // steps without a plan: the last input held
-  std::map<std::string, int> held_by_status;           // status name → such steps
+  int unanswered = 0;                         // of them, steps whose period ended before their answer (status HELD)
+  std::map<std::string, int> held_by_status;  // status name → such steps
   double median_solve_ms = 0.0, max_solve_ms = 0.0;
   double median_round_trip_ms = 0.0, p90_round_trip_ms = 0.0;
   double max_violation = 0.0;  // over steps with a plan
@@ -36,6 +37,10 @@ struct ClosedLoopSummary {
   // the start to the first, or from the last to the end).
   int reconnects = 0, reconnect_attempts = 0;
   double reconnect_s = 0.0, longest_without_plan_s = 0.0;
+  // With a control period (0: none): answers that came after their period had ended
+  // (discarded; their steps count among the held ones, status "held").
+  double period_ms = 0.0;
+  int late_answers = 0;
 };
 
 // Median: the mean of the two middle values for an even count. p90: the nearest-rank
@@ -43,7 +48,8 @@ struct ClosedLoopSummary {
 // always a measured round trip. All zero for no steps.
 ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps);
 
-// The lines printed after the table (--format table).
+// The lines printed after the table (--format table), beginning with what happened in
+// words: whether every period got a plan, and if not, why none came and what the client did.
 std::string SummaryText(const ClosedLoopSummary& summary);
 
 // One JSON object on one line, marked "summary": true so that a reader of the per-step

@@ -102,6 +102,17 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
   Counter(out, "nupmpc_auth_refused_total",
           "Calls refused with UNAUTHENTICATED before reaching the service (missing or unknown token or certificate).",
           state.auth != nullptr ? static_cast<double>(state.auth->refused_total()) : 0.0);
+  out.Family("nupmpc_control_stream_ends_total", "counter",
+             "Control streams ended, by cause: client_closed (half-close), client_gone (cancelled or reset while the "
+             "client was active), keepalive (a silent client found by keepalive pings), server_ended (an error).");
+  for (int e = 0; e < kStreamEndCount; ++e) {
+    const auto end = static_cast<StreamEnd>(e);
+    out.Sample("nupmpc_control_stream_ends_total", {{"cause", std::string(StreamEndName(end))}},
+               static_cast<double>(state.stream_ends.count(end)));
+  }
+  Counter(out, "nupmpc_client_held_periods_total",
+          "Control periods clients held without an answer in time, as they reported them with their next step.",
+          static_cast<double>(state.client_held_periods.load()));
   Counter(out, "nupmpc_control_stream_read_pauses_total",
           "Times a Control stream stopped reading because its client left answers unread.",
           static_cast<double>(state.stream_read_pauses.load()));

@@ -55,7 +55,7 @@ class Metrics {
   static constexpr std::array<double, 14> kLatencyBucketsS = {0.00005, 0.0001, 0.0002, 0.0005, 0.001, 0.002, 0.005,
                                                               0.01,    0.02,   0.05,   0.1,    0.2,   0.5,   1};
   static constexpr std::array<double, 12> kIterationBuckets = {1, 2, 3, 5, 10, 20, 50, 100, 200, 500, 1000, 10000};
-  static constexpr int kStatusCount = 8;     // v1::SolveStatus values
+  static constexpr int kStatusCount = 8;     // v1::SolveStatus values a server sends (not HELD)
   static constexpr int kAlgorithmCount = 4;  // v1::Algorithm values
   static constexpr int kCodeCount = 17;      // canonical status codes
 

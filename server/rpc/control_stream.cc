@@ -168,6 +168,11 @@ void ControlStream::OnReadDone(bool ok) {
   v1::ControlRequest request;
   const absl::Status parsed = ParseRaw(&read_buffer_, &request);
   read_buffer_.Clear();
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    last_message_at_ = Clock::now();
+  }
+  if (parsed.ok() && request.held_periods() > 0) NoteHeldPeriods(request.held_periods());
   // The next read starts only once the first message is handled. Taking the first message
   // moves the phase on under the lock, so the first-message timer cannot end the stream
   // while it is handled (and a message that arrives after the timer ended it is dropped).
@@ -513,6 +518,32 @@ void ControlStream::OnCancel() {
   cancelled_.store(true);
 }
 
+void ControlStream::NoteHeldPeriods(std::uint32_t periods) {
+  state_->client_held_periods.fetch_add(periods);
+  std::shared_ptr<SessionEntry> entry;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    entry = entry_;
+  }
+  const LogContext log_context(entry != nullptr ? absl::string_view(entry->id) : absl::string_view(),
+                               caller_.principal);
+  spdlog::info("session {}: its client held {} control periods without an answer in time",
+               entry != nullptr ? entry->id : std::string("(attaching)"), periods);
+}
+
+StreamEnd ControlStream::EndCause() {
+  if (!cancelled_.load()) return final_status_.ok() ? StreamEnd::kClientClosed : StreamEnd::kServerEnded;
+  // A shutdown cancels the streams it did not let finish.
+  if (state_->draining.load()) return StreamEnd::kServerEnded;
+  // gRPC does not say why a call was cancelled. A client that had been silent for longer
+  // than the keepalive timeout before it did is one the keepalive pings found gone (a
+  // partition, a frozen client); a cancellation that follows traffic is the client's own
+  // (or its connection was reset).
+  std::lock_guard<std::mutex> lock(mu_);
+  const double silent_s = std::chrono::duration<double>(Clock::now() - last_message_at_).count();
+  return silent_s >= state_->options.keepalive_timeout_s ? StreamEnd::kKeepalive : StreamEnd::kClientGone;
+}
+
 void ControlStream::OnDone() {
   TakeFromGrpc(this);
   // Deletes this stream on return unless a pool task still holds it.
@@ -526,9 +557,15 @@ void ControlStream::OnDone() {
   if (counted_for_principal_) state_->principal_streams.Release(caller_.principal, this);
   const LogContext log_context(entry_ != nullptr ? absl::string_view(entry_->id) : absl::string_view(),
                                caller_.principal);
+  const StreamEnd cause = EndCause();
+  state_->stream_ends.Record(cause);
   if (spdlog::should_log(spdlog::level::debug)) {
-    spdlog::debug("access: Control ended after {:.3f} s peer {}",
-                  std::chrono::duration<double>(Clock::now() - started_at_).count(), caller_.connection);
+    spdlog::debug("access: Control ended after {:.3f} s peer {} ({})",
+                  std::chrono::duration<double>(Clock::now() - started_at_).count(), caller_.connection,
+                  StreamEndName(cause));
+  }
+  if (entry_ != nullptr && cause != StreamEnd::kClientClosed) {
+    spdlog::info("session {}: its Control stream ended: {}", entry_->id, StreamEndName(cause));
   }
   if (entry_ != nullptr) {
     if (entry_->owned_by_stream) {

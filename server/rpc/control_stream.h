@@ -120,6 +120,10 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   // by itself (so that a client holding the status no longer sees or counts the session),
   // else in OnDone. Called without mu_; ordered before OnDone by End's hand-over.
   void CloseOwnedSession();
+  // Why the stream ended (for OnDone's metric and log line).
+  StreamEnd EndCause();
+  // Counts and logs the periods the client says it held (ControlRequest.held_periods).
+  void NoteHeldPeriods(std::uint32_t periods);
 
   ServerState* const state_;
   // Valid until OnDone; read only while the stream cannot finish (a read pending, the
@@ -162,8 +166,9 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   // after Finish.
   int reads_starting_ = 0;
   ReadTiming read_timing_;
-  bool read_after_solve_ = false;      // the pending read was started after a solve
-  Clock::time_point read_started_at_;  // when the pending read was started
+  bool read_after_solve_ = false;                    // the pending read was started after a solve
+  Clock::time_point read_started_at_;                // when the pending read was started
+  Clock::time_point last_message_at_ = started_at_;  // when the client's latest message arrived
   grpc::Status final_status_;
   // Set by Begin; cancelled once the first message arrives (the callback holds only a weak
   // reference, so a pending timer never keeps the stream alive).

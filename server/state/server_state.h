@@ -16,6 +16,7 @@
 #include "server/convert/gp_model_cache.h"
 #include "server/convert/spec_conversion.h"
 #include "server/observability/metrics.h"
+#include "server/observability/stream_ends.h"
 #include "server/scheduling/worker_pool.h"
 #include "server/sessions/memory_budget.h"
 #include "server/sessions/session_registry.h"
@@ -52,6 +53,10 @@ struct ServerState {
   std::atomic<int> work_in_flight{0};
   std::atomic<int> control_streams{0};               ///< open Control streams
   std::atomic<std::uint64_t> stream_read_pauses{0};  ///< times a stream stopped reading (flow control)
+  StreamEnds stream_ends;                            ///< why Control streams ended
+  /// Periods Control clients held without an answer in time, as they report them
+  /// (ControlRequest.held_periods).
+  std::atomic<std::uint64_t> client_held_periods{0};
 
   // An absl::Status of `rpc` as a gRPC status, counted when it is an error.
   grpc::Status ToGrpc(Rpc rpc, const absl::Status& status);

@@ -47,6 +47,7 @@ TEST(ClosedLoopSummary, CountsStepsThatDidNotConvergeByStatus) {
   EXPECT_DOUBLE_EQ(s.max_violation, 0.5);
   EXPECT_EQ(SummaryText(s),
             "summary: 4 steps, 3 not converged (iteration_limit 2, time_limit 1)\n"
+            "  what happened        every step got its plan\n"
             "  without a plan       0 steps\n"
             "  reconnects           0 (0 attempts, 0.000 s), longest without a fresh plan 0.000 s\n"
             "  solve time (server)  median 4.5000 ms, max 9.0000 ms\n"
@@ -55,8 +56,8 @@ TEST(ClosedLoopSummary, CountsStepsThatDidNotConvergeByStatus) {
   EXPECT_EQ(SummaryJson(s),
             "{\"summary\":true,\"steps\":4,\"all_converged\":false,\"not_converged\":{\"iteration_limit\":2,"
             "\"time_limit\":1},\"held_steps\":0,\"held\":{},\"reconnects\":0,\"reconnect_attempts\":0,"
-            "\"reconnect_s\":0.000000,\"longest_without_plan_s\":0.000000,\"median_solve_ms\":4.500000,\"max_solve_"
-            "ms\":9.000000,\"median_round_trip_ms\":5.500000,"
+            "\"reconnect_s\":0.000000,\"longest_without_plan_s\":0.000000,\"period_ms\":0,\"late_answers\":0,"
+            "\"median_solve_ms\":4.500000,\"max_solve_ms\":9.000000,\"median_round_trip_ms\":5.500000,"
             "\"p90_round_trip_ms\":10.000000,\"max_violation\":0.5}\n");
 }
 
@@ -83,6 +84,32 @@ TEST(ClosedLoopSummary, StepsWithoutAPlanAreHeldAndCountedByStatus) {
   EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"held_steps\":2,\"held\":{\"numerical_error\":2},\"reconnects\":1,"
                                                    "\"reconnect_attempts\":6,\"reconnect_s\":1.500000,"
                                                    "\"longest_without_plan_s\":1.750000"));
+}
+
+TEST(ClosedLoopSummary, PeriodsWithoutAnAnswerAreHeldAndToldInWords) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const ClosedLoopStep unanswered{v1::SOLVE_STATUS_HELD, 0, 50, nan, /*has_plan=*/false};
+  ClosedLoopSummary s = SummariseClosedLoop({Converged(1, 1),
+                                             unanswered,
+                                             unanswered,
+                                             unanswered,
+                                             {v1::SOLVE_STATUS_SUPERSEDED, 0, 3, nan, /*has_plan=*/false}});
+  EXPECT_EQ(s.held, 4);
+  EXPECT_EQ(s.unanswered, 3);
+  EXPECT_EQ(s.not_converged, 1);  // the superseded one: nothing was solved for the held ones
+  EXPECT_THAT(s.held_by_status, ElementsAre(Pair("held", 3), Pair("superseded", 1)));
+  s.period_ms = 50;
+  s.reconnects = 1;
+  s.reconnect_attempts = 2;
+  s.late_answers = 1;
+  s.longest_without_plan_s = 0.2;
+  EXPECT_THAT(SummaryText(s),
+              ::testing::HasSubstr("  what happened        3 periods of 50 ms passed without an answer and the last "
+                                   "input was held; 1 answers carried no plan and the last input was held; the "
+                                   "stream broke and the session was re-created 1 time (2 attempts); 1 late answers "
+                                   "were discarded; the longest time without a fresh plan was 0.200 s\n"));
+  EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"held_steps\":4,\"held\":{\"held\":3,\"superseded\":1}"));
+  EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"period_ms\":50,\"late_answers\":1,"));
 }
 
 TEST(ClosedLoopSummary, AllConvergedAndNoSteps) {

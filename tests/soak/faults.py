@@ -415,6 +415,9 @@ def frozen_client(quick):
                        "after it froze")
         r.check(wait_for(lambda: server.metric_sum("nupmpc_active_sessions") == 0, 10),
                 "the session the frozen stream owned was not closed")
+        keepalive_ends = server.metric_sum("nupmpc_control_stream_ends_total", cause="keepalive")
+        r.figures["stream_ends_by_keepalive"] = keepalive_ends
+        r.check(keepalive_ends == 1, f"nupmpc_control_stream_ends_total{{cause=\"keepalive\"}} is {keepalive_ends}, not 1")
     finally:
         if victim is not None:
             victim.send_signal(signal.SIGCONT)

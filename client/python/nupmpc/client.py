@@ -73,11 +73,12 @@ class Client(_Connection):
         response = self._call(self._stub.SolveOnce, pb.SolveOnceRequest(spec=spec))
         return Plan(response.result, dims_of(spec), (time.perf_counter() - start) * 1e3)
 
-    def session(self, problem, reconnect=None):
+    def session(self, problem, reconnect=None, period=None, held_periods=None):
         """A session on a Control stream that owns it (closed with the stream); it
-        re-creates itself after a server restart (see nupmpc.Session)."""
+        re-creates itself after a server restart. period: the control period in seconds, by
+        which every step returns, held when its answer has not come (see nupmpc.Session)."""
         from nupmpc.session import Session
-        session = Session(self, spec_of(problem), reconnect)
+        session = Session(self, spec_of(problem), reconnect, period, held_periods)
         self._sessions.add(session)
         return session
 

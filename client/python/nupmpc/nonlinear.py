@@ -241,10 +241,13 @@ class NonlinearSession:
       "keep" until the plan moves less than `tolerance`, relative max-norm; see the module
       text for the step rule).
     check_jacobians: compare given Jacobians with central differences along the initial
-      guess and at points near it (JacobianError naming the Jacobian and the entry)."""
+      guess and at points near it (JacobianError naming the Jacobian and the entry).
+    period: the control period in seconds (None: none): step() returns by it, with the plan
+      of the last linearisation answered in time, or held (plan.held) when the first was not
+      (nupmpc.Session)."""
 
     def __init__(self, client, problem, model, u_guess=None, x_guess=None, iterations=1, tolerance=1e-6,
-                 check_jacobians=True, jacobian_tolerance=1e-5, reconnect=None):
+                 check_jacobians=True, jacobian_tolerance=1e-5, reconnect=None, period=None):
         if not isinstance(model, NonlinearModel):
             raise ShapeError("model", f"expected a nupmpc.NonlinearModel, got {type(model).__name__}")
         spec = pb.ProblemSpec()
@@ -276,7 +279,7 @@ class NonlinearSession:
                         u + 0.1 * (1 + np.abs(u)) * rng.standard_normal(L)) for x, u in points]
             model.check_jacobians(points, jacobian_tolerance)
         _fill_model(spec, model.linearise(x_bar, self._u_guess))
-        self.session = client.session(spec, reconnect)
+        self.session = client.session(spec, reconnect, period=period)
         self.periods = []
         self._plan = None  # the last plan with has_plan: (states, inputs)
 
@@ -328,14 +331,19 @@ class NonlinearSession:
         iterations = self.iterations if iterations is None else int(iterations)
         tolerance = self.tolerance if tolerance is None else float(tolerance)
         start = time.perf_counter()
+        # With a period, every linearisation of this period shares its deadline.
+        deadline = time.monotonic() + self.session.period if self.session.period else None
         x_bar, u_bar = self._trajectory(x)
         passes, solve_ms, moved, plan, step = 0, 0.0, np.inf, None, 1.0
         for k in range(iterations):
             update = self.model.linearise(x_bar, u_bar).model_update()
             if k == 0:
-                plan = self.session.step(x, model=update, warm_start=warm_start, **step_args)
+                plan = self.session.step(x, model=update, warm_start=warm_start, deadline=deadline, **step_args)
             else:
-                plan = self.session.step(x, model=update, warm_start="keep")
+                refined = self.session.step(x, model=update, warm_start="keep", deadline=deadline)
+                if refined.held:
+                    break  # the period is over: the previous linearisation's plan is this state's
+                plan = refined
             passes += plan.iterations
             solve_ms += plan.solve_ms
             if not plan.has_plan:

@@ -10,7 +10,8 @@ class Plan:
 
     u (N, L), x (N+1, M), y (N+1, K) and u0 (L,) hold the plan when `has_plan` (apply u0
     only then: a result without a plan, e.g. SUPERSEDED or a time limit before any finite
-    iterate, carries none and the arrays are empty). `status` is the SolveStatus name
+    iterate, carries none and the arrays are empty). `held`: a session with a control
+    period got no answer within the period (status "HELD", no plan). `status` is the SolveStatus name
     without its prefix ("CONVERGED", ...); `solve_ms` the server's time in the solver,
     `round_trip_ms` the client's wall time of the call, a reconnect included (None for
     results not timed)."""
@@ -20,6 +21,7 @@ class Plan:
         self.raw = result
         self.status = pb.SolveStatus.Name(result.status).replace("SOLVE_STATUS_", "")
         self.has_plan = result.has_plan
+        self.held = result.status == pb.SOLVE_STATUS_HELD
         self.iterations = result.iterations
         self.objective = result.objective
         self.max_violation = result.max_violation
@@ -45,3 +47,9 @@ class Plan:
     def __repr__(self):
         return (f"Plan(status={self.status}, objective={self.objective:.6g}, iterations={self.iterations}, "
                 f"solve_ms={self.solve_ms:.3f}, has_plan={self.has_plan})")
+
+
+def held_result():
+    """What a step whose period ended before its answer returns: status HELD, no plan."""
+    return pb.SolveResult(status=pb.SOLVE_STATUS_HELD, has_plan=False, objective=float("nan"),
+                          max_violation=float("nan"))

@@ -1,12 +1,24 @@
-"""A session on a Control stream (the main path), riding through server restarts.
+"""A session on a Control stream (the main path), riding through server restarts and
+quiet network failures. The semantics of the C++ client (client/session.h):
 
-When its stream breaks (UNAVAILABLE, a cancellation it did not make, a stream that ended
-without a status or without an error) a step re-creates the session from the spec it holds
-(kept current with every answered step, nupmpc.spec_update) with back-off
-(nupmpc.reconnect) and resends itself, so step() returns that step's plan; only a spent
-budget makes it raise Unavailable. The semantics of the C++ client (client/client.cc).
+Without a period, a step waits for its answer. When its stream breaks (UNAVAILABLE, a
+cancellation it did not make, a stream that ended without a status or without an error)
+the step re-creates the session from the spec it holds (kept current with every answered
+step, nupmpc.spec_update) with back-off (nupmpc.reconnect) and resends itself, so step()
+returns that step's plan; only a spent budget makes it raise Unavailable.
+
+With a control period P (`period=` in seconds), step() returns by P after it was called,
+whatever the network does: with the plan if the answer came, else a Plan with `held`
+True (status HELD, no plan: hold the last input or apply a fallback). A late answer is
+never returned for a later step (answers are matched by sequence number); it only keeps
+the spec current. After K held steps in a row (K = max(3, ceil(1 s / P)) unless given)
+the stream counts as broken, as it does when it ends, and a background thread re-creates
+the session for as long as the caller keeps stepping: no overall budget, back-off at most
+0.5 s, each attempt cancelled after at most 1 s; steps meanwhile are held. The slack: a
+step returns within P plus the time to wake its thread (tests allow 100 ms and more).
 """
 
+import math
 import queue
 import threading
 import time
@@ -15,12 +27,27 @@ import grpc
 
 from nupmpc._proto import pb, pb_grpc
 from nupmpc.errors import NupmpcError, Unavailable, error_from_code, error_from_rpc
-from nupmpc.reconnect import ReconnectOptions, ReconnectStats, is_retryable, ride_out_outage
-from nupmpc.result import Plan
+from nupmpc.reconnect import Backoff, ReconnectAttempt, ReconnectOptions, ReconnectStats, is_retryable, \
+    ride_out_outage
+from nupmpc.result import Plan, held_result
 from nupmpc.spec_update import apply_step_to_spec
 from nupmpc.step import build_step, dims_of
 
 _END = object()
+# With a period: the caps on the reconnect options, and how recent the last step must be
+# for the reconnect thread to keep trying.
+MAX_BACKOFF_S = 0.5
+MAX_ATTEMPT_TIMEOUT_S = 1.0
+STEPPING_S = 1.0
+# Sent steps whose answer has not come that are remembered (for the spec) at most.
+MAX_UNANSWERED = 256
+
+
+def held_periods_to_reconnect(period_s, given=None):
+    """K: held steps in a row after which the stream counts as broken."""
+    if given:
+        return int(given)
+    return max(3, math.ceil(1.0 / period_s))
 
 
 def broken_stream_error(error, what):
@@ -39,60 +66,121 @@ def broken_stream_error(error, what):
 
 
 class _Stream:
-    """One Control call: requests through a queue, responses read one at a time."""
+    """One Control call: requests through a queue (gRPC's thread writes them, so a stalled
+    network never blocks a step), responses read by a thread of its own into an inbox, so
+    that a step can stop waiting at its deadline."""
 
-    def __init__(self, stub):
+    def __init__(self, channel):
         self._requests = queue.Queue()
-        self.call = stub.Control(iter(self._requests.get, _END))
+        self._inbox = queue.Queue()
+        self.ended = False
+        self.call = pb_grpc.MpcServiceStub(channel).Control(iter(self._requests.get, _END))
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        error = None
+        try:
+            for response in self.call:
+                self._inbox.put(response)
+        except grpc.RpcError as e:
+            error = e
+        self.ended = True
+        self._inbox.put((_END, error))
 
     def send(self, request):
         self._requests.put(request)
 
-    def receive(self, what):
+    def receive(self, what, deadline=None):
+        """The next response; None once `deadline` (time.monotonic) has passed; raises the
+        stream's error once it ended."""
+        timeout = None if deadline is None else max(deadline - time.monotonic(), 0.0)
         try:
-            return next(self.call)
-        except StopIteration:
-            raise broken_stream_error(None, what) from None
-        except grpc.RpcError as error:
-            raise broken_stream_error(error, what) from None
+            item = self._inbox.get(timeout=timeout)
+        except queue.Empty:
+            return None
+        if isinstance(item, tuple) and item[0] is _END:
+            self._inbox.put(item)  # every later receive sees the end too
+            raise broken_stream_error(item[1], what)
+        return item
 
-    def close(self):
-        """Half-closes and waits for the server to end the call."""
+    def close(self, timeout_s=None):
+        """Half-closes and waits (at most timeout_s) for the server to end the call."""
         self._requests.put(_END)
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
         try:
-            for _ in self.call:
+            while self.receive("close", deadline) is not None:
                 pass
-        except grpc.RpcError:
-            pass
+        except NupmpcError:
+            return
+        self.call.cancel()
 
     def cancel(self):
         self._requests.put(_END)
         self.call.cancel()
 
 
-class Session:
-    """session.step(x, ...) → Plan, one control period; see step() for the arguments."""
+def _attach(channel, spec, sequence, timeout_s):
+    """A stream on `channel` that created the session from `spec`, and the session's id;
+    cancelled and Unavailable when the server has not answered within timeout_s."""
+    stream = _Stream(channel)
+    stream.send(pb.ControlRequest(spec=spec, sequence=sequence))
+    try:
+        response = stream.receive("attach", time.monotonic() + timeout_s)
+    except NupmpcError:
+        stream.cancel()
+        raise
+    if response is None:
+        stream.cancel()
+        raise Unavailable(f"no session within the attempt timeout of {timeout_s * 1000:.0f} ms")
+    if response.error_code != 0:
+        stream.cancel()
+        raise error_from_code(response.error_code, response.error_message)
+    return stream, response.session_id
 
-    def __init__(self, client, spec, reconnect=None):
+
+class Session:
+    """session.step(x, ...) → Plan, one control period; see step() for the arguments.
+
+    period: the control period in seconds (None: a step waits for its answer); see the
+    module text. held_periods: K (None: max(3, ceil(1 s / period)))."""
+
+    def __init__(self, client, spec, reconnect=None, period=None, held_periods=None):
+        if period is not None and not period > 0:
+            raise ValueError(f"period: must be > 0 seconds, got {period!r}")
         self._client = client
         self._spec = spec
         self._dims = dims_of(spec)
         self._options = reconnect or ReconnectOptions()
-        self._lock = threading.Lock()
+        self._period = period
+        self._held_periods = held_periods_to_reconnect(period, held_periods) if period else None
+        self._step_lock = threading.Lock()  # one step (or close) at a time
+        self._cond = threading.Condition()  # everything below
         self._channel = client._channel
         self._own_channel = False
         self._stream = None
         self._sequence = 1
+        self._unanswered = {}  # sequence → step sent and not answered yet
         self.id = None
         self.stats = ReconnectStats()
-        with self._lock:
-            self._connect(self._options.attempt_timeout_s)
+        self.held_steps = 0
+        self.consecutive_held = 0
+        self.late_answers = 0
+        self._unreported_held = 0
+        self._closing = False
+        self._break_cause = None
+        self._broken_at = self._last_step_at = time.monotonic()
+        with self._cond:
+            self._stream, self.id = _attach(self._channel, self._spec, self._next_sequence(),
+                                            self._options.attempt_timeout_s)
+        if period:
+            threading.Thread(target=self._reconnect_loop, daemon=True).start()
 
     @property
     def spec(self):
         """The spec the session would be re-created from (kept current with every step)."""
-        copy = pb.ProblemSpec()
-        copy.CopyFrom(self._spec)
+        with self._cond:
+            copy = pb.ProblemSpec()
+            copy.CopyFrom(self._spec)
         return copy
 
     @property
@@ -101,79 +189,190 @@ class Session:
         return self._dims
 
     @property
+    def period(self):
+        return self._period
+
+    @property
     def reconnects(self):
         return self.stats.reconnects
-
-    def _connect(self, timeout_s):
-        """Opens a stream that creates the session; cancelled after `timeout_s`."""
-        stream = _Stream(pb_grpc.MpcServiceStub(self._channel))
-        fired = threading.Event()
-
-        def expire():
-            fired.set()
-            stream.cancel()
-
-        timer = threading.Timer(timeout_s, expire)
-        timer.start()
-        try:
-            stream.send(pb.ControlRequest(spec=self._spec, sequence=self._next_sequence()))
-            response = stream.receive("attach")
-        except NupmpcError:
-            if fired.is_set():
-                raise Unavailable(f"no session within the attempt timeout of {timeout_s * 1000:.0f} ms") from None
-            stream.cancel()
-            raise
-        finally:
-            timer.cancel()
-        if response.error_code != 0:
-            stream.cancel()
-            raise error_from_code(response.error_code, response.error_message)
-        self._stream = stream
-        self.id = response.session_id
 
     def _next_sequence(self):
         sequence = self._sequence
         self._sequence += 1
         return sequence
 
-    def _tear_down(self):
+    def _renew_channel(self):
+        # A channel whose connection attempts were refused while the server was down keeps
+        # failing calls at once until its own back-off (1 s growing ×1.6) lets it retry:
+        # every attempt gets a new channel with a connection of its own. Under _cond.
+        if self._own_channel:
+            self._channel.close()
+        self._channel = self._client.new_channel(own_subchannel=True)
+        self._own_channel = True
+
+    def _take_late_answer(self, response):
+        with self._cond:
+            step = self._unanswered.get(response.sequence)
+            if step is None:
+                return
+            self.late_answers += 1
+            # The server applied the step (unless it refused it): so does the spec.
+            if response.error_code == 0:
+                apply_step_to_spec(step, response.result, self._spec)
+            # Answers come in order: the steps before this one will not be answered any more.
+            for sequence in [s for s in self._unanswered if s <= response.sequence]:
+                del self._unanswered[sequence]
+
+    def _exchange(self, step, deadline):
+        """Sends `step` and waits for its answer until `deadline` (None: no deadline):
+        the result, None (held), or raises the step's or the stream's error."""
+        with self._cond:
+            stream = self._stream
+            if stream is None:
+                raise Unavailable("not connected")
+            sequence = self._next_sequence()
+            self._unanswered[sequence] = step
+            if len(self._unanswered) > MAX_UNANSWERED:
+                del self._unanswered[min(self._unanswered)]
+            stream.send(pb.ControlRequest(sequence=sequence, step=step, held_periods=self._unreported_held))
+            self._unreported_held = 0
+        while True:
+            try:
+                response = stream.receive("read", deadline)
+            except NupmpcError:
+                with self._cond:
+                    self._unanswered.clear()  # the session is gone with its stream
+                raise
+            if response is None:
+                return None  # held: the answer may still come
+            if response.sequence != sequence:
+                self._take_late_answer(response)
+                continue
+            with self._cond:
+                self._unanswered.pop(sequence, None)
+                if response.error_code != 0:
+                    raise error_from_code(response.error_code, response.error_message)
+                apply_step_to_spec(step, response.result, self._spec)
+            return response.result
+
+    def _step_waiting(self, step):
+        try:
+            return self._exchange(step, None)
+        except NupmpcError as error:
+            if not is_retryable(error):
+                raise
+            cause = error
+        with self._cond:
+            self._drop_stream()
+
+        def recreate_and_resend(timeout_s):
+            with self._cond:
+                self._renew_channel()
+                self._stream, self.id = _attach(self._channel, self._spec, self._next_sequence(), timeout_s)
+            try:
+                return self._exchange(step, None)
+            except NupmpcError as e:
+                if is_retryable(e):
+                    with self._cond:
+                        self._drop_stream()
+                raise
+        return ride_out_outage(self._options, cause, recreate_and_resend, self.stats)
+
+    def _drop_stream(self):
         if self._stream is not None:
             self._stream.cancel()
             self._stream = None
 
-    def _step_once(self, step):
-        if self._stream is None:
-            raise Unavailable("not connected")
-        sequence = self._next_sequence()
-        self._stream.send(pb.ControlRequest(sequence=sequence, step=step))
-        while True:
-            try:
-                response = self._stream.receive("read")
-            except NupmpcError as error:
-                if is_retryable(error):
-                    self._tear_down()
-                raise
-            if response.sequence != sequence:
-                continue  # an older step superseded by this one
-            if response.error_code != 0:
-                raise error_from_code(response.error_code, response.error_message)
-            return response.result
+    def _break(self, stream, cause):
+        """The stream `stream` counts as broken: dropped, and the reconnect thread woken. Under _cond."""
+        if self._stream is None or self._stream is not stream:
+            return  # already broken (and maybe replaced)
+        self._drop_stream()
+        self._unanswered.clear()
+        self._break_cause, self._broken_at = cause, time.monotonic()
+        self._cond.notify_all()
 
-    def _recreate_and_resend(self, step):
-        def attempt(timeout_s):
-            # A channel whose connection attempts were refused while the server was down
-            # keeps failing calls at once until its own back-off (1 s growing ×1.6) lets it
-            # retry: every attempt gets a new channel with a connection of its own.
-            if self._own_channel:
-                self._channel.close()
-            self._channel = self._client.new_channel(own_subchannel=True)
-            self._own_channel = True
-            self._connect(timeout_s)
-            return self._step_once(step)
-        return attempt
+    def _step_in_period(self, step, deadline):
+        with self._cond:
+            self._last_step_at = time.monotonic()
+            if self._stream is not None and self._stream.ended:
+                self._break(self._stream, Unavailable("the Control stream ended"))
+            # Wake the reconnect thread (it pauses while nobody steps), then wait for it as
+            # long as the period allows.
+            self._cond.notify_all()
+            self._cond.wait_for(lambda: self._stream is not None or self._closing,
+                                timeout=max(deadline - time.monotonic(), 0.0))
+            stream = self._stream
+        result = None
+        if stream is not None:
+            try:
+                result = self._exchange(step, deadline)
+            except NupmpcError as error:
+                if not is_retryable(error):
+                    raise  # the step's own error (a bad update): not a held period
+                with self._cond:
+                    self._break(stream, error)
+        with self._cond:
+            if result is not None:
+                self.consecutive_held = 0
+                return result
+            self.held_steps += 1
+            self.consecutive_held += 1
+            self._unreported_held += 1  # told the server with the next step (ControlRequest.held_periods)
+            if stream is not None and self.consecutive_held >= self._held_periods:
+                self._break(stream, Unavailable(f"no answer in {self.consecutive_held} consecutive periods"))
+        return held_result()
+
+    def _reconnect_loop(self):
+        o = self._options
+        options = ReconnectOptions(initial_backoff_s=o.initial_backoff_s, multiplier=o.multiplier,
+                                   max_backoff_s=min(o.max_backoff_s, MAX_BACKOFF_S), jitter=o.jitter,
+                                   attempt_timeout_s=min(o.attempt_timeout_s, MAX_ATTEMPT_TIMEOUT_S), seed=o.seed)
+        stepping_s = max(STEPPING_S, 2 * self._period)
+        backoff, attempt = Backoff(options), 0
+        with self._cond:
+            while True:
+                self._cond.wait_for(lambda: self._closing or (
+                    self._stream is None and time.monotonic() - self._last_step_at < stepping_s))
+                if self._closing:
+                    return
+                if attempt == 0:
+                    backoff = Backoff(options)
+                wait = backoff.next()
+                if self._cond.wait_for(lambda: self._closing, timeout=wait):
+                    return
+                self._renew_channel()
+                channel, spec, sequence = self._channel, pb.ProblemSpec(), self._next_sequence()
+                spec.CopyFrom(self._spec)
+                self._cond.release()
+                try:
+                    stream, session_id = _attach(channel, spec, sequence, options.attempt_timeout_s)
+                    error = None
+                except NupmpcError as e:
+                    stream, error = None, e
+                finally:
+                    self._cond.acquire()
+                attempt += 1
+                elapsed = time.monotonic() - self._broken_at
+                self.stats.attempts += 1
+                if error is None and not self._closing:
+                    self._stream, self.id = stream, session_id
+                    self.consecutive_held, attempt = 0, 0
+                    self.stats.reconnects += 1
+                    self.stats.total_s += elapsed
+                    self.stats.longest_s = max(self.stats.longest_s, elapsed)
+                    self._cond.notify_all()
+                elif stream is not None:
+                    stream.cancel()
+                report = ReconnectAttempt(attempt, wait, elapsed, self._break_cause, error, False)
+                self.stats.attempt_log.append(report)
+                if error is not None:
+                    self._break_cause = error
+                if o.on_attempt:
+                    o.on_attempt(report)
 
     def step(self, x=None, references=None, bounds=None, input_references=None, input_bounds=None, shift=False,
-             warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None):
+             warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None, deadline=None):
         """Solves one period for the measured state `x` (M,) and returns its Plan.
 
         references: output references, (K,) or (N+1, K) (GP sessions: r, 1 or N values);
@@ -182,28 +381,29 @@ class Session:
         shift: move every stored per-step prior one step first (receding references);
         warm_start: None/"shift", "keep" or "cold"; previous_input: u[-1] (Δu problems);
         model: new model terms for this period (a nupmpc.ModelUpdate; a pb.ModelUpdate is
-        sent unchecked), kept for later steps as the prior updates are.
+        sent unchecked), kept for later steps as the prior updates are;
+        deadline: with a period, the time.monotonic() by which to return instead of one
+        period from now (a caller that makes several steps within one period).
         Raises ShapeError (before sending) or a typed NupmpcError from the server."""
         step = build_step(self._spec, x, references, bounds, input_references, input_bounds, shift, warm_start,
                           max_iterations, time_limit_ms, previous_input, model)
-        with self._lock:
+        with self._step_lock:
             start = time.perf_counter()
-            try:
-                result = self._step_once(step)
-            except NupmpcError as error:
-                if not is_retryable(error):
-                    raise
-                self._tear_down()
-                result = ride_out_outage(self._options, error, self._recreate_and_resend(step), self.stats)
+            if self._period:
+                result = self._step_in_period(step, deadline or time.monotonic() + self._period)
+            else:
+                result = self._step_waiting(step)
             round_trip_ms = (time.perf_counter() - start) * 1e3
-            apply_step_to_spec(step, result, self._spec)
         return Plan(result, self._dims, round_trip_ms)
 
     def close(self):
-        """Ends the stream (the server closes the session)."""
-        with self._lock:
+        """Ends the stream (the server closes the session). With a period, waits at most a
+        second for the server's goodbye."""
+        with self._step_lock, self._cond:
+            self._closing = True
+            self._cond.notify_all()
             if self._stream is not None:
-                self._stream.close()
+                self._stream.close(1.0 if self._period else None)
                 self._stream = None
             if self._own_channel:
                 self._channel.close()

@@ -12,6 +12,7 @@
 #include "grpcpp/create_channel.h"
 #include "grpcpp/security/credentials.h"
 #include "grpcpp/support/channel_arguments.h"
+#include "server/metrics_exposition.h"
 #include "tests/server/service/service_fixture.h"
 
 namespace nupmpc::testing {
@@ -191,6 +192,66 @@ TEST_F(ServiceStreamBoundsTest, AStreamThatNeverSendsItsFirstMessageIsEndedAndGi
   ASSERT_TRUE(info.ok()) << info.status();
   EXPECT_EQ(info->limits().first_message_timeout_s(), 1.0);
   EXPECT_EQ(info->errors_by_code().at("DEADLINE_EXCEEDED"), 1u);
+}
+
+// Why streams ended is counted by cause (nupmpc_control_stream_ends_total), and the held
+// periods clients report with their steps are added up (nupmpc_client_held_periods_total).
+TEST_F(ServiceStreamBoundsTest, StreamEndsAreCountedByCauseAndReportedHeldPeriodsAddUp) {
+  server::ServerState& state = server_->state();
+  const auto ends = [&](server::StreamEnd cause) { return state.stream_ends.count(cause); };
+  const auto wait_for_ends = [&](server::StreamEnd cause, std::uint64_t n) {
+    for (int i = 0; i < 200 && ends(cause) < n; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return ends(cause);
+  };
+  const auto attached = [&](grpc::ClientContext* context) {
+    std::unique_ptr<Stream> stream = client_->stub().Control(context);
+    v1::ControlRequest hello;
+    *hello.mutable_spec() = DoubleIntegrator();
+    hello.set_sequence(1);
+    v1::ControlResponse r;
+    EXPECT_TRUE(stream->Write(hello) && stream->Read(&r));
+    return stream;
+  };
+  {  // A half-close after two steps, the second one saying 3 periods went unanswered.
+    grpc::ClientContext context;
+    std::unique_ptr<Stream> stream = attached(&context);
+    v1::ControlResponse r;
+    v1::ControlRequest step = StepRequest(2, 1.0);
+    ASSERT_TRUE(stream->Write(step) && stream->Read(&r));
+    step = StepRequest(3, 0.5);
+    step.set_held_periods(3);
+    ASSERT_TRUE(stream->Write(step) && stream->Read(&r));
+    stream->WritesDone();
+    EXPECT_TRUE(stream->Finish().ok());
+  }
+  EXPECT_EQ(wait_for_ends(server::StreamEnd::kClientClosed, 1), 1u);
+  EXPECT_EQ(state.client_held_periods.load(), 3u);
+  {  // A cancellation right after a step: the client's own.
+    grpc::ClientContext context;
+    std::unique_ptr<Stream> stream = attached(&context);
+    v1::ControlResponse r;
+    ASSERT_TRUE(stream->Write(StepRequest(2, 1.0)) && stream->Read(&r));
+    context.TryCancel();
+    (void)stream->Finish();
+  }
+  EXPECT_EQ(wait_for_ends(server::StreamEnd::kClientGone, 1), 1u);
+  {  // A first message the server refuses.
+    grpc::ClientContext context;
+    std::unique_ptr<Stream> stream = client_->stub().Control(&context);
+    v1::ControlRequest hello;
+    hello.set_session_id("no-such-session");
+    v1::ControlResponse r;
+    ASSERT_TRUE(stream->Write(hello));
+    EXPECT_FALSE(stream->Read(&r));
+    EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::INVALID_ARGUMENT);  // not an id
+  }
+  EXPECT_EQ(wait_for_ends(server::StreamEnd::kServerEnded, 1), 1u);
+  EXPECT_EQ(ends(server::StreamEnd::kKeepalive), 0u);  // found by real keepalive: tests/soak/faults.py
+  const std::string metrics = server::RenderPrometheusMetrics(state);
+  EXPECT_THAT(metrics, HasSubstr("nupmpc_control_stream_ends_total{cause=\"client_closed\"} 1\n"));
+  EXPECT_THAT(metrics, HasSubstr("nupmpc_control_stream_ends_total{cause=\"client_gone\"} 1\n"));
+  EXPECT_THAT(metrics, HasSubstr("nupmpc_control_stream_ends_total{cause=\"server_ended\"} 1\n"));
+  EXPECT_THAT(metrics, HasSubstr("nupmpc_client_held_periods_total 3\n"));
 }
 
 TEST_F(ServiceStreamBoundsTest, AResultWithoutAUsablePlanCarriesNoPlanAtAll) {

@@ -1,0 +1,256 @@
+// A Session with a control period (client/session.h) against a scripted Control service on
+// a real gRPC server in this process: the test decides when (or whether) each step is
+// answered, so the mechanisms are checked without depending on the machine's speed: a step
+// returns HELD by its period plus a generous slack, a late answer is never returned for a
+// later step and still updates the spec, K held periods in a row re-create the session, and
+// without a period a step waits for its answer.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "client/client.h"
+#include "gtest/gtest.h"
+
+namespace nupmpc {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using std::chrono::milliseconds;
+
+// Tests allow this much beyond the period: a loaded two-core machine may be slow to wake a
+// thread, and what is checked is that a step does not wait for its answer, not how fast.
+constexpr milliseconds kSlack(400);
+
+// A Control service whose answers the test scripts: each step is answered after
+// delay(attach number, the step's state[0]), or never for a negative delay; an answer's
+// objective is the step's state[0], so a test sees which step a result belongs to.
+class ScriptedControl final : public v1::MpcService::CallbackService {
+ public:
+  std::function<milliseconds(int attach, double x0)> delay = [](int, double) { return milliseconds(0); };
+
+  int attaches() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return static_cast<int>(attach_specs_.size());
+  }
+  v1::ProblemSpec attach_spec(int k) const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return attach_specs_.at(k);
+  }
+
+  grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(
+      grpc::CallbackServerContext* /*context*/) override {
+    return new Stream(this);
+  }
+
+ private:
+  class Stream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
+   public:
+    explicit Stream(ScriptedControl* service) : service_(service) { StartRead(&request_); }
+    ~Stream() override {
+      for (std::thread& t : answerers_) t.join();
+    }
+
+    void OnReadDone(bool ok) override {
+      if (!ok) {
+        FinishOnce(grpc::Status::OK);
+        return;
+      }
+      v1::ControlResponse response;
+      response.set_sequence(request_.sequence());
+      if (request_.has_spec()) {
+        std::lock_guard<std::mutex> lock(service_->mu_);
+        service_->attach_specs_.push_back(request_.spec());
+        attach_ = static_cast<int>(service_->attach_specs_.size());
+        response.set_session_id("scripted");
+        Answer(response, milliseconds(0));
+      } else {
+        const double x0 = request_.step().state(0);
+        response.mutable_result()->set_status(v1::SOLVE_STATUS_CONVERGED);
+        response.mutable_result()->set_has_plan(true);
+        response.mutable_result()->set_objective(x0);
+        response.mutable_result()->add_inputs(x0);
+        const milliseconds delay = service_->delay(attach_, x0);
+        if (delay.count() >= 0) Answer(response, delay);
+      }
+      request_.Clear();
+      StartRead(&request_);
+    }
+    void OnWriteDone(bool /*ok*/) override {
+      std::lock_guard<std::mutex> lock(mu_);
+      writing_ = false;
+      if (!queue_.empty() && !finished_) WriteNextLocked();
+    }
+    void OnDone() override {
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        done_ = true;
+      }
+      done_changed_.notify_all();
+      // The answerer threads may still be sleeping: let them end before this is freed.
+      std::thread([this] { delete this; }).detach();
+    }
+    void OnCancel() override { FinishOnce(grpc::Status::CANCELLED); }
+
+   private:
+    void FinishOnce(const grpc::Status& status) {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (finished_) return;
+      finished_ = true;
+      Finish(status);
+    }
+    // Writes `response` after `delay` (one write at a time, in order of their times).
+    void Answer(v1::ControlResponse response, milliseconds delay) {
+      answerers_.emplace_back([this, response = std::move(response), delay] {
+        std::unique_lock<std::mutex> lock(mu_);
+        if (done_changed_.wait_for(lock, delay, [this] { return done_; })) return;
+        if (finished_) return;
+        queue_.push_back(response);
+        if (!writing_) WriteNextLocked();
+      });
+    }
+    void WriteNextLocked() {
+      writing_ = true;
+      writing_response_ = queue_.front();
+      queue_.erase(queue_.begin());
+      StartWrite(&writing_response_);
+    }
+
+    ScriptedControl* service_;
+    v1::ControlRequest request_;
+    int attach_ = 0;
+    std::vector<std::thread> answerers_;
+    std::mutex mu_;
+    std::condition_variable done_changed_;
+    bool done_ = false;
+    bool finished_ = false;
+    bool writing_ = false;
+    std::vector<v1::ControlResponse> queue_;
+    v1::ControlResponse writing_response_;
+  };
+
+  mutable std::mutex mu_;
+  std::vector<v1::ProblemSpec> attach_specs_;
+};
+
+class ControlPeriodTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    grpc::ServerBuilder builder;
+    builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port_);
+    builder.RegisterService(&service_);
+    server_ = builder.BuildAndStart();
+    ASSERT_NE(server_, nullptr);
+    client_ = std::make_unique<Client>("127.0.0.1:" + std::to_string(port_));
+    spec_.mutable_initial_state()->add_mean(0.0);
+  }
+  void TearDown() override {
+    client_.reset();
+    server_->Shutdown(std::chrono::system_clock::now() + milliseconds(100));
+  }
+
+  static v1::Step StepAt(double x0) {
+    v1::Step step;
+    step.add_state(x0);
+    return step;
+  }
+
+  ScriptedControl service_;
+  int port_ = 0;
+  std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<Client> client_;
+  v1::ProblemSpec spec_;
+};
+
+TEST_F(ControlPeriodTest, AStepWithoutItsAnswerInThePeriodIsHeldAndItsLateAnswerIsNeverReturned) {
+  const milliseconds period(100);
+  // Step 1 is answered three periods late; every other at once.
+  service_.delay = [&](int, double x0) { return x0 == 1.0 ? 3 * period : milliseconds(0); };
+  auto session = client_->OpenSession(spec_, {}, ControlPeriod{.period = period, .held_periods_to_reconnect = 10});
+  ASSERT_TRUE(session.ok()) << session.status();
+
+  const Clock::time_point start = Clock::now();
+  absl::StatusOr<v1::SolveResult> held = (*session)->Step(StepAt(1.0));
+  const milliseconds took = std::chrono::duration_cast<milliseconds>(Clock::now() - start);
+  ASSERT_TRUE(held.ok()) << held.status();
+  EXPECT_EQ(held->status(), v1::SOLVE_STATUS_HELD);
+  EXPECT_FALSE(HasPlan(*held));
+  EXPECT_EQ(held->inputs_size(), 0);
+  EXPECT_GE(took, period - milliseconds(5));
+  EXPECT_LE(took, period + kSlack);
+
+  // Wait until the late answer has surely arrived, then step again: the result is step 2's.
+  std::this_thread::sleep_for(4 * period);
+  absl::StatusOr<v1::SolveResult> next = (*session)->Step(StepAt(2.0));
+  ASSERT_TRUE(next.ok()) << next.status();
+  ASSERT_EQ(next->status(), v1::SOLVE_STATUS_CONVERGED);
+  EXPECT_EQ(next->objective(), 2.0) << "an answer of an earlier step was returned for this one";
+  EXPECT_EQ((*session)->late_answers(), 1);
+  EXPECT_EQ((*session)->held_steps(), 1);
+  EXPECT_EQ((*session)->consecutive_held_steps(), 0);
+  EXPECT_EQ((*session)->reconnects(), 0);
+}
+
+TEST_F(ControlPeriodTest, KHeldPeriodsInARowRecreateTheSessionFromTheSpecTheAnswersLeft) {
+  const milliseconds period(50);
+  constexpr int kHeld = 3;
+  // The first stream answers state 1 late (after the step was held) and then nothing; the
+  // stream the session re-creates answers everything.
+  service_.delay = [&](int attach, double x0) {
+    if (attach > 1) return milliseconds(0);
+    return x0 == 1.0 ? 2 * period : milliseconds(-1);
+  };
+  auto session = client_->OpenSession(spec_, {}, ControlPeriod{.period = period, .held_periods_to_reconnect = kHeld});
+  ASSERT_TRUE(session.ok()) << session.status();
+
+  // Held steps until the stream counts as broken and a new one is up: each returns by its
+  // period, and the loop keeps stepping as a controller would.
+  int held = 0;
+  double x0 = 1.0;
+  absl::StatusOr<v1::SolveResult> result;
+  for (; held < 100; ++held, x0 += 1.0) {
+    const Clock::time_point start = Clock::now();
+    result = (*session)->Step(StepAt(x0));
+    ASSERT_TRUE(result.ok()) << result.status();
+    EXPECT_LE(Clock::now() - start, period + kSlack) << "step " << held;
+    if (result->status() != v1::SOLVE_STATUS_HELD) break;
+  }
+  EXPECT_GE(held, kHeld) << "answered before the stream could have been re-created";
+  EXPECT_EQ(result->objective(), x0) << "the first answer after the reconnect is not for its own step";
+  EXPECT_EQ((*session)->reconnects(), 1);
+  ASSERT_EQ(service_.attaches(), 2);
+  // State 1's answer came late on the first stream: the server had applied it, so the
+  // session was re-created from it; the later steps were never answered, so not from them.
+  EXPECT_EQ(service_.attach_spec(1).initial_state().mean(0), 1.0);
+  EXPECT_EQ((*session)->late_answers(), 1);
+}
+
+TEST_F(ControlPeriodTest, WithoutAPeriodAStepWaitsForItsAnswer) {
+  const milliseconds delay(300);
+  service_.delay = [&](int, double) { return delay; };
+  auto session = client_->OpenSession(spec_);
+  ASSERT_TRUE(session.ok()) << session.status();
+  const Clock::time_point start = Clock::now();
+  absl::StatusOr<v1::SolveResult> result = (*session)->Step(StepAt(7.0));
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_GE(Clock::now() - start, delay - milliseconds(5));
+  EXPECT_EQ(result->status(), v1::SOLVE_STATUS_CONVERGED);
+  EXPECT_EQ(result->objective(), 7.0);
+  EXPECT_EQ((*session)->held_steps(), 0);
+}
+
+TEST_F(ControlPeriodTest, HeldPeriodsToReconnectIsAtLeastThreeAndCoversASecond) {
+  EXPECT_EQ(ControlPeriod{.period = milliseconds(10)}.HeldPeriodsToReconnect(), 100);
+  EXPECT_EQ(ControlPeriod{.period = milliseconds(50)}.HeldPeriodsToReconnect(), 20);
+  EXPECT_EQ(ControlPeriod{.period = milliseconds(300)}.HeldPeriodsToReconnect(), 4);
+  EXPECT_EQ(ControlPeriod{.period = milliseconds(1000)}.HeldPeriodsToReconnect(), 3);
+  EXPECT_EQ(ControlPeriod{.period = milliseconds(5000)}.HeldPeriodsToReconnect(), 3);
+  EXPECT_EQ((ControlPeriod{.period = milliseconds(50), .held_periods_to_reconnect = 7}.HeldPeriodsToReconnect()), 7);
+}
+
+}  // namespace
+}  // namespace nupmpc
