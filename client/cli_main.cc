@@ -214,8 +214,8 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
     // In real time: one step per period, never a burst to catch up after a late one.
     std::this_thread::sleep_until(next_step);
     next_step = std::max(next_step + period, Clock::now());
-    const std::string state = JsonVector(x);
     if (recorded) x = problem.closed_loop_states[t];
+    const std::string state = JsonVector(x);
     v1::Step step;
     step.mutable_state()->Add(x.begin(), x.end());
     const auto start = std::chrono::steady_clock::now();

@@ -281,7 +281,12 @@ void Session::ReconnectLoop() {
     } else {
       break_cause_ = call.status();
     }
-    if (options.on_attempt) options.on_attempt(report);
+    if (options.on_attempt) {
+      // Not under the lock: the callback may ask the session for its figures.
+      lock.unlock();
+      options.on_attempt(report);
+      lock.lock();
+    }
   }
 }
 

@@ -19,6 +19,7 @@ packages=(
   openssl       # the TLS tests' certificates (tests/util/test_pki.cc, the Python client's tests)
   prometheus    # promtool: Prometheus' own check of /metrics (metrics_endpoint_test)
   haproxy python3-yaml python3-kubernetes yamllint libcpp-httplib-dev
+  nftables iproute2  # nft, ip: the quiet faults' partitions in namespaces (tests/soak/quiet_faults.py)
   python3-grpcio python3-protobuf python3-numpy python3-matplotlib python3-pytest
 )
 # Programs the build, the tests and their scripts call (beyond a minimal Debian's own), and
@@ -29,7 +30,7 @@ programs=(
   protoc:protobuf-compiler grpc_cpp_plugin:protobuf-compiler-grpc grpc_python_plugin:protobuf-compiler-grpc
   clang++:clang llvm-symbolizer-14:llvm-14 nm:binutils c++filt:binutils
   clang-format-14:clang-format clang-tidy-14:clang-tidy
-  openssl:openssl promtool:prometheus haproxy:haproxy yamllint:yamllint
+  openssl:openssl promtool:prometheus haproxy:haproxy yamllint:yamllint nft:nftables ip:iproute2
 )
 
 check_programs() {

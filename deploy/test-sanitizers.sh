@@ -11,7 +11,8 @@
 #      same tree (deploy/fuzz.sh).
 #   3. ThreadSanitizer (build-tsan/): the worker pool, the session strands, the Control
 #      stream, the service's unary and streaming calls, SolveFleet and steps solved on
-#      gRPC's threads (solve_placement_test); reports triaged by
+#      gRPC's threads (solve_placement_test), and the client's Session with a control period
+#      (client_control_period_test); reports triaged by
 #      tests/build/tsan_triage.py (only races inside gRPC's and protobuf's own code are
 #      dismissed, each rule with its reason).
 # Compiled with clang at -O1, -UNDEBUG (Eigen's assertions on), warnings as errors. Each
@@ -42,7 +43,7 @@ asan_stage() {
                 service_stream_bounds_test service_malformed_bytes_test memory_budget_test auth_test
                 log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
                 hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test
-                listen_probe_test http_listener_test metrics_port_hostile_test)
+                listen_probe_test http_listener_test metrics_port_hostile_test client_control_period_test)
   targets=()
   for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
   cmake --build build-asan -j "$jobs" "${targets[@]}"
@@ -70,7 +71,8 @@ tsan_stage() {
   check_symbolizer thread
   deploy/sanitizer-tree.sh tsan
   tsan_tests=(worker_pool_test session_strand_test control_stream_lifetime_test service_stream_bounds_test
-              service_solve_test service_fleet_test solve_placement_test http_listener_test)
+              service_solve_test service_fleet_test solve_placement_test http_listener_test
+              client_control_period_test)
   targets=()
   for t in "${tsan_tests[@]}"; do targets+=(--target "$t"); done
   cmake --build build-tsan -j "$jobs" "${targets[@]}"

@@ -64,9 +64,14 @@ $( [ -n "$stats" ] && echo "  stats socket $stats mode 600 level admin" )
 defaults
   mode http
   timeout connect 1s
-  # A Control stream lives as long as its controller: no idle timeout short of an hour.
-  timeout client 1h
-  timeout server 1h
+  # HAProxy 2.6 pings neither side, so these are what end a stream whose client or replica
+  # went silent (a partition, a frozen host): 30 s without a byte on that side. Controllers
+  # step every period and never idle that long; a client with a period has re-created its
+  # session on another replica after K held periods (about 1 s) long before, and a replica's
+  # own keepalive ends a silent client's stream within 15 s only when nothing sits between
+  # them. A client that idles longer between steps gets its session re-created: raise both.
+  timeout client 30s
+  timeout server 30s
   # Only a replica that hangs waits this out: answers, SERVING or not, are decided at once.
   timeout check 2s
   # A request whose replica cannot be connected to is sent to another one.
