@@ -42,6 +42,7 @@ ClosedLoopSummary SummariseClosedLoop(const std::vector<ClosedLoopStep>& steps) 
       ++s.held;
       ++s.held_by_status[SolveStatusName(step.status)];
     }
+    if (step.status == v1::SOLVE_STATUS_HELD) continue;  // no answer: no solve or round trip to time
     solve_ms.push_back(step.solve_ms);
     round_trip_ms.push_back(step.round_trip_ms);
     s.max_solve_ms = std::max(s.max_solve_ms, step.solve_ms);
@@ -78,13 +79,17 @@ std::string StoryText(const ClosedLoopSummary& s) {
                                     s.unanswered, s.period_ms));
   }
   if (const int others = s.held - s.unanswered; others > 0) {
-    parts.push_back(absl::StrCat(others, " answers carried no plan and the last input was held"));
+    parts.push_back(
+        absl::StrCat(others, others == 1 ? " answer" : " answers", " carried no plan and the last input was held"));
   }
   if (s.reconnects > 0) {
     parts.push_back(absl::StrFormat("the stream broke and the session was re-created %d time%s (%d attempts)",
                                     s.reconnects, s.reconnects == 1 ? "" : "s", s.reconnect_attempts));
   }
-  if (s.late_answers > 0) parts.push_back(absl::StrCat(s.late_answers, " late answers were discarded"));
+  if (s.late_answers > 0) {
+    parts.push_back(
+        absl::StrCat(s.late_answers, s.late_answers == 1 ? " late answer was" : " late answers were", " discarded"));
+  }
   return absl::StrCat(absl::StrJoin(parts, "; "),
                       absl::StrFormat("; the longest time without a fresh plan was %.3f s", s.longest_without_plan_s));
 }

@@ -8,9 +8,9 @@ namespace nupmpc {
 
 absl::Status BrokenControlStreamStatus(const grpc::Status& s) {
   if (s.ok()) return absl::UnavailableError("the Control stream ended");
-  // A session never cancels a live stream and still waits on it: CANCELLED here is the
-  // server dropping the call (e.g. shutting down past its grace period) or gRPC ending it
-  // for a connection that died (keepalive), as retryable as a lost connection.
+  // A session waits on a stream only until it cancels it itself: CANCELLED while it waits
+  // is the server dropping the call (e.g. shutting down past its grace period) or gRPC
+  // ending it for a connection that died (keepalive), as retryable as a lost connection.
   if (s.error_code() == grpc::StatusCode::CANCELLED) {
     return absl::UnavailableError(absl::StrCat("the Control stream was cancelled: ", s.error_message()));
   }
@@ -28,6 +28,10 @@ absl::Status BrokenControlStreamStatus(const grpc::Status& s) {
 ControlCall::ControlCall(std::shared_ptr<grpc::Channel> channel, const v1::ControlRequest& first)
     : channel_(std::move(channel)), stub_(v1::MpcService::NewStub(channel_)) {
   stub_->async()->Control(&context_, this);
+  // Writes start on the session's threads, outside gRPC's reactions: gRPC's contract for
+  // that is a hold, without which the call may complete (and its stream object be freed)
+  // between a check of done_ and a StartWrite. Removed once no operation will start.
+  AddHold();
   {
     std::lock_guard<std::mutex> lock(mu_);
     waiting_ = first;
@@ -39,21 +43,35 @@ ControlCall::ControlCall(std::shared_ptr<grpc::Channel> channel, const v1::Contr
 
 ControlCall::~ControlCall() {
   context_.TryCancel();
+  ReleaseHold();
   std::unique_lock<std::mutex> lock(mu_);
   changed_.wait(lock, [this] { return done_; });
 }
 
-std::optional<std::uint64_t> ControlCall::Send(const v1::ControlRequest& request) {
+void ControlCall::ReleaseHold() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (ops_closed_) return;
+    ops_closed_ = true;
+  }
+  RemoveHold();  // not under mu_: it may complete the call, and OnDone takes mu_
+}
+
+std::optional<std::uint64_t> ControlCall::Send(v1::ControlRequest request) {
   std::lock_guard<std::mutex> lock(mu_);
   std::optional<std::uint64_t> dropped;
-  if (waiting_.has_value()) dropped = waiting_->sequence();
-  waiting_ = request;
+  if (waiting_.has_value()) {
+    dropped = waiting_->sequence();
+    // The dropped request's report of held periods goes out with the one replacing it.
+    request.set_held_periods(request.held_periods() + waiting_->held_periods());
+  }
+  waiting_ = std::move(request);
   PumpWritesLocked();
   return dropped;
 }
 
 void ControlCall::PumpWritesLocked() {
-  if (write_in_flight_ || done_) return;
+  if (write_in_flight_ || ops_closed_) return;
   if (waiting_.has_value()) {
     writing_ = *std::move(waiting_);
     waiting_.reset();
@@ -63,14 +81,20 @@ void ControlCall::PumpWritesLocked() {
     writes_done_started_ = true;
     write_in_flight_ = true;
     StartWritesDone();
+    release_hold_ = true;  // nothing starts after the half-close: the caller releases the hold
   }
 }
 
 void ControlCall::OnWriteDone(bool ok) {
-  std::lock_guard<std::mutex> lock(mu_);
-  write_in_flight_ = false;
-  // A failed write means the call is ending; OnDone says how.
-  if (ok) PumpWritesLocked();
+  bool release;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    write_in_flight_ = false;
+    // A failed write means the call is ending; OnDone says how.
+    if (ok) PumpWritesLocked();
+    release = std::exchange(release_hold_, false);
+  }
+  if (release) ReleaseHold();
 }
 
 void ControlCall::OnWritesDoneDone(bool /*ok*/) {
@@ -79,7 +103,15 @@ void ControlCall::OnWritesDoneDone(bool /*ok*/) {
 }
 
 void ControlCall::OnReadDone(bool ok) {
-  if (!ok) return;  // no more responses; OnDone follows
+  if (!ok) {  // the stream is over: no more responses, no more writes; OnDone follows
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      read_failed_ = true;
+    }
+    changed_.notify_all();
+    ReleaseHold();
+    return;
+  }
   {
     std::lock_guard<std::mutex> lock(mu_);
     responses_.push_back(std::move(reading_));
@@ -123,18 +155,28 @@ grpc::Status ControlCall::Finish(Clock::time_point deadline) {
   std::unique_lock<std::mutex> lock(mu_);
   writes_done_wanted_ = true;
   PumpWritesLocked();
+  if (std::exchange(release_hold_, false)) {
+    lock.unlock();
+    ReleaseHold();
+    lock.lock();
+  }
   if (!WaitUntil(lock, deadline, [this] { return done_; })) {
-    context_.TryCancel();
+    lock.unlock();
+    Cancel();
+    lock.lock();
     changed_.wait(lock, [this] { return done_; });
   }
   return status_;
 }
 
-void ControlCall::Cancel() { context_.TryCancel(); }
+void ControlCall::Cancel() {
+  context_.TryCancel();
+  ReleaseHold();
+}
 
 bool ControlCall::Ended() const {
   std::lock_guard<std::mutex> lock(mu_);
-  return done_;
+  return done_ || read_failed_;
 }
 
 }  // namespace nupmpc

@@ -45,8 +45,9 @@ class ControlCall : public grpc::ClientBidiReactor<v1::ControlRequest, v1::Contr
   ControlCall& operator=(const ControlCall&) = delete;
 
   // Sends `request` now, or after the write in flight; a request already waiting for that
-  // write is dropped and its sequence returned (nothing of it reaches the server).
-  std::optional<std::uint64_t> Send(const v1::ControlRequest& request);
+  // write is dropped and its sequence returned (nothing of it reaches the server but its
+  // held_periods, added to `request`'s).
+  std::optional<std::uint64_t> Send(v1::ControlRequest request);
 
   // Waits until the response numbered `sequence` arrives (returned), `deadline` passes
   // (nullopt; time_point::max(): no deadline), or the call ends (BrokenControlStreamStatus). Every other response read
@@ -59,7 +60,7 @@ class ControlCall : public grpc::ClientBidiReactor<v1::ControlRequest, v1::Contr
   grpc::Status Finish(Clock::time_point deadline);
   // Cancels the call (the server sees a cancellation) without waiting.
   void Cancel();
-  // Whether the call has ended (its status is known).
+  // Whether the call has ended (its last response read; its status may follow).
   bool Ended() const;
 
  private:
@@ -69,6 +70,9 @@ class ControlCall : public grpc::ClientBidiReactor<v1::ControlRequest, v1::Contr
   void OnDone(const grpc::Status& status) override;
   // Starts the waiting write, or the half-close, when no write is in flight. Under mu_.
   void PumpWritesLocked();
+  // From now on no operation starts: gives gRPC the hold back (once), so the call can
+  // complete. Not under mu_.
+  void ReleaseHold();
 
   // A reader that does not take its answers must not make the client's memory grow: the
   // server sends at most one response per request, so this bounds a backlog that nobody
@@ -96,6 +100,9 @@ class ControlCall : public grpc::ClientBidiReactor<v1::ControlRequest, v1::Contr
   bool write_in_flight_ = false;
   bool writes_done_wanted_ = false;
   bool writes_done_started_ = false;
+  bool ops_closed_ = false;      // ReleaseHold ran: nothing may start any more
+  bool release_hold_ = false;    // the half-close started: ReleaseHold is due (outside mu_)
+  bool read_failed_ = false;     // the stream is over (OnDone may still be pending)
   v1::ControlResponse reading_;  // the read in flight
   std::deque<v1::ControlResponse> responses_;
   bool done_ = false;

@@ -119,12 +119,20 @@ void Session::RenewChannelLocked() {
 
 void Session::TakeLateAnswer(const v1::ControlResponse& response) {
   std::lock_guard<std::mutex> lock(mu_);
+  silent_periods_ = 0;  // the stream is alive, only slower than the period
   auto it = unanswered_.find(response.sequence());
   if (it == unanswered_.end()) return;
   ++late_answers_;
-  // The server applied the step (unless it refused it): so does the spec.
-  if (response.error_code() == 0) ApplyStepToSpec(it->second, response.result(), &spec_);
-  // Answers come in order: the steps before this one will not be answered any more.
+  const bool solved = response.error_code() == 0 && response.result().status() != v1::SOLVE_STATUS_SUPERSEDED;
+  if (!solved) {
+    // A refusal or a SUPERSEDED answer comes at once, ahead of the solve in progress of an
+    // earlier step: only this step is settled, and nothing of it applied.
+    unanswered_.erase(it);
+    return;
+  }
+  // The server applied the step: so does the spec. Solves run one at a time and answers
+  // of earlier steps were sent before this one's: none of them is still to come.
+  ApplyStepToSpec(it->second, response.result(), &spec_);
   unanswered_.erase(unanswered_.begin(), std::next(it));
 }
 
@@ -139,7 +147,9 @@ absl::StatusOr<std::optional<v1::SolveResult>> Session::Exchange(const v1::Step&
     *request.mutable_step() = step;
     request.set_held_periods(static_cast<std::uint32_t>(std::exchange(unreported_held_, 0)));
     unanswered_.emplace(request.sequence(), step);
-    if (unanswered_.size() > kMaxUnanswered) unanswered_.erase(unanswered_.begin());
+    // At least K of them: past that the stream counts as broken anyway.
+    const auto most = std::max<std::size_t>(kMaxUnanswered, 2 * period_.HeldPeriodsToReconnect());
+    if (unanswered_.size() > most) unanswered_.erase(unanswered_.begin());
     // A step still waiting behind a stalled write is dropped unsent: nothing of it applies.
     if (std::optional<std::uint64_t> dropped = call->Send(request); dropped.has_value()) unanswered_.erase(*dropped);
   }
@@ -148,10 +158,11 @@ absl::StatusOr<std::optional<v1::SolveResult>> Session::Exchange(const v1::Step&
   std::lock_guard<std::mutex> lock(mu_);
   if (!response.ok()) {
     // The session is gone with its stream; a re-created one starts from the spec.
-    unanswered_.clear();
+    BreakLocked(call, response.status());
     return response.status();
   }
   if (!response->has_value()) return std::nullopt;  // held: the answer may still come
+  silent_periods_ = 0;
   unanswered_.erase(request.sequence());
   v1::ControlResponse& answer = **response;
   if (answer.error_code() != 0) {
@@ -163,6 +174,10 @@ absl::StatusOr<std::optional<v1::SolveResult>> Session::Exchange(const v1::Step&
 
 absl::StatusOr<v1::SolveResult> Session::Step(const v1::Step& step) {
   std::lock_guard<std::mutex> serial(step_mu_);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (closing_) return absl::FailedPreconditionError("the session was closed");
+  }
   return period_.period.count() > 0 ? StepInPeriod(step) : StepWaiting(step);
 }
 
@@ -194,7 +209,7 @@ absl::StatusOr<v1::SolveResult> Session::StepWaiting(const v1::Step& step) {
   return **std::move(result);
 }
 
-void Session::BreakLocked(const std::shared_ptr<ControlCall>& call, const absl::Status& cause) {
+void Session::BreakLocked(std::shared_ptr<ControlCall> call, const absl::Status& cause) {
   if (call_ == nullptr || call_ != call) return;  // already broken (and maybe replaced)
   call_->Cancel();
   call_.reset();
@@ -232,8 +247,10 @@ absl::StatusOr<v1::SolveResult> Session::StepInPeriod(const v1::Step& step) {
   ++held_steps_;
   ++consecutive_held_;
   ++unreported_held_;
-  if (call != nullptr && consecutive_held_ >= period_.HeldPeriodsToReconnect()) {
-    BreakLocked(call, absl::UnavailableError(absl::StrCat("no answer in ", consecutive_held_, " consecutive periods")));
+  // Late answers reset silent_periods_: a live server slower than the period keeps its
+  // stream (and its warm start); only one that answers nothing at all is left.
+  if (call != nullptr && ++silent_periods_ >= period_.HeldPeriodsToReconnect()) {
+    BreakLocked(call, absl::UnavailableError(absl::StrCat("no answer in ", silent_periods_, " periods in a row")));
   }
   return HeldResult();
 }
@@ -251,7 +268,8 @@ void Session::ReconnectLoop() {
     changed_.wait(lock, [&] { return closing_ || (call_ == nullptr && Clock::now() - last_step_at_ < stepping); });
     if (closing_) return;
     if (attempt == 0) backoff.Reset();
-    const std::chrono::milliseconds wait = backoff.Next();
+    // Capped after the jitter too: at most kMaxBackoff between attempts, as documented.
+    const std::chrono::milliseconds wait = std::min(backoff.Next(), ControlPeriod::kMaxBackoff);
     if (changed_.wait_for(lock, wait, [this] { return closing_; })) return;
     RenewChannelLocked();
     std::shared_ptr<grpc::Channel> channel = channel_;
@@ -272,7 +290,7 @@ void Session::ReconnectLoop() {
     if (call.ok() && !closing_) {
       call_ = *std::move(call);
       id_ = std::move(id);
-      consecutive_held_ = 0;
+      silent_periods_ = 0;
       ++stats_.reconnects;
       stats_.total += report.elapsed;
       stats_.longest = std::max(stats_.longest, report.elapsed);
@@ -305,8 +323,13 @@ absl::Status Session::Close() {
   }
   if (reconnector_.joinable()) reconnector_.join();
   if (call == nullptr) return absl::OkStatus();
-  const auto deadline = period_.period.count() > 0 ? Clock::now() + std::chrono::seconds(1) : Clock::time_point::max();
-  const grpc::Status s = call->Finish(deadline);
+  if (period_.period.count() > 0) {
+    // Bounded, and quiet: a server that does not say goodbye within a second, or a stream
+    // that broke unnoticed, leaves nothing to report to a loop that is ending anyway.
+    (void)call->Finish(Clock::now() + std::chrono::seconds(1));
+    return absl::OkStatus();
+  }
+  const grpc::Status s = call->Finish(Clock::time_point::max());
   return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
 }
 

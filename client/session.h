@@ -12,8 +12,9 @@
 // plan: the caller holds its last input or applies its fallback). The answer of a held step,
 // should it come later, is never returned for a later step (answers are matched by sequence
 // number); it only keeps the session's spec current. The stream counts as broken when it
-// ends, and also after K consecutive held steps (a balancer's connection to a dead replica
-// answers the client's keepalive pings, so only the missing answers tell):
+// ends, and also after K held periods in a row in which no answer at all came (a
+// balancer's connection to a dead replica answers the client's keepalive pings, so only
+// the missing answers tell; a live server slower than the period keeps its stream):
 //
 //   K = held_periods_to_reconnect, default max(3, ceil(1 s / P)),
 //
@@ -67,8 +68,9 @@ class Session {
   absl::StatusOr<v1::SolveResult> Step(const v1::Step& step);
   // The same on a separate thread; steps of one session still run one at a time.
   std::future<absl::StatusOr<v1::SolveResult>> StepAsync(v1::Step step);
-  // Ends the stream (the server closes the session). With a period, waits at most a
-  // second for the server's goodbye.
+  // Ends the stream (the server closes the session); later steps fail with
+  // FAILED_PRECONDITION. With a period, returns OK within about two seconds (a reconnect
+  // attempt in flight ends first, then the server's goodbye is awaited for a second).
   absl::Status Close();
   std::string id() const;
   int reconnects() const;
@@ -101,7 +103,7 @@ class Session {
   absl::StatusOr<v1::SolveResult> StepWaiting(const v1::Step& step);
   absl::StatusOr<v1::SolveResult> StepInPeriod(const v1::Step& step);
   // Drops the current call (if it is still `call`) and wakes the reconnect thread. Under mu_.
-  void BreakLocked(const std::shared_ptr<ControlCall>& call, const absl::Status& cause);
+  void BreakLocked(std::shared_ptr<ControlCall> call, const absl::Status& cause);
   void ReconnectLoop();
 
   Client* client_;
@@ -121,6 +123,7 @@ class Session {
   ReconnectStats stats_;
   int held_steps_ = 0, consecutive_held_ = 0, late_answers_ = 0;
   int unreported_held_ = 0;  // held steps not yet told the server (ControlRequest.held_periods)
+  int silent_periods_ = 0;   // held periods in a row in which no answer at all came (the K rule)
   // With a period: the reconnect thread's inputs.
   absl::Status break_cause_;
   ControlCall::Clock::time_point broken_at_{}, last_step_at_{};

@@ -105,9 +105,11 @@ TEST(ClosedLoopSummary, PeriodsWithoutAnAnswerAreHeldAndToldInWords) {
   s.longest_without_plan_s = 0.2;
   EXPECT_THAT(SummaryText(s),
               ::testing::HasSubstr("  what happened        3 periods of 50 ms passed without an answer and the last "
-                                   "input was held; 1 answers carried no plan and the last input was held; the "
-                                   "stream broke and the session was re-created 1 time (2 attempts); 1 late answers "
-                                   "were discarded; the longest time without a fresh plan was 0.200 s\n"));
+                                   "input was held; 1 answer carried no plan and the last input was held; the "
+                                   "stream broke and the session was re-created 1 time (2 attempts); 1 late answer "
+                                   "was discarded; the longest time without a fresh plan was 0.200 s\n"));
+  // Periods without an answer had no solve and no round trip: the medians are the answers'.
+  EXPECT_DOUBLE_EQ(s.median_round_trip_ms, 2.0);
   EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"held_steps\":4,\"held\":{\"held\":3,\"superseded\":1}"));
   EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"period_ms\":50,\"late_answers\":1,"));
 }

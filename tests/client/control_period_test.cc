@@ -27,11 +27,13 @@ using std::chrono::milliseconds;
 constexpr milliseconds kSlack(400);
 
 // A Control service whose answers the test scripts: each step is answered after
-// delay(attach number, the step's state[0]), or never for a negative delay; an answer's
-// objective is the step's state[0], so a test sees which step a result belongs to.
+// delay(attach number, the step's state[0]), or never for a negative delay, as SUPERSEDED
+// when superseded(attach, x0) says so; an answer's objective is the step's state[0], so a
+// test sees which step a result belongs to.
 class ScriptedControl final : public v1::MpcService::CallbackService {
  public:
   std::function<milliseconds(int attach, double x0)> delay = [](int, double) { return milliseconds(0); };
+  std::function<bool(int attach, double x0)> superseded = [](int, double) { return false; };
 
   int attaches() const {
     std::lock_guard<std::mutex> lock(mu_);
@@ -70,10 +72,14 @@ class ScriptedControl final : public v1::MpcService::CallbackService {
         Answer(response, milliseconds(0));
       } else {
         const double x0 = request_.step().state(0);
-        response.mutable_result()->set_status(v1::SOLVE_STATUS_CONVERGED);
-        response.mutable_result()->set_has_plan(true);
-        response.mutable_result()->set_objective(x0);
-        response.mutable_result()->add_inputs(x0);
+        if (service_->superseded(attach_, x0)) {
+          response.mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
+        } else {
+          response.mutable_result()->set_status(v1::SOLVE_STATUS_CONVERGED);
+          response.mutable_result()->set_has_plan(true);
+          response.mutable_result()->set_objective(x0);
+          response.mutable_result()->add_inputs(x0);
+        }
         const milliseconds delay = service_->delay(attach_, x0);
         if (delay.count() >= 0) Answer(response, delay);
       }
@@ -227,6 +233,61 @@ TEST_F(ControlPeriodTest, KHeldPeriodsInARowRecreateTheSessionFromTheSpecTheAnsw
   // session was re-created from it; the later steps were never answered, so not from them.
   EXPECT_EQ(service_.attach_spec(1).initial_state().mean(0), 1.0);
   EXPECT_EQ((*session)->late_answers(), 1);
+}
+
+// The server answers SUPERSEDED for a newer step at once, while an older one is still being
+// solved: that answer overtakes the older step's result, which must still reach the spec.
+TEST_F(ControlPeriodTest, ASupersededAnswerAheadOfAnEarlierResultLeavesThatResultInTheSpec) {
+  const milliseconds period(50);
+  // On the first stream: state 1 solved after 3 periods, state 2 superseded after 1.1
+  // periods (both after their own step was held), nothing else. The second answers all.
+  service_.superseded = [](int attach, double x0) { return attach == 1 && x0 == 2.0; };
+  service_.delay = [&](int attach, double x0) {
+    if (attach > 1) return milliseconds(0);
+    if (x0 == 1.0) return 3 * period;
+    if (x0 == 2.0) return period + period / 10;
+    return milliseconds(-1);
+  };
+  auto session = client_->OpenSession(spec_, {}, ControlPeriod{.period = period, .held_periods_to_reconnect = 3});
+  ASSERT_TRUE(session.ok()) << session.status();
+  absl::StatusOr<v1::SolveResult> result;
+  double x0 = 1.0;
+  for (int step = 0; step < 100; ++step, x0 += 1.0) {
+    result = (*session)->Step(StepAt(x0));
+    ASSERT_TRUE(result.ok()) << result.status();
+    if (result->status() != v1::SOLVE_STATUS_HELD) break;
+  }
+  EXPECT_EQ(result->objective(), x0);
+  ASSERT_EQ(service_.attaches(), 2);
+  EXPECT_EQ(service_.attach_spec(1).initial_state().mean(0), 1.0)
+      << "state 1's result, which came after state 2's SUPERSEDED, was not applied to the spec";
+  EXPECT_EQ((*session)->late_answers(), 2);
+}
+
+// A server that answers every step, only later than the period: every step is held, the
+// late answers show the stream is alive, and it is kept (re-creating the session would
+// only lose the warm start and add work to a server that is already behind).
+TEST_F(ControlPeriodTest, AServerSlowerThanThePeriodKeepsItsStream) {
+  const milliseconds period(40);
+  service_.delay = [&](int, double) { return period + period / 2; };
+  auto session = client_->OpenSession(spec_, {}, ControlPeriod{.period = period, .held_periods_to_reconnect = 3});
+  ASSERT_TRUE(session.ok()) << session.status();
+  for (int step = 1; step <= 12; ++step) {
+    absl::StatusOr<v1::SolveResult> result = (*session)->Step(StepAt(step));
+    ASSERT_TRUE(result.ok()) << result.status();
+    EXPECT_EQ(result->status(), v1::SOLVE_STATUS_HELD) << "step " << step;
+  }
+  EXPECT_EQ((*session)->reconnects(), 0);
+  EXPECT_EQ(service_.attaches(), 1);
+  EXPECT_GE((*session)->late_answers(), 8);
+}
+
+TEST_F(ControlPeriodTest, AClosedSessionRefusesSteps) {
+  auto session = client_->OpenSession(spec_, {}, ControlPeriod{.period = milliseconds(50)});
+  ASSERT_TRUE(session.ok()) << session.status();
+  EXPECT_TRUE((*session)->Close().ok());
+  absl::StatusOr<v1::SolveResult> result = (*session)->Step(StepAt(1.0));
+  EXPECT_EQ(result.status().code(), absl::StatusCode::kFailedPrecondition);
 }
 
 TEST_F(ControlPeriodTest, WithoutAPeriodAStepWaitsForItsAnswer) {

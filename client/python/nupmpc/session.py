@@ -22,6 +22,7 @@ import math
 import queue
 import threading
 import time
+from collections import deque
 
 import grpc
 
@@ -39,13 +40,19 @@ _END = object()
 MAX_BACKOFF_S = 0.5
 MAX_ATTEMPT_TIMEOUT_S = 1.0
 STEPPING_S = 1.0
-# Sent steps whose answer has not come that are remembered (for the spec) at most.
+# Sent steps whose answer has not come that are remembered (for the spec) at most (and at
+# least 2 K: past K the stream counts as broken anyway).
 MAX_UNANSWERED = 256
+# Reconnect attempts kept in stats.attempt_log with a period (no overall budget: an outage
+# may last for ever).
+ATTEMPT_LOG_LENGTH = 100
 
 
 def held_periods_to_reconnect(period_s, given=None):
     """K: held steps in a row after which the stream counts as broken."""
-    if given:
+    if given is not None:
+        if int(given) != given or given < 1:
+            raise ValueError(f"held_periods: must be an integer >= 1, got {given!r}")
         return int(given)
     return max(3, math.ceil(1.0 / period_s))
 
@@ -65,16 +72,54 @@ def broken_stream_error(error, what):
     return typed
 
 
+class _NewestRequest:
+    """The request iterator of a Control call: gRPC's thread takes the next request when
+    it can write, and a request put while the previous one still waits replaces it (the
+    network stalls): the replaced one never reaches the server, as the server's own "newest
+    state wins" would have treated it, and its report of held periods goes with the new one."""
+
+    def __init__(self):
+        self._cond = threading.Condition()
+        self._waiting = None
+        self._ended = False
+
+    def put(self, request):
+        """Queues `request`; returns the sequence of the request it replaced, if any."""
+        with self._cond:
+            dropped = self._waiting
+            if dropped is not None and dropped is not _END:
+                request.held_periods += dropped.held_periods
+            self._waiting = request
+            self._cond.notify()
+        return None if dropped is None or dropped is _END else dropped.sequence
+
+    def end(self):
+        with self._cond:
+            self._ended = True
+            self._cond.notify()
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        with self._cond:
+            self._cond.wait_for(lambda: self._waiting is not None or self._ended)
+            if self._waiting is None:
+                raise StopIteration
+            request, self._waiting = self._waiting, None
+            return request
+
+
 class _Stream:
-    """One Control call: requests through a queue (gRPC's thread writes them, so a stalled
-    network never blocks a step), responses read by a thread of its own into an inbox, so
-    that a step can stop waiting at its deadline."""
+    """One Control call: requests through a one-slot iterator (gRPC's thread writes them,
+    so a stalled network never blocks a step), responses read by a thread of its own into
+    an inbox, so that a step can stop waiting at its deadline."""
 
     def __init__(self, channel):
-        self._requests = queue.Queue()
+        self._requests = _NewestRequest()
         self._inbox = queue.Queue()
         self.ended = False
-        self.call = pb_grpc.MpcServiceStub(channel).Control(iter(self._requests.get, _END))
+        self.call = pb_grpc.MpcServiceStub(channel).Control(self._requests)
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self):
@@ -88,7 +133,8 @@ class _Stream:
         self._inbox.put((_END, error))
 
     def send(self, request):
-        self._requests.put(request)
+        """Sends `request`; returns the sequence of an unsent one it replaced, if any."""
+        return self._requests.put(request)
 
     def receive(self, what, deadline=None):
         """The next response; None once `deadline` (time.monotonic) has passed; raises the
@@ -105,7 +151,7 @@ class _Stream:
 
     def close(self, timeout_s=None):
         """Half-closes and waits (at most timeout_s) for the server to end the call."""
-        self._requests.put(_END)
+        self._requests.end()
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         try:
             while self.receive("close", deadline) is not None:
@@ -115,7 +161,7 @@ class _Stream:
         self.call.cancel()
 
     def cancel(self):
-        self._requests.put(_END)
+        self._requests.end()
         self.call.cancel()
 
 
@@ -166,14 +212,18 @@ class Session:
         self.consecutive_held = 0
         self.late_answers = 0
         self._unreported_held = 0
+        self._silent_periods = 0  # held periods in a row without any answer (the K rule)
         self._closing = False
         self._break_cause = None
         self._broken_at = self._last_step_at = time.monotonic()
         with self._cond:
             self._stream, self.id = _attach(self._channel, self._spec, self._next_sequence(),
                                             self._options.attempt_timeout_s)
+        self._reconnector = None
         if period:
-            threading.Thread(target=self._reconnect_loop, daemon=True).start()
+            self.stats.attempt_log = deque(maxlen=ATTEMPT_LOG_LENGTH)
+            self._reconnector = threading.Thread(target=self._reconnect_loop, daemon=True)
+            self._reconnector.start()
 
     @property
     def spec(self):
@@ -212,14 +262,19 @@ class Session:
 
     def _take_late_answer(self, response):
         with self._cond:
+            self._silent_periods = 0  # the stream is alive, only slower than the period
             step = self._unanswered.get(response.sequence)
             if step is None:
                 return
             self.late_answers += 1
-            # The server applied the step (unless it refused it): so does the spec.
-            if response.error_code == 0:
-                apply_step_to_spec(step, response.result, self._spec)
-            # Answers come in order: the steps before this one will not be answered any more.
+            if response.error_code != 0 or response.result.status == pb.SOLVE_STATUS_SUPERSEDED:
+                # A refusal or a SUPERSEDED answer comes at once, ahead of the solve in
+                # progress of an earlier step: only this step is settled, nothing applied.
+                del self._unanswered[response.sequence]
+                return
+            # The server applied the step: so does the spec. Solves run one at a time and
+            # answers of earlier steps were sent before this one's: none is still to come.
+            apply_step_to_spec(step, response.result, self._spec)
             for sequence in [s for s in self._unanswered if s <= response.sequence]:
                 del self._unanswered[sequence]
 
@@ -232,16 +287,19 @@ class Session:
                 raise Unavailable("not connected")
             sequence = self._next_sequence()
             self._unanswered[sequence] = step
-            if len(self._unanswered) > MAX_UNANSWERED:
+            if len(self._unanswered) > max(MAX_UNANSWERED, 2 * (self._held_periods or 0)):
                 del self._unanswered[min(self._unanswered)]
-            stream.send(pb.ControlRequest(sequence=sequence, step=step, held_periods=self._unreported_held))
+            dropped = stream.send(pb.ControlRequest(sequence=sequence, step=step,
+                                                    held_periods=self._unreported_held))
             self._unreported_held = 0
+            if dropped is not None:
+                self._unanswered.pop(dropped, None)  # never sent: nothing of it applies
         while True:
             try:
                 response = stream.receive("read", deadline)
-            except NupmpcError:
+            except NupmpcError as error:
                 with self._cond:
-                    self._unanswered.clear()  # the session is gone with its stream
+                    self._break(stream, error)  # the session is gone with its stream
                 raise
             if response is None:
                 return None  # held: the answer may still come
@@ -249,6 +307,7 @@ class Session:
                 self._take_late_answer(response)
                 continue
             with self._cond:
+                self._silent_periods = 0
                 self._unanswered.pop(sequence, None)
                 if response.error_code != 0:
                     raise error_from_code(response.error_code, response.error_message)
@@ -319,8 +378,12 @@ class Session:
             self.held_steps += 1
             self.consecutive_held += 1
             self._unreported_held += 1  # told the server with the next step (ControlRequest.held_periods)
-            if stream is not None and self.consecutive_held >= self._held_periods:
-                self._break(stream, Unavailable(f"no answer in {self.consecutive_held} consecutive periods"))
+            # Late answers reset _silent_periods: a live server slower than the period keeps
+            # its stream (and its warm start); only one that answers nothing is left.
+            if stream is not None:
+                self._silent_periods += 1
+                if self._silent_periods >= self._held_periods:
+                    self._break(stream, Unavailable(f"no answer in {self._silent_periods} periods in a row"))
         return held_result()
 
     def _reconnect_loop(self):
@@ -338,7 +401,8 @@ class Session:
                     return
                 if attempt == 0:
                     backoff = Backoff(options)
-                wait = backoff.next()
+                # Capped after the jitter too: at most MAX_BACKOFF_S between attempts.
+                wait = min(backoff.next(), MAX_BACKOFF_S)
                 if self._cond.wait_for(lambda: self._closing, timeout=wait):
                     return
                 self._renew_channel()
@@ -348,8 +412,9 @@ class Session:
                 try:
                     stream, session_id = _attach(channel, spec, sequence, options.attempt_timeout_s)
                     error = None
-                except NupmpcError as e:
-                    stream, error = None, e
+                except Exception as e:  # noqa: BLE001 - a channel closed under it too: the thread must live on
+                    stream, error = None, e if isinstance(e, NupmpcError) else Unavailable(f"reconnect attempt: {e}")
+                    error.__traceback__ = None  # kept in the attempt log: no frames with it
                 finally:
                     self._cond.acquire()
                 attempt += 1
@@ -357,7 +422,7 @@ class Session:
                 self.stats.attempts += 1
                 if error is None and not self._closing:
                     self._stream, self.id = stream, session_id
-                    self.consecutive_held, attempt = 0, 0
+                    self._silent_periods, attempt = 0, 0
                     self.stats.reconnects += 1
                     self.stats.total_s += elapsed
                     self.stats.longest_s = max(self.stats.longest_s, elapsed)
@@ -369,7 +434,14 @@ class Session:
                 if error is not None:
                     self._break_cause = error
                 if o.on_attempt:
-                    o.on_attempt(report)
+                    # Not under the lock: a slow callback must not hold the steps up.
+                    self._cond.release()
+                    try:
+                        o.on_attempt(report)
+                    except Exception:  # noqa: BLE001 - the caller's callback must not end reconnecting
+                        pass
+                    finally:
+                        self._cond.acquire()
 
     def step(self, x=None, references=None, bounds=None, input_references=None, input_bounds=None, shift=False,
              warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None, deadline=None):
@@ -388,6 +460,8 @@ class Session:
         step = build_step(self._spec, x, references, bounds, input_references, input_bounds, shift, warm_start,
                           max_iterations, time_limit_ms, previous_input, model)
         with self._step_lock:
+            if self._closing:
+                raise error_from_code(grpc.StatusCode.FAILED_PRECONDITION, "the session was closed")
             start = time.perf_counter()
             if self._period:
                 result = self._step_in_period(step, deadline or time.monotonic() + self._period)
@@ -397,11 +471,16 @@ class Session:
         return Plan(result, self._dims, round_trip_ms)
 
     def close(self):
-        """Ends the stream (the server closes the session). With a period, waits at most a
-        second for the server's goodbye."""
+        """Ends the stream (the server closes the session); later steps raise. With a
+        period, returns within about two seconds (a reconnect attempt in flight ends first,
+        then the server's goodbye is awaited for a second)."""
+        with self._step_lock:
+            with self._cond:
+                self._closing = True
+                self._cond.notify_all()
+            if self._reconnector is not None:
+                self._reconnector.join()
         with self._step_lock, self._cond:
-            self._closing = True
-            self._cond.notify_all()
             if self._stream is not None:
                 self._stream.close(1.0 if self._period else None)
                 self._stream = None
