@@ -42,7 +42,13 @@ Session::Session(Client* client, v1::ProblemSpec spec, ReconnectOptions reconnec
       reconnect_(std::move(reconnect)),
       period_(period),
       channel_(client->channel_),
-      spec_(std::move(spec)) {}
+      spec_(std::move(spec)) {
+  // The server learns the period as the session's deadline (ProblemSpec.timing), unless
+  // the spec sets one of its own.
+  if (period_.period.count() > 0 && spec_.timing().period_ms() == 0.0) {
+    spec_.mutable_timing()->set_period_ms(static_cast<double>(period_.period.count()));
+  }
+}
 
 Session::~Session() { (void)Close(); }
 

@@ -43,7 +43,8 @@ asan_stage() {
                 service_stream_bounds_test service_malformed_bytes_test memory_budget_test auth_test
                 log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
                 hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test
-                listen_probe_test http_listener_test metrics_port_hostile_test client_control_period_test)
+                listen_probe_test http_listener_test metrics_port_hostile_test client_control_period_test
+                service_deadline_test)
   targets=()
   for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
   cmake --build build-asan -j "$jobs" "${targets[@]}"

@@ -11,7 +11,7 @@ absl::StatusOr<core::SolveSummary> StepAsTheServerDoes(server::BuiltSession& ses
   absl::StatusOr<core::StepUpdate> step = server::StepUpdateFromProto(message, solver.dimensions());
   if (!step.ok()) return step.status();
   absl::StatusOr<core::SolveLimits> limits =
-      server::SolveLimitsFor(session.default_time_limit_ms, &message, server::CallContext{});
+      server::SolveLimitsFor(session.timing.default_time_limit_ms, &message, server::CallContext{});
   if (!limits.ok()) return limits.status();
   if (absl::Status applied = server::AsStepError(solver.Apply(*step)); !applied.ok()) return applied;
   switch (message.warm_start()) {

@@ -87,6 +87,17 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
   WriteHistogram(out, "nupmpc_step_latency_seconds", "From a solve's arrival at the server to its answer.",
                  m.latency_seconds());
   WriteHistogram(out, "nupmpc_solve_iterations", "Message-passing passes per solve.", m.iterations());
+  out.Family("nupmpc_step_deadlines_total", "counter",
+             "Steps with a deadline (Step.budget_ms or the session's Timing.period_ms), by outcome: met, "
+             "queued_past_deadline (answered without a plan, or solved late), solve_too_long.");
+  for (int o = 1; o < Metrics::kDeadlineOutcomeCount; ++o) {
+    const auto outcome = static_cast<v1::DeadlineOutcome>(o);
+    out.Sample("nupmpc_step_deadlines_total",
+               {{"outcome", LowerSuffix(v1::DeadlineOutcome_Name(outcome), "DEADLINE_OUTCOME_")}},
+               static_cast<double>(m.deadlines(outcome)));
+  }
+  WriteHistogram(out, "nupmpc_step_deadline_slack_seconds",
+                 "Time from a step's answer to its deadline (negative: after it).", m.deadline_slack_seconds());
   WriteErrors(out, m);
 
   const SessionRegistry& sessions = state.registry;
@@ -104,7 +115,8 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
           state.auth != nullptr ? static_cast<double>(state.auth->refused_total()) : 0.0);
   out.Family("nupmpc_control_stream_ends_total", "counter",
              "Control streams ended, by cause: client_closed (half-close), client_gone (cancelled or reset while the "
-             "client was active), keepalive (a silent client found by keepalive pings), server_ended (an error).");
+             "client was active), keepalive (cancelled after the client was silent past --keepalive_timeout_s: a "
+             "vanished client found by keepalive pings, by this rule of thumb), server_ended (an error).");
   for (int e = 0; e < kStreamEndCount; ++e) {
     const auto end = static_cast<StreamEnd>(e);
     out.Sample("nupmpc_control_stream_ends_total", {{"cause", std::string(StreamEndName(end))}},

@@ -20,6 +20,9 @@ ABSL_FLAG(double, inline_solve_max_ms, 0.5,
           "(env NUPMPC_INLINE_SOLVE_MAX_MS)");
 ABSL_FLAG(int, max_fleet_steps, 10000, "steps in one SolveFleet call (env NUPMPC_MAX_FLEET_STEPS)");
 ABSL_FLAG(int, queue_capacity, 64, "solves waiting for a worker before RESOURCE_EXHAUSTED (env NUPMPC_QUEUE_CAPACITY)");
+ABSL_FLAG(std::string, scheduling, "edf",
+          "the order waiting steps are solved in: edf (earliest deadline first; work without a deadline counts as due "
+          "1 s after it arrived) or fifo (arrival) (env NUPMPC_SCHEDULING)");
 ABSL_FLAG(int, max_sessions, 10000, "maximum open sessions (env NUPMPC_MAX_SESSIONS)");
 ABSL_FLAG(double, session_idle_timeout_s, 600, "close sessions idle this long (env NUPMPC_SESSION_IDLE_TIMEOUT_S)");
 ABSL_FLAG(double, max_queue_wait_ms, 0,
@@ -180,7 +183,8 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                            "list_all_sessions",
                            "slow_solve_ms",
                            "log_format",
-                           "log_level"}) {
+                           "log_level",
+                           "scheduling"}) {
     if (absl::Status s = ApplyEnvironment(name); !s.ok()) return s;
   }
   cli::ParseProgramFlags(ServerProgram(), argc, argv);
@@ -191,6 +195,11 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.inline_solve_max_ms = absl::GetFlag(FLAGS_inline_solve_max_ms);
   o.max_fleet_steps = absl::GetFlag(FLAGS_max_fleet_steps);
   o.queue_capacity = absl::GetFlag(FLAGS_queue_capacity);
+  if (const std::string scheduling = absl::GetFlag(FLAGS_scheduling); scheduling == "fifo") {
+    o.scheduling = WorkerPool::Scheduling::kFifo;
+  } else if (scheduling != "edf") {
+    return absl::InvalidArgumentError(absl::StrCat("--scheduling = ", scheduling, ": must be edf or fifo"));
+  }
   o.max_sessions = absl::GetFlag(FLAGS_max_sessions);
   o.session_idle_timeout_s = absl::GetFlag(FLAGS_session_idle_timeout_s);
   o.session_compact_idle_s = absl::GetFlag(FLAGS_session_compact_idle_s);

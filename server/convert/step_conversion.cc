@@ -92,6 +92,9 @@ absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const
     return absl::InvalidArgumentError(
         absl::StrCat("step.time_limit_ms = ", step.time_limit_ms(), ": must be finite and >= 0"));
   }
+  if (!(step.budget_ms() >= 0.0) || !std::isfinite(step.budget_ms())) {
+    return absl::InvalidArgumentError(absl::StrCat("step.budget_ms = ", step.budget_ms(), ": must be finite and >= 0"));
+  }
   if (step.max_iterations() > static_cast<unsigned>(std::numeric_limits<int>::max())) {
     return absl::InvalidArgumentError("step.max_iterations: too large");
   }

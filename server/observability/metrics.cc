@@ -67,7 +67,8 @@ Metrics::Metrics()
     : queue_wait_({kLatencyBucketsS.begin(), kLatencyBucketsS.end()}),
       solve_({kLatencyBucketsS.begin(), kLatencyBucketsS.end()}),
       latency_({kLatencyBucketsS.begin(), kLatencyBucketsS.end()}),
-      iterations_({kIterationBuckets.begin(), kIterationBuckets.end()}) {}
+      iterations_({kIterationBuckets.begin(), kIterationBuckets.end()}),
+      slack_({kSlackBucketsS.begin(), kSlackBucketsS.end()}) {}
 
 void Metrics::RecordSolve(const v1::SolveResult& result, double queue_wait_s, double latency_s) {
   solves_[SolveIndex(result.status(), result.algorithm())].fetch_add(1, std::memory_order_relaxed);
@@ -75,6 +76,16 @@ void Metrics::RecordSolve(const v1::SolveResult& result, double queue_wait_s, do
   solve_.Observe(result.solve_ms() / 1000.0);
   latency_.Observe(latency_s);
   iterations_.Observe(static_cast<double>(result.iterations()));
+  if (result.deadline() != v1::DEADLINE_OUTCOME_UNSPECIFIED) {
+    deadlines_[static_cast<std::size_t>(std::clamp<int>(result.deadline(), 0, kDeadlineOutcomeCount - 1))].fetch_add(
+        1, std::memory_order_relaxed);
+    slack_.Observe(result.deadline_slack_ms() / 1000.0);
+  }
+}
+
+std::uint64_t Metrics::deadlines(v1::DeadlineOutcome outcome) const {
+  return deadlines_[static_cast<std::size_t>(std::clamp<int>(outcome, 0, kDeadlineOutcomeCount - 1))].load(
+      std::memory_order_relaxed);
 }
 
 void Metrics::RecordError(Rpc rpc, absl::StatusCode code) {

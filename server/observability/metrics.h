@@ -55,9 +55,13 @@ class Metrics {
   static constexpr std::array<double, 14> kLatencyBucketsS = {0.00005, 0.0001, 0.0002, 0.0005, 0.001, 0.002, 0.005,
                                                               0.01,    0.02,   0.05,   0.1,    0.2,   0.5,   1};
   static constexpr std::array<double, 12> kIterationBuckets = {1, 2, 3, 5, 10, 20, 50, 100, 200, 500, 1000, 10000};
-  static constexpr int kStatusCount = 8;     // v1::SolveStatus values a server sends (not HELD)
-  static constexpr int kAlgorithmCount = 4;  // v1::Algorithm values
-  static constexpr int kCodeCount = 17;      // canonical status codes
+  // Seconds a step's answer was handed over before (positive) or after (negative) its deadline.
+  static constexpr std::array<double, 15> kSlackBucketsS = {-1,    -0.1, -0.01, -0.001, 0,   0.0005, 0.001, 0.002,
+                                                            0.005, 0.01, 0.02,  0.05,   0.1, 0.5,    1};
+  static constexpr int kDeadlineOutcomeCount = 4;  // v1::DeadlineOutcome values
+  static constexpr int kStatusCount = 8;           // v1::SolveStatus values a server sends (not HELD)
+  static constexpr int kAlgorithmCount = 4;        // v1::Algorithm values
+  static constexpr int kCodeCount = 17;            // canonical status codes
 
   Metrics();
 
@@ -70,6 +74,9 @@ class Metrics {
   std::uint64_t solves(v1::SolveStatus status, v1::Algorithm algorithm) const;
   std::uint64_t errors(Rpc rpc, absl::StatusCode code) const;
   std::uint64_t errors(absl::StatusCode code) const;  // over every RPC
+  // Steps with a deadline answered with `outcome` (never DEADLINE_OUTCOME_UNSPECIFIED).
+  std::uint64_t deadlines(v1::DeadlineOutcome outcome) const;
+  const Histogram& deadline_slack_seconds() const { return slack_; }
   const Histogram& queue_wait_seconds() const { return queue_wait_; }
   const Histogram& solve_seconds() const { return solve_; }
   const Histogram& latency_seconds() const { return latency_; }
@@ -85,6 +92,8 @@ class Metrics {
   Histogram solve_;
   Histogram latency_;
   Histogram iterations_;
+  std::array<std::atomic<std::uint64_t>, kDeadlineOutcomeCount> deadlines_{};
+  Histogram slack_;
 };
 
 }  // namespace nupmpc::server

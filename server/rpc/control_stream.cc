@@ -298,6 +298,7 @@ std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRe
     QueueWriteLocked(superseded);
   }
   parked_ = std::move(request);
+  parked_received_at_ = Clock::now();
   return TakeParkedLocked();
 }
 
@@ -305,6 +306,7 @@ std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
   if (solving_ || !parked_.has_value()) return std::nullopt;
   std::optional<v1::ControlRequest> step = std::move(parked_);
   parked_.reset();
+  solving_received_at_ = parked_received_at_;
   SetSolvingLocked(true);
   return step;
 }
@@ -335,6 +337,12 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
     // meanwhile (other streams', and this one's next), as a worker would, but without
     // handing each to another thread.
     const bool short_solve = SolvesHere();
+    Clock::time_point received_at;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      received_at = solving_received_at_;
+    }
+    const std::optional<Clock::time_point> due = StepDue(entry_->timing, request.step(), received_at);
     if (short_solve && SessionStrand::TryRunHere(
                            entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },
                            [this, read_after_solve] {
@@ -348,16 +356,16 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
       read_after_solve = false;
       ReadHeldBack();
     }
-    const absl::Status queued =
-        SessionStrand::Submit(entry_->strand, state_->pool,
-                              {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
-                                 self->Solve(std::move(request), queued_at, /*pump=*/true);
-                               },
-                               [self = shared_from_this(), sequence](const absl::Status& refused) {
-                                 self->FailQueuedSolve(sequence, refused);
-                               },
-                               entry_->last_solve_ms.load(std::memory_order_relaxed),
-                               short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker});
+    const absl::Status queued = SessionStrand::Submit(
+        entry_->strand, state_->pool,
+        {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
+           self->Solve(std::move(request), queued_at, /*pump=*/true);
+         },
+         [self = shared_from_this(), sequence](const absl::Status& refused) {
+           self->FailQueuedSolve(sequence, refused);
+         },
+         entry_->last_solve_ms.load(std::memory_order_relaxed),
+         short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker, due});
     if (queued.ok()) return;
     std::optional<v1::ControlRequest> next;
     {
@@ -402,6 +410,11 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
   CallContext call;
   call.deadline = SteadyDeadline(*context_);
   call.cancel = &cancelled_;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    call.received_at = solving_received_at_;
+  }
+  call.send_cost_ms = send_cost_ms_.load(std::memory_order_relaxed);
   v1::ControlResponse response;
   response.set_sequence(request.sequence());
   const absl::Status status = RunCatchingExceptions(
@@ -414,6 +427,7 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (status.ok()) {
+      if (!writing_ && writes_.empty()) timed_write_since_ = Clock::now();  // written at once: a clean sample
       QueueWriteLocked(response);
     } else {
       QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
@@ -499,6 +513,12 @@ void ControlStream::OnWriteDone(bool ok) {
   bool resume_reading = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
+    if (timed_write_since_.has_value()) {
+      const double took_ms = std::chrono::duration<double, std::milli>(Clock::now() - *timed_write_since_).count();
+      const double cost_ms = send_cost_ms_.load(std::memory_order_relaxed);
+      send_cost_ms_.store(0.8 * cost_ms + 0.2 * took_ms, std::memory_order_relaxed);
+      timed_write_since_.reset();
+    }
     writes_.pop_front();
     writing_ = false;
     if (!ok) {  // the client is gone: drop what is left
@@ -521,14 +541,24 @@ void ControlStream::OnCancel() {
 void ControlStream::NoteHeldPeriods(std::uint32_t periods) {
   state_->client_held_periods.fetch_add(periods);
   std::shared_ptr<SessionEntry> entry;
+  std::uint64_t to_log = 0;
   {
     std::lock_guard<std::mutex> lock(mu_);
     entry = entry_;
+    // One line a second at most: a client that misses every other period would otherwise
+    // write one per step.
+    held_not_logged_ += periods;
+    const Clock::time_point now = Clock::now();
+    if (now - held_logged_at_ >= std::chrono::seconds(1)) {
+      to_log = std::exchange(held_not_logged_, 0);
+      held_logged_at_ = now;
+    }
   }
+  if (to_log == 0) return;
   const LogContext log_context(entry != nullptr ? absl::string_view(entry->id) : absl::string_view(),
                                caller_.principal);
   spdlog::info("session {}: its client held {} control periods without an answer in time",
-               entry != nullptr ? entry->id : std::string("(attaching)"), periods);
+               entry != nullptr ? entry->id : std::string("(attaching)"), to_log);
 }
 
 StreamEnd ControlStream::EndCause() {

@@ -158,8 +158,16 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   Reading reading_ = Reading::kActive;
   std::shared_ptr<SessionEntry> entry_;       // set by the first message
   std::optional<v1::ControlRequest> parked_;  // the newest step not yet started
-  bool solving_ = false;                      // a step is on the pool (in its session's strand)
-  std::deque<grpc::ByteBuffer> writes_;       // serialized answers; front is being written when writing_
+  Clock::time_point parked_received_at_{};    // when parked_ arrived
+  Clock::time_point solving_received_at_{};   // when the step being solved arrived (its deadline counts from it)
+  // What handing an answer to gRPC takes (from the end of its solve to OnWriteDone, for
+  // answers written at once), exponentially weighted: kept free of a step's deadline.
+  std::atomic<double> send_cost_ms_{0.05};
+  std::optional<Clock::time_point> timed_write_since_;  // the answer being timed, if any
+  std::uint64_t held_not_logged_ = 0;                   // periods the client reported, not yet logged
+  Clock::time_point held_logged_at_{};                  // the last such log line
+  bool solving_ = false;                                // a step is on the pool (in its session's strand)
+  std::deque<grpc::ByteBuffer> writes_;                 // serialized answers; front is being written when writing_
   bool writing_ = false;
   // Reads decided on (under mu_) but not started yet (ReadNext counts it down once its
   // StartRead is issued): the stream must not finish in between, as no read may start

@@ -98,6 +98,7 @@ class FleetRun : public std::enable_shared_from_this<FleetRun> {
         {.run = solve,
          .fail = [self = shared_from_this(), i](const absl::Status& refused) { self->AnswerError(i, refused); },
          .expected_ms = entry->last_solve_ms.load(std::memory_order_relaxed),
+         .due = StepDue(entry->timing, request_.steps(static_cast<int>(i)).step(), *context_.received_at),
          .superseded = [self = shared_from_this(), i] { return self->Superseded(i); },
          .answer_superseded = [self = shared_from_this(), i] { self->AnswerSuperseded(i); }});
     if (!queued.ok()) AnswerError(i, queued);

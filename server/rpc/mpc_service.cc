@@ -80,7 +80,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
   call->RunOnPool(
       "Solve", result,
       [entry = *std::move(entry), step, result](const CallContext& c) { return SolveStep(*entry, *step, c, result); },
-      session);
+      session, step);
   return call;
 }
 

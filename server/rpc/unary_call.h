@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <functional>
+#include <optional>
 #include <string>
 #include <type_traits>
 
@@ -66,6 +67,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
   const CallContext& Context() {
     call_.deadline = SteadyDeadline(*context_);
     call_.cancel = &cancelled_;
+    call_.received_at = started_at_;
     return call_;
   }
   const Request& request() const { return request_; }
@@ -85,15 +87,18 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
   // `session`'s strand when given (one at a time per session), catching what escapes it.
   // `solve_result`: where `work` writes a solve's result, recorded in the solve metrics
   // when the work succeeds (nullptr: not a solve). A client that cancels raises the flag
-  // the solver checks.
+  // the solver checks. `step`: the session's step this work solves, whose deadline orders
+  // the pool's queue (step_deadline.h).
   void RunOnPool(const char* name, const v1::SolveResult* solve_result,
-                 std::function<absl::Status(const CallContext&)> work, const SessionEntry* session = nullptr) {
+                 std::function<absl::Status(const CallContext&)> work, const SessionEntry* session = nullptr,
+                 const v1::Step* step = nullptr) {
     if (state_->draining.load()) {
       Reply(absl::UnavailableError("the server is shutting down"));
       return;
     }
-    call_.deadline = SteadyDeadline(*context_);
-    call_.cancel = &cancelled_;
+    Context();
+    const std::optional<Clock::time_point> due =
+        session != nullptr && step != nullptr ? StepDue(session->timing, *step, started_at_) : std::nullopt;
     const auto queued_at = Clock::now();
     auto run = [this, name, solve_result, work = std::move(work), queued_at, session] {
       const auto started_at = Clock::now();
@@ -104,11 +109,14 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
       }
       Reply(status);
     };
-    const absl::Status queued = session == nullptr
-                                    ? state_->pool.TrySubmit(std::move(run))
-                                    : SessionStrand::Submit(session->strand, state_->pool,
-                                                            {std::move(run), [this](absl::Status s) { Reply(s); },
-                                                             session->last_solve_ms.load(std::memory_order_relaxed)});
+    const absl::Status queued =
+        session == nullptr
+            ? state_->pool.TrySubmit(std::move(run))
+            : SessionStrand::Submit(session->strand, state_->pool,
+                                    {.run = std::move(run),
+                                     .fail = [this](absl::Status s) { Reply(s); },
+                                     .expected_ms = session->last_solve_ms.load(std::memory_order_relaxed),
+                                     .due = due});
     if (!queued.ok()) Reply(queued);
   }
 

@@ -47,7 +47,7 @@ absl::Status SessionStrand::Start(const std::shared_ptr<SessionStrand>& strand, 
         run = nullptr;  // release the call's state before the next task starts
         StartNext(strand, pool);
       },
-      task.expected_ms, task.placement);
+      task.expected_ms, task.placement, task.due);
 }
 
 void SessionStrand::StartNext(const std::shared_ptr<SessionStrand>& strand, WorkerPool& pool) {
@@ -110,7 +110,7 @@ void SessionStrand::RunExclusive(const std::shared_ptr<SessionStrand>& strand, W
     std::lock_guard<std::mutex> lock(strand->mu_);
     if (strand->busy_) {
       // StartNext calls `fail` with the strand still held, so the work is exclusive either way.
-      strand->waiting_.push_front({work, [work](const absl::Status&) { work(); }, 0.0});
+      strand->waiting_.push_front({.run = work, .fail = [work](const absl::Status&) { work(); }, .expected_ms = 0.0});
       return;
     }
     strand->busy_ = true;

@@ -5,6 +5,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include "absl/status/status.h"
 #include "server/scheduling/worker_pool.h"
@@ -29,6 +30,7 @@ class SessionStrand {
     std::function<void(absl::Status)> fail;  ///< answers the call if the pool refuses it later
     double expected_ms = -1.0;               ///< for the pool's admission (WorkerPool::TrySubmit)
     WorkerPool::Placement placement = WorkerPool::Placement::kWorker;
+    std::optional<WorkerPool::Clock::time_point> due = std::nullopt;  ///< its answer's deadline (the pool's order)
     // Steps that a newer one of the session replaces (SolveFleet's "newest state wins"):
     // whether a newer step has been accepted since, and how this one is then answered
     // without running. Each Submit removes the waiting tasks that say so first, so stale

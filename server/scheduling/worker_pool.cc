@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <exception>
+#include <iterator>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -10,18 +11,27 @@
 
 namespace nupmpc::server {
 
-WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms, int cores)
+WorkerPool::WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms, int cores, Scheduling scheduling)
     : threads_started_(threads),
       cores_(std::max(cores, threads)),
       capacity_(queue_capacity),
-      max_queue_wait_ms_(max_queue_wait_ms) {
+      max_queue_wait_ms_(max_queue_wait_ms),
+      scheduling_(scheduling) {
   threads_.reserve(threads);
   for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { Run(); });
 }
 
 WorkerPool::~WorkerPool() { Shutdown(); }
 
-absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_ms, Placement placement) {
+void WorkerPool::InsertLocked(Task task) {
+  // From the back: most tasks arrive in order (no deadline, or one period ahead).
+  auto at = queue_.end();
+  while (at != queue_.begin() && std::prev(at)->order > task.order) --at;
+  queue_.insert(at, std::move(task));
+}
+
+absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_ms, Placement placement,
+                                   std::optional<Clock::time_point> due) {
   bool wake;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -37,7 +47,10 @@ absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_m
           wait_ms, max_queue_wait_ms_));
     }
     if (expected_ms < 0.0) expected_ms = average_task_ms_;
-    queue_.push_back(Task{std::move(task), expected_ms, placement});
+    const Clock::time_point now = Clock::now();
+    Clock::time_point order = now;
+    if (scheduling_ == Scheduling::kEarliestDeadlineFirst) order = due.value_or(now + kNoDeadlineGrace);
+    InsertLocked(Task{std::move(task), expected_ms, placement, order});
     queued_ms_ += expected_ms;
     // With every core taken a woken worker would only go back to sleep; ReleaseCore wakes one.
     wake = running_ < cores_ && here_waiting_ == 0;

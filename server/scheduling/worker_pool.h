@@ -2,11 +2,13 @@
 #define NUPMPC_SERVER_SCHEDULING_WORKER_POOL_H_
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -28,11 +30,23 @@ namespace nupmpc::server {
 // pool's cores() (the workers, or more: ServerState's SolverCores); workers start a queued
 // task only while fewer than cores() tasks run in all. So the solves running at once never
 // exceed the cores the pool was sized for.
+//
+// Queued tasks are taken earliest deadline first (a step's answer is due at its deadline,
+// server/sessions/step_deadline.h): on one core EDF meets every deadline any order would.
+// Work without a deadline (unary calls, steps of sessions without a period) counts as due
+// kNoDeadlineGrace after it arrived, so it yields to steps due sooner but is never starved;
+// among equal deadlines, arrival order. Scheduling::kFifo takes tasks by arrival alone (the
+// load test compares the two).
 class WorkerPool {
  public:
+  using Clock = std::chrono::steady_clock;
+  enum class Scheduling { kEarliestDeadlineFirst, kFifo };
+  static constexpr std::chrono::milliseconds kNoDeadlineGrace{1000};
+
   // `cores` (at least `threads`; 0: `threads`): solves that may run at once, on workers and
   // on TryRunHere callers together.
-  WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms = 0.0, int cores = 0);
+  WorkerPool(int threads, int queue_capacity, double max_queue_wait_ms = 0.0, int cores = 0,
+             Scheduling scheduling = Scheduling::kEarliestDeadlineFirst);
   ~WorkerPool();  // Shutdown()
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;
@@ -42,10 +56,10 @@ class WorkerPool {
   enum class Placement { kWorker, kAnyCoreHolder };
 
   // Queues a task expected to run `expected_ms` (negative: unknown, the recent average of
-  // the pool's tasks is used). RESOURCE_EXHAUSTED when refused as above, UNAVAILABLE when
-  // the pool is shut down.
+  // the pool's tasks is used), due at `due` (none: see the class comment).
+  // RESOURCE_EXHAUSTED when refused as above, UNAVAILABLE when the pool is shut down.
   absl::Status TrySubmit(std::function<void()> task, double expected_ms = -1.0,
-                         Placement placement = Placement::kWorker);
+                         Placement placement = Placement::kWorker, std::optional<Clock::time_point> due = {});
   // Runs `task` now on the calling thread and returns true if a core is free for it (fewer
   // than cores() tasks run) and nothing is queued (queued tasks go first); else returns
   // false without running it. With `drain_ms` > 0, the thread that holds a core also
@@ -63,6 +77,7 @@ class WorkerPool {
   int threads() const { return threads_started_; }
   int cores() const { return cores_; }
   int queue_capacity() const { return capacity_; }
+  Scheduling scheduling() const { return scheduling_; }
   int queued() const;
   // Callers of TryRunHere waiting for a core now.
   int callers_waiting() const;
@@ -78,7 +93,10 @@ class WorkerPool {
     std::function<void()> run;
     double expected_ms = 0.0;
     Placement placement = Placement::kWorker;
+    Clock::time_point order;  ///< the queue is sorted by this (stable): deadline, or arrival
   };
+  // Where a task with `order` goes: after every queued task with an order not later.
+  void InsertLocked(Task task);
 
   void Run();
   // Runs a queued task; a throwing task is logged, not propagated (it answers its own call).
@@ -97,6 +115,7 @@ class WorkerPool {
   const int cores_;            ///< tasks that may run at once (workers' and callers')
   const int capacity_;
   const double max_queue_wait_ms_;
+  const Scheduling scheduling_;
   mutable std::mutex mu_;
   std::condition_variable ready_;      ///< workers: work queued and a core free
   std::condition_variable core_free_;  ///< threads waiting in TryRunHere for a core

@@ -19,8 +19,12 @@ namespace nupmpc::server {
 using Clock = std::chrono::steady_clock;
 
 struct CallContext {
-  std::optional<Clock::time_point> deadline;
+  std::optional<Clock::time_point> deadline;  ///< the RPC's (gRPC deadline): after it nobody listens
   const std::atomic<bool>* cancel = nullptr;
+  // A step's: when the server received it, from which its answer's deadline is counted
+  // (Step.budget_ms, Timing.period_ms), and what sending the answer is expected to take.
+  std::optional<Clock::time_point> received_at = std::nullopt;
+  double send_cost_ms = 0.0;
 };
 
 // A solve's limits from the session's time limit (`session_limit_ms`, 0: none), the step's

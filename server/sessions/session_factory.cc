@@ -58,7 +58,7 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
   } else {
     NUPMPC_ASSIGN_OR_RETURN(built.solver, LinearSession(spec, limits));
   }
-  built.default_time_limit_ms = spec.options().time_limit_ms();
+  NUPMPC_ASSIGN_OR_RETURN(built.timing, SessionTimingFromSpec(spec));
   reserved.ShrinkTo(cost.session_bytes());
   built.memory.scratch = reserved.Split(cost.scratch_bytes);
   built.memory.scratch_bytes = built.memory.scratch.bytes();
@@ -75,8 +75,8 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::Proble
   NUPMPC_RETURN_IF_ERROR(registry->CheckQuota(owner));
   NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, limits, gp_models, &call, budget));
   NUPMPC_RETURN_IF_ERROR(CheckCallStillWanted(call, "the session was built"));
-  return registry->Add(std::move(built.solver), built.default_time_limit_ms, owned_by_stream, std::move(built.memory),
-                       requested_id, owner);
+  return registry->Add(std::move(built.solver), built.timing, owned_by_stream, std::move(built.memory), requested_id,
+                       owner);
 }
 
 }  // namespace nupmpc::server

@@ -21,7 +21,7 @@ namespace nupmpc::server {
 
 struct BuiltSession {
   std::unique_ptr<core::MpcSession> solver;
-  double default_time_limit_ms = 0.0;
+  SessionTiming timing;
   SessionMemory memory;  ///< its share of the budget (empty without one)
 };
 

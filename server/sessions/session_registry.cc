@@ -38,13 +38,13 @@ std::string SessionRegistry::NewId() {
 }
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
-                                                                   double default_time_limit_ms, bool owned_by_stream,
+                                                                   SessionTiming timing, bool owned_by_stream,
                                                                    SessionMemory memory, absl::string_view requested_id,
                                                                    SessionOwner owner) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owner = std::move(owner);
   entry->owned_by_stream = owned_by_stream;
-  entry->default_time_limit_ms = default_time_limit_ms;
+  entry->timing = timing;
   entry->algorithm = solver->algorithm();
   const core::Dimensions dims = solver->dimensions();
   entry->dims.set_num_states(dims.num_states);

@@ -17,6 +17,7 @@
 #include "server/auth/caller.h"
 #include "server/scheduling/session_strand.h"
 #include "server/sessions/memory_budget.h"
+#include "server/sessions/step_deadline.h"
 
 namespace nupmpc::server {
 
@@ -38,8 +39,8 @@ struct SessionEntry {
   std::string id;
   SessionOwner owner;  ///< fixed at creation: who may use it (server/auth/caller.h)
   bool owned_by_stream = false;
-  double default_time_limit_ms = 0.0;  ///< from the spec's options
-  v1::Dimensions dims;                 ///< fixed at creation: the caller's (MpcSession::dimensions)
+  SessionTiming timing;  ///< from the spec: time limit, period
+  v1::Dimensions dims;   ///< fixed at creation: the caller's (MpcSession::dimensions)
 
   std::unique_ptr<core::MpcSession> solver;  ///< strand; holds the session's problem
   bool compacted = false;                    ///< strand: solver scratch released while idle
@@ -60,6 +61,9 @@ struct SessionEntry {
   // Its thread's CPU time (ThreadCpuTime), which a shared core does not inflate: where its
   // next Control step is solved (ControlStream::SolvesHere); -1: not solved yet.
   std::atomic<double> last_solve_cpu_ms{-1.0};
+  // One message-passing pass of its last solve (wall time): the solver checks its time
+  // limit between passes, so a step's deadline leaves it this much room (step_solver.cc).
+  std::atomic<double> last_pass_ms{0.0};
   std::atomic<Clock::rep> last_used{0};
 
   void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }
@@ -92,10 +96,9 @@ class SessionRegistry {
   // gets `requested_id` (a form CheckSessionIdForm accepts: the client drew it, see
   // CreateSessionRequest.session_id) or, when empty, a new random id; ALREADY_EXISTS when
   // `requested_id` is taken.
-  absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver,
-                                                    double default_time_limit_ms, bool owned_by_stream,
-                                                    SessionMemory memory = {}, absl::string_view requested_id = {},
-                                                    SessionOwner owner = {});
+  absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver, SessionTiming timing,
+                                                    bool owned_by_stream, SessionMemory memory = {},
+                                                    absl::string_view requested_id = {}, SessionOwner owner = {});
   // The quota check of Add, for before the work of building a session.
   absl::Status CheckQuota(const SessionOwner& owner) const;
   // INVALID_ARGUMENT for malformed ids, NOT_FOUND for unknown (or closed, or expired) ones

@@ -1,5 +1,8 @@
 #include "server/sessions/step_solver.h"
 
+#include <algorithm>
+#include <optional>
+
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
 #include "server/convert/result_conversion.h"
@@ -7,6 +10,7 @@
 #include "server/scheduling/thread_cpu_time.h"
 #include "server/sessions/model_storage.h"
 #include "server/sessions/session_factory.h"
+#include "server/sessions/step_deadline.h"
 
 namespace nupmpc::server {
 
@@ -32,7 +36,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   entry.Touch();
   core::MpcSession& solver = *entry.solver;
   NUPMPC_ASSIGN_OR_RETURN(const core::StepUpdate update, StepUpdateFromProto(step, solver.dimensions()));
-  NUPMPC_ASSIGN_OR_RETURN(core::SolveLimits limits, SolveLimitsFor(entry.default_time_limit_ms, &step, call));
+  NUPMPC_ASSIGN_OR_RETURN(core::SolveLimits limits, SolveLimitsFor(entry.timing.default_time_limit_ms, &step, call));
   // A refused step leaves the session as it was, its share of the budget included (the
   // core checks an update when it applies it, after the storage for it was reserved).
   const std::int64_t resident_before = entry.memory.resident.bytes();
@@ -57,6 +61,30 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     default:
       break;
   }
+  // The step's deadline (step_deadline.h): the solve gets what is left of it, less the cost
+  // of sending the answer and one pass (the solver looks at its time limit between passes,
+  // so the last one may end a pass after it); one that could not start in time is answered
+  // at once without a plan (its update applied above, as for any answered step) unless the
+  // session wants it solved late.
+  const std::optional<Clock::time_point> due =
+      call.received_at.has_value() ? StepDue(entry.timing, step, *call.received_at) : std::nullopt;
+  bool started_late = false;
+  if (due.has_value()) {
+    const double left_s = std::chrono::duration<double>(*due - Clock::now()).count();
+    if (left_s - call.send_cost_ms * 1e-3 <= 0.0 && !entry.timing.solve_late_steps) {
+      AnswerQueuedPastDeadline(*due, out);
+      entry.Touch();
+      return absl::OkStatus();
+    }
+    started_late = left_s - call.send_cost_ms * 1e-3 <= 0.0;
+    if (!started_late) {
+      // At least a little: a first pass gives an anytime plan if it can finish in time.
+      const double pass_s = entry.last_pass_ms.load(std::memory_order_relaxed) * 1e-3;
+      const double limit_s = std::max(left_s - call.send_cost_ms * 1e-3 - pass_s, 1e-6);
+      limits.time_limit_seconds =
+          limits.time_limit_seconds > 0.0 ? std::min(limits.time_limit_seconds, limit_s) : limit_s;
+    }
+  }
   // Read on every solve, short ones included, although the thread CPU clock is a system
   // call: the reading also brings the scheduler's account of this thread up to date, and
   // without it p99 at 8 streams on one core doubled (README, "Where a step is solved":
@@ -71,7 +99,11 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   entry.last_solve_cpu_ms.store(std::chrono::duration<double, std::milli>(ThreadCpuTime() - cpu_before).count(),
                                 std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
+  if (summary.iterations > 0) {
+    entry.last_pass_ms.store(summary.solve_seconds * 1e3 / summary.iterations, std::memory_order_relaxed);
+  }
   ResultToProto(summary, entry.solution, out);
+  RecordDeadlineOutcome(due, started_late, out);
   entry.Touch();
   return absl::OkStatus();
 }
@@ -79,7 +111,8 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 absl::Status SolveOnce(const v1::ProblemSpec& spec, const SizeLimits& size_limits, const CallContext& call,
                        v1::SolveResult* out, GpModelCache* gp_models, MemoryBudget* budget) {
   NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, size_limits, gp_models, &call, budget));
-  NUPMPC_ASSIGN_OR_RETURN(const core::SolveLimits limits, SolveLimitsFor(built.default_time_limit_ms, nullptr, call));
+  NUPMPC_ASSIGN_OR_RETURN(const core::SolveLimits limits,
+                          SolveLimitsFor(built.timing.default_time_limit_ms, nullptr, call));
   core::Solution solution;
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, built.solver->Solve(limits, &solution));
   ResultToProto(summary, solution, out);

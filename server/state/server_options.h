@@ -10,6 +10,7 @@
 
 #include "server/auth/transport_security.h"
 #include "server/convert/spec_conversion.h"
+#include "server/scheduling/worker_pool.h"
 
 namespace nupmpc::server {
 
@@ -22,6 +23,8 @@ struct ServerOptions {
   double inline_solve_max_ms = 0.5;
   int max_fleet_steps = 10000;  ///< steps in one SolveFleet call
   int queue_capacity = 64;
+  // The order in which waiting steps are taken: earliest deadline first, or arrival.
+  WorkerPool::Scheduling scheduling = WorkerPool::Scheduling::kEarliestDeadlineFirst;
   double max_queue_wait_ms = 0.0;  ///< 0: only queue_capacity bounds the queue
   int max_sessions = 10000;
   double session_idle_timeout_s = 600.0;

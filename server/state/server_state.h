@@ -32,7 +32,7 @@ struct ServerState {
         budget(o.memory_budget_bytes > 0 ? o.memory_budget_bytes : DefaultMemoryBudgetBytes()),
         registry(o.max_sessions, pool,
                  o.max_sessions_per_principal),  // only kept: the pool is built next, and joined first
-        pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms, SolverCores(o)),
+        pool(o.worker_threads, o.queue_capacity, o.max_queue_wait_ms, SolverCores(o), o.scheduling),
         principal_streams(o.max_streams_per_principal) {}
   ServerOptions options;
   MemoryBudget budget;  ///< before the registry: sessions give their reservations back to it

@@ -49,8 +49,8 @@ plant() {
 expect check 0
 plant "nupmpc.v1.Step.state: field 1 removed" '/^  repeated double state = 1;/d'
 plant "nupmpc.v1.Step.reference: field 7 removed" 's/^  repeated double reference = 7;/  reserved 7;/'
-plant "nupmpc.v1.Step.max_iterations: field renumbered from 4 to 9" \
-  's/^  uint32 max_iterations = 4;/  uint32 max_iterations = 9;/'
+plant "nupmpc.v1.Step.max_iterations: field renumbered from 4 to 99" \
+  's/^  uint32 max_iterations = 4;/  uint32 max_iterations = 99;/'
 plant "nupmpc.v1.Step.state: field 1 retyped from repeated double to repeated float" \
   's/^  repeated double state = 1;/  repeated float state = 1;/'
 plant "nupmpc.v1.Step.max_iterations: field 4 retyped from uint32 to optional uint32" \
@@ -97,8 +97,8 @@ cp "$work/baseline.orig" "$baseline"
 
 # An added field: compatible, but `check` fails until `update` has put it into the baseline.
 echo "-- added: Step.planted_extra"
-sed -i 's/^  ModelUpdate model = 8;/&\n  double planted_extra = 9;/' "$api"
-expect check 1 "nupmpc.v1.Step.planted_extra: field 9 added (double)"
+sed -i 's/^  ModelUpdate model = 8;/&\n  double planted_extra = 99;/' "$api"
+expect check 1 "nupmpc.v1.Step.planted_extra: field 99 added (double)"
 expect check 1 "Run \`tests/build/proto_compat_check.py update"
 expect update 0 "wrote proto/api_baseline/nupmpc_v1.txtpb"
 grep -q '"planted_extra"' "$baseline" || { echo "FAIL: update did not write the addition" >&2; exit 1; }

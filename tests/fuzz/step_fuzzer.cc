@@ -24,7 +24,7 @@ std::shared_ptr<SessionEntry> NewSession() {
   if (!built.ok()) nupmpc::fuzz::Violated("the seed spec does not build");
   auto entry = std::make_shared<SessionEntry>();
   entry->solver = std::move(built->solver);
-  entry->default_time_limit_ms = built->default_time_limit_ms;
+  entry->timing = built->timing;
   return entry;
 }
 

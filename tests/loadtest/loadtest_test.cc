@@ -515,7 +515,7 @@ TEST(SessionCompaction, ACompactedSessionContinuesBitIdentically) {
     absl::StatusOr<server::BuiltSession> built = server::BuildSession(w.spec, {});
     ASSERT_TRUE(built.ok()) << built.status();
     absl::StatusOr<std::shared_ptr<server::SessionEntry>> added =
-        registry->Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
+        registry->Add(std::move(built->solver), server::SessionTiming{}, /*owned_by_stream=*/false);
     ASSERT_TRUE(added.ok());
     *entry = *added;
   }

@@ -22,6 +22,11 @@ class Plan:
         self.status = pb.SolveStatus.Name(result.status).replace("SOLVE_STATUS_", "")
         self.has_plan = result.has_plan
         self.held = result.status == pb.SOLVE_STATUS_HELD
+        # Steps with a deadline (ProblemSpec.timing, Step.budget_ms): "MET",
+        # "QUEUED_PAST_DEADLINE" or "SOLVE_TOO_LONG", and the slack; None without one.
+        self.deadline = (pb.DeadlineOutcome.Name(result.deadline).replace("DEADLINE_OUTCOME_", "")
+                         if result.deadline else None)
+        self.deadline_slack_ms = result.deadline_slack_ms if result.deadline else None
         self.iterations = result.iterations
         self.objective = result.objective
         self.max_violation = result.max_violation

@@ -194,7 +194,12 @@ class Session:
         if period is not None and not period > 0:
             raise ValueError(f"period: must be > 0 seconds, got {period!r}")
         self._client = client
-        self._spec = spec
+        self._spec = pb.ProblemSpec()
+        self._spec.CopyFrom(spec)
+        # The server learns the period as the session's deadline (ProblemSpec.timing),
+        # unless the spec sets one of its own.
+        if period and not self._spec.timing.period_ms:
+            self._spec.timing.period_ms = period * 1e3
         self._dims = dims_of(spec)
         self._options = reconnect or ReconnectOptions()
         self._period = period
@@ -459,6 +464,9 @@ class Session:
         Raises ShapeError (before sending) or a typed NupmpcError from the server."""
         step = build_step(self._spec, x, references, bounds, input_references, input_bounds, shift, warm_start,
                           max_iterations, time_limit_ms, previous_input, model)
+        if self._period and deadline is not None:
+            # The server's deadline for it too (Step.budget_ms), instead of the session's period.
+            step.budget_ms = max((deadline - time.monotonic()) * 1e3, 1e-3)
         with self._step_lock:
             if self._closing:
                 raise error_from_code(grpc.StatusCode.FAILED_PRECONDITION, "the session was closed")

@@ -192,7 +192,7 @@ class SolveTime : public ::testing::Test {
     EXPECT_TRUE(built.ok()) << built.status();
     if (!built.ok()) return nullptr;
     absl::StatusOr<std::shared_ptr<server::SessionEntry>> entry =
-        registry_.Add(std::move(built->solver), 0.0, /*owned_by_stream=*/false);
+        registry_.Add(std::move(built->solver), server::SessionTiming{}, /*owned_by_stream=*/false);
     EXPECT_TRUE(entry.ok()) << entry.status();
     return entry.ok() ? *std::move(entry) : nullptr;
   }

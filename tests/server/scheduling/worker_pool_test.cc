@@ -3,8 +3,10 @@
 #include "server/scheduling/worker_pool.h"
 
 #include <atomic>
+#include <chrono>
 #include <future>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -34,6 +36,52 @@ class Blocker {
  private:
   std::promise<void> started_, release_;
 };
+
+// The order queued tasks run in, on one worker held busy while they are queued.
+std::vector<int> RunOrder(WorkerPool::Scheduling scheduling,
+                          const std::vector<std::optional<std::chrono::milliseconds>>& due_in) {
+  WorkerPool pool(1, 64, 0.0, 0, scheduling);
+  std::vector<int> order;
+  std::mutex mu;
+  {
+    Blocker blocker(pool);
+    const auto now = WorkerPool::Clock::now();
+    for (int i = 0; i < static_cast<int>(due_in.size()); ++i) {
+      std::optional<WorkerPool::Clock::time_point> due;
+      if (due_in[i].has_value()) due = now + *due_in[i];
+      EXPECT_TRUE(pool.TrySubmit(
+                          [&, i] {
+                            std::lock_guard<std::mutex> lock(mu);
+                            order.push_back(i);
+                          },
+                          -1.0, WorkerPool::Placement::kWorker, due)
+                      .ok());
+    }
+    blocker.Release();
+  }
+  pool.Shutdown();
+  return order;
+}
+
+TEST(WorkerPool, TakesQueuedTasksEarliestDeadlineFirst) {
+  using std::chrono::milliseconds;
+  // Deadlines in 30, 10, 20 ms, then one without a deadline (due 1 s after it arrived) and
+  // one due in 2 s: the undated one goes before the late deadline, after the near ones.
+  EXPECT_THAT(RunOrder(WorkerPool::Scheduling::kEarliestDeadlineFirst,
+                       {milliseconds(30), milliseconds(10), milliseconds(20), std::nullopt, milliseconds(2000)}),
+              ::testing::ElementsAre(1, 2, 0, 3, 4));
+  // Equal deadlines and undated tasks keep their arrival order.
+  EXPECT_THAT(RunOrder(WorkerPool::Scheduling::kEarliestDeadlineFirst,
+                       {std::nullopt, milliseconds(50), std::nullopt, milliseconds(50)}),
+              ::testing::ElementsAre(1, 3, 0, 2));
+}
+
+TEST(WorkerPool, FifoSchedulingIgnoresDeadlines) {
+  using std::chrono::milliseconds;
+  EXPECT_THAT(RunOrder(WorkerPool::Scheduling::kFifo,
+                       {milliseconds(30), milliseconds(10), milliseconds(20), std::nullopt, milliseconds(2000)}),
+              ::testing::ElementsAre(0, 1, 2, 3, 4));
+}
 
 TEST(WorkerPool, RefusesWorkBeyondTheQueueCapacity) {
   WorkerPool pool(1, 2);
