@@ -11,7 +11,8 @@
 #   3. overload: masses_N300 (a few ms per solve, so the generator can offer 10x what
 #      the server can solve), open loop at 10x the core-alone capacity, then at half of
 #      it (recovery), against a server that refuses work it could not start within 20 ms;
-#   4. 10,000 idle sessions: server RSS with them, compacted, and after they are closed.
+#   4. 10,000 idle sessions: server RSS with them, compacted, and after they are closed;
+#   5. deadlines under mixed control periods, EDF against FIFO (deploy/deadline-sweep.py).
 # Pinning: on a machine with 3 or more CPUs, the server gets CPUs 0-1 (two workers, as
 # designed) and the generator the rest; on 2 CPUs, the server CPU 0 with one worker and
 # the generator CPU 1; on 1 CPU, nothing is pinned. NUPMPC_SERVER_CPUS / NUPMPC_CLIENT_CPUS
@@ -90,6 +91,9 @@ echo "   open loop at 10x capacity, then at 0.5x (recovery)"
 run_loadtest --instance "$benchmarks/masses_N300.json" --mode open --rate_x 10 --concurrency 64
 run_loadtest --instance "$benchmarks/masses_N300.json" --mode open --rate_x 0.5 --concurrency 64
 stop_server
+echo "== deadlines: 32 masses_N30 streams at a short period and 8 masses_N300 at a long one, at 50-120 % of"
+echo "   the core's capacity, EDF and FIFO servers in turn (deploy/deadline-sweep.py)"
+NUPMPC_BENCHMARK_DIR="$benchmarks" /usr/bin/python3 deploy/deadline-sweep.py
 if [ "$starved" -ne 0 ]; then
   echo "deploy/loadtest.sh: a level starved a stream (see nupmpc-loadtest's messages above)" >&2
   exit 3

@@ -1,0 +1,143 @@
+#!/usr/bin/python3
+"""Deadlines met under mixed control periods, earliest deadline first against FIFO.
+
+Two groups of Control streams (nupmpc-period-groups, the client library's period option):
+many short-period streams of a small problem and a few long-period streams of a larger one,
+each group offering half of the load. The server runs on one CPU with one worker, the
+streams on another. First the server's capacity for each instance is measured (one stream
+stepping as fast as answers come); then, for each load level (a share of that capacity),
+an EDF and a FIFO server are run in turn (their order alternating from level to level),
+and the script prints per level, scheduling and group: steps, met, missed by cause, the
+slack's median and worst percent, and how evenly the group's streams were served.
+
+    deploy/deadline-sweep.py [--levels 0.5,0.9,1.0,1.2] [--seconds 5] [--json FILE]
+
+Run by deploy/loadtest.sh; --quick (short runs, two levels) is the ctest smoke
+LoadTest.DeadlineSweepCountsEveryStep, which checks mechanisms, never speed."""
+
+import argparse
+import json
+import os
+import pathlib
+import subprocess
+import sys
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "client" / "python"))
+sys.path.insert(0, os.environ.get("NUPMPC_PYTHON_STUBS", str(REPO / "build" / "python")))
+from nupmpc.local_server import LocalServer  # noqa: E402
+
+BIN = pathlib.Path(os.environ.get("NUPMPC_BIN_DIR", str(REPO / "build" / "bin")))
+BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO / "benchmarks")))
+GROUPS = [("short", "masses_N30.json", 32), ("long", "masses_N300.json", 8)]
+SCHEDULINGS = ("edf", "fifo")
+
+
+def cpus():
+    """(server's CPUs, the streams' CPUs): one each on a machine with two or more."""
+    count = os.cpu_count() or 1
+    return ([0], [1]) if count >= 2 else (None, None)
+
+
+def server(scheduling, server_cpus):
+    return LocalServer(BIN / "nupmpc-server", "--threads", "1", "--scheduling", scheduling, cpus=server_cpus,
+                       env={**os.environ, "NUPMPC_LOG_LEVEL": "warn"})
+
+
+def period_groups(target, group_flag, client_cpus, *flags):
+    command = [str(BIN / "nupmpc-period-groups"), "--server", target, "--group", group_flag, *flags]
+    if client_cpus is not None:
+        command = ["taskset", "-c", ",".join(map(str, client_cpus)), *command]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    if done.returncode != 0:
+        sys.exit(f"deadline-sweep: {' '.join(command)} failed: {done.stderr.strip()}")
+    return json.loads(done.stdout)
+
+
+def calibrate(server_cpus, client_cpus, seconds):
+    """Steps per second one stream of each group gets from the server: its capacity."""
+    with_one = ",".join(f"{name}:{BENCHMARKS / file}:1:1000" for name, file, _ in GROUPS)
+    s = server("edf", server_cpus).start()
+    try:
+        return period_groups(s.target, with_one, client_cpus, "--calibrate_s", str(seconds))["steps_per_s"]
+    finally:
+        s.stop()
+
+
+def groups_at(level, capacity):
+    """The --group flag offering `level` of the capacity, half from each group."""
+    parts, periods = [], {}
+    for name, file, streams in GROUPS:
+        period_ms = streams / capacity[name] / (level / len(GROUPS)) * 1e3
+        periods[name] = period_ms
+        parts.append(f"{name}:{BENCHMARKS / file}:{streams}:{period_ms:.3f}")
+    return ",".join(parts), periods
+
+
+def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s):
+    capacity = calibrate(server_cpus, client_cpus, calibrate_s)
+    print(f"capacity (steps/s of one stream on the server's core): "
+          + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
+    runs = []
+    for i, level in enumerate(levels):
+        flag, periods = groups_at(level, capacity)
+        order = SCHEDULINGS if i % 2 == 0 else tuple(reversed(SCHEDULINGS))
+        for scheduling in order:
+            s = server(scheduling, server_cpus).start()
+            try:
+                figures = period_groups(s.target, flag, client_cpus, "--seconds", str(seconds), "--warmup_s", "1")
+            finally:
+                s.stop()
+            runs.append({"level": level, "scheduling": scheduling, "periods_ms": periods, **figures})
+            print_run(runs[-1])
+    return {"capacity_steps_per_s": capacity, "runs": runs}
+
+
+def print_run(run):
+    for g in run["groups"]:
+        m = g["missed_by_cause"]
+        print(f"load {run['level']:4.0%} {run['scheduling']:4} {g['group']:5} {g['streams']:3} x {g['period_ms']:7.2f} ms: "
+              f"{g['steps']:6} steps, missed {g['missed_share']:7.3%} (queued {m['queued_past_deadline']}, "
+              f"too long {m['solve_too_long']}, held {m['held']}, other {m['other']}, errors {m['errors']}), "
+              f"slack p50 {g['slack_p50_ms']:7.3f} ms, p1 {g['slack_p01_ms']:8.3f} ms, "
+              f"streams met {g['stream_min_share']:.2f}..{g['stream_max_share']:.2f} x mean", flush=True)
+
+
+def check(result):
+    """The mechanisms every run must show, whatever the machine's speed: each step counted
+    once, by outcome, and no stream of a group left without deadlines met at low load."""
+    problems = []
+    for run in result["runs"]:
+        for g in run["groups"]:
+            m = g["missed_by_cause"]
+            counted = g["met"] + sum(m.values())
+            if g["steps"] == 0 or counted != g["steps"]:
+                problems.append(f"{run['scheduling']} at {run['level']}: {g['group']} counted {counted} of {g['steps']}")
+            if m["errors"]:
+                problems.append(f"{run['scheduling']} at {run['level']}: {g['group']} had {m['errors']} errors")
+            if run["level"] <= 0.5 and g["stream_min_share"] <= 0.0:
+                problems.append(f"{run['scheduling']} at {run['level']}: a {g['group']} stream met no deadline")
+    return problems
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--levels", default="0.5,0.9,1.0,1.2", help="load levels, shares of the capacity")
+    parser.add_argument("--seconds", type=float, default=5.0, help="counted time per run")
+    parser.add_argument("--json", help="write every figure to this file")
+    parser.add_argument("--quick", action="store_true", help="short runs at 0.3 and 1.2 (the ctest smoke)")
+    args = parser.parse_args()
+    levels = [0.3, 1.2] if args.quick else [float(v) for v in args.levels.split(",")]
+    seconds = 1.5 if args.quick else args.seconds
+    server_cpus, client_cpus = cpus()
+    result = sweep(levels, seconds, server_cpus, client_cpus, 0.5 if args.quick else 2.0)
+    if args.json:
+        pathlib.Path(args.json).write_text(json.dumps(result, indent=1))
+    problems = check(result)
+    for p in problems:
+        print(f"deadline-sweep: {p}", file=sys.stderr)
+    sys.exit(1 if problems else 0)
+
+
+if __name__ == "__main__":
+    main()
