@@ -3,7 +3,9 @@
 # client library; every claim of the routing contract is checked (exit 1 naming it):
 #   1. spread:    nupmpc-loadtest, 24 Control streams through the balancer: every replica
 #                 gets streams, no errors; solves/s and p50/p99 next to one replica
-#                 reached directly (1 stream each way: the proxy hop's cost);
+#                 reached directly (1 stream each way: the proxy hop's cost); Debian's
+#                 Prometheus scrapes the replicas with deploy/prometheus/'s rules: all up,
+#                 solves stored, the deadline-miss ratio recorded for each;
 #   2. addressed: 50 sessions made with client-drawn ids, each solved 20 times by id
 #                 through the balancer: every call reaches its session;
 #   3. failover:  kill -9 of one replica under 24 streams: each affected stream re-creates
@@ -24,6 +26,7 @@ quick=0
 if [ $quick = 1 ]; then phase_s=4; streams=24; else phase_s=20; streams=24; fi
 bin="${NUPMPC_BIN_DIR:-build/bin}"
 instance="${NUPMPC_BENCHMARKS:-benchmarks}/masses_N30.json"
+command -v prometheus >/dev/null || deploy/install-deps.sh
 for p in nupmpc-server nupmpc nupmpc-loadtest nupmpc-scaleout-probe; do
   [ -x "$bin/$p" ] || deploy/build.sh nupmpc-server nupmpc nupmpc-loadtest nupmpc-scaleout-probe
 done
@@ -49,16 +52,16 @@ fail() { echo "scaleout-test: FAILED: $*" >&2; for f in "$work"/*.log; do echo "
 # Five distinct free ports, drawn while all are held (HAProxy binds with SO_REUSEPORT:
 # two processes given one port would silently share it), from outside the range the kernel
 # takes outgoing connections' ports from (the replicas restart on theirs).
-read -r lb_port p1 p2 p3 p4 < <("$py" tests/util/loopback_port.py 5)
-declare -A port=([r1]=$p1 [r2]=$p2 [r3]=$p3 [r4]=$p4) pid
+read -r lb_port p1 p2 p3 p4 m1 m2 m3 m4 prom_port < <("$py" tests/util/loopback_port.py 10)
+declare -A port=([r1]=$p1 [r2]=$p2 [r3]=$p3 [r4]=$p4) metrics_port=([r1]=$m1 [r2]=$m2 [r3]=$m3 [r4]=$m4) pid
 # Longer than the balancer's worst case to take a replica out (inter 500ms, fall 2, timeout
 # check 2s: 3 s when a check hangs), so that a drained replica is seen DOWN before it exits
 # even on a loaded machine; it answers NOT_SERVING at once, so it is out after about 1 s.
 drain_delay_s=5
 start_replica() {  # name
   local name=$1
-  "$bin/nupmpc-server" --address "127.0.0.1:${port[$name]}" --log_level warn --drain_delay_s "$drain_delay_s" \
-    --grace_period_s 2 >>"$work/$name.log" 2>&1 &
+  "$bin/nupmpc-server" --address "127.0.0.1:${port[$name]}" --metrics_address "127.0.0.1:${metrics_port[$name]}" \
+    --log_level warn --drain_delay_s "$drain_delay_s" --grace_period_s 2 >>"$work/$name.log" 2>&1 &
   pid[$name]=$!
   local started=$(date +%s.%N)
   for _ in $(seq 100); do
@@ -142,6 +145,41 @@ print(f"== scaleout: 1 stream, balancer: {b['solves_per_s']:.0f} solves/s, p50 {
       f" direct: {d['solves_per_s']:.0f} solves/s, p50 {d['p50_ms']:.3f} ms, p99 {d['p99_ms']:.3f} ms;"
       f" the hop adds {1000 * (b['p50_ms'] - d['p50_ms']):.0f} us at p50")
 PY
+
+# 1b. Debian's Prometheus scraping the three replicas with the alert rules of
+#     deploy/prometheus/: every replica up, its metrics stored, the recorded deadline-miss
+#     ratio evaluated for each (one query each, once scrapes have come in).
+sed -e "s|127.0.0.1:9461\", \"127.0.0.1:9462\", \"127.0.0.1:9463|127.0.0.1:$m1\", \"127.0.0.1:$m2\", \"127.0.0.1:$m3|" \
+  -e "s|scrape_interval: 5s|scrape_interval: 1s|; s|evaluation_interval: 5s|evaluation_interval: 1s|" \
+  -e "s|  - nupmpc-alerts.yml|  - $PWD/deploy/prometheus/nupmpc-alerts.yml|" \
+  deploy/prometheus/prometheus.yml > "$work/prometheus.yml"
+prometheus --config.file="$work/prometheus.yml" --storage.tsdb.path="$work/tsdb" \
+  --web.listen-address="127.0.0.1:$prom_port" --log.level=warn >>"$work/prometheus.log" 2>&1 &
+prometheus_pid=$!
+prom_query() {  # PromQL: prints the number of series and their values, or nothing yet
+  "$py" - "127.0.0.1:$prom_port" "$1" <<'PY'
+import json, sys, urllib.parse, urllib.request
+try:
+    url = f"http://{sys.argv[1]}/api/v1/query?" + urllib.parse.urlencode({"query": sys.argv[2]})
+    result = json.load(urllib.request.urlopen(url, timeout=2))["data"]["result"]
+    print(len(result), " ".join(sorted(r["value"][1] for r in result)))
+except Exception:
+    pass
+PY
+}
+scraped=""
+for _ in $(seq 100); do
+  scraped=$(prom_query 'up{job="nupmpc"} == 1')
+  recorded=$(prom_query 'nupmpc:step_deadline_miss_ratio:rate5m')
+  [ "${scraped%% *}" = 3 ] && [ "${recorded%% *}" = 3 ] && break
+  sleep 0.2
+done
+say "prometheus: replicas up: ${scraped:-none}; deadline-miss ratio recorded for: ${recorded:-none}"
+[ "${scraped%% *}" = 3 ] || fail "prometheus did not scrape the three replicas (up: ${scraped:-none})"
+[ "${recorded%% *}" = 3 ] || fail "prometheus did not evaluate the recording rule for the three replicas"
+solves=$(prom_query 'sum(nupmpc_solves_total)')
+[ "${solves#1 }" != "0" ] && [ -n "$solves" ] || fail "prometheus stored no solves (${solves:-nothing})"
+kill "$prometheus_pid" 2>/dev/null; wait "$prometheus_pid" 2>/dev/null || true
 
 # 2. Calls addressed by session id.
 out=$("$bin/nupmpc-scaleout-probe" --server "$lb" --instance "$instance" --probe addressed --sessions 50 --solves 20) ||
