@@ -3,6 +3,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "nupmpc/grpc_handover.h"
 
 namespace nupmpc {
 
@@ -37,6 +38,7 @@ ControlCall::ControlCall(std::shared_ptr<grpc::Channel> channel, const v1::Contr
     waiting_ = first;
     PumpWritesLocked();
   }
+  HandToGrpc(this);
   StartRead(&reading_);
   StartCall();
 }
@@ -54,6 +56,7 @@ void ControlCall::ReleaseHold() {
     if (ops_closed_) return;
     ops_closed_ = true;
   }
+  HandToGrpc(this);
   RemoveHold();  // not under mu_: it may complete the call, and OnDone takes mu_
 }
 
@@ -76,16 +79,19 @@ void ControlCall::PumpWritesLocked() {
     writing_ = *std::move(waiting_);
     waiting_.reset();
     write_in_flight_ = true;
+    HandToGrpc(this);
     StartWrite(&writing_);
   } else if (writes_done_wanted_ && !writes_done_started_) {
     writes_done_started_ = true;
     write_in_flight_ = true;
+    HandToGrpc(this);
     StartWritesDone();
     release_hold_ = true;  // nothing starts after the half-close: the caller releases the hold
   }
 }
 
 void ControlCall::OnWriteDone(bool ok) {
+  TakeFromGrpc(this);
   bool release;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -98,11 +104,13 @@ void ControlCall::OnWriteDone(bool ok) {
 }
 
 void ControlCall::OnWritesDoneDone(bool /*ok*/) {
+  TakeFromGrpc(this);
   std::lock_guard<std::mutex> lock(mu_);
   write_in_flight_ = false;
 }
 
 void ControlCall::OnReadDone(bool ok) {
+  TakeFromGrpc(this);
   if (!ok) {  // the stream is over: no more responses, no more writes; OnDone follows
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -119,10 +127,12 @@ void ControlCall::OnReadDone(bool ok) {
   }
   changed_.notify_all();
   reading_.Clear();
+  HandToGrpc(this);
   StartRead(&reading_);
 }
 
 void ControlCall::OnDone(const grpc::Status& status) {
+  TakeFromGrpc(this);
   // Notified under the lock: the destructor, waiting for done_, may free this object as
   // soon as the lock is released.
   std::lock_guard<std::mutex> lock(mu_);

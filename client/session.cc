@@ -215,7 +215,7 @@ absl::StatusOr<v1::SolveResult> Session::StepWaiting(const v1::Step& step) {
   return **std::move(result);
 }
 
-void Session::BreakLocked(std::shared_ptr<ControlCall> call, const absl::Status& cause) {
+void Session::BreakLocked(const std::shared_ptr<ControlCall>& call, const absl::Status& cause) {
   if (call_ == nullptr || call_ != call) return;  // already broken (and maybe replaced)
   call_->Cancel();
   call_.reset();
@@ -231,7 +231,10 @@ absl::StatusOr<v1::SolveResult> Session::StepInPeriod(const v1::Step& step) {
   {
     std::unique_lock<std::mutex> lock(mu_);
     last_step_at_ = Clock::now();
-    if (call_ != nullptr && call_->Ended()) BreakLocked(call_, absl::UnavailableError("the Control stream ended"));
+    // A copy: BreakLocked resets call_, which a reference to it would then see reset too.
+    if (const std::shared_ptr<ControlCall> ended = call_; ended != nullptr && ended->Ended()) {
+      BreakLocked(ended, absl::UnavailableError("the Control stream ended"));
+    }
     // Wake the reconnect thread (it pauses while nobody steps), then wait for it as long
     // as the period allows.
     changed_.notify_all();

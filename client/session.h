@@ -103,7 +103,7 @@ class Session {
   absl::StatusOr<v1::SolveResult> StepWaiting(const v1::Step& step);
   absl::StatusOr<v1::SolveResult> StepInPeriod(const v1::Step& step);
   // Drops the current call (if it is still `call`) and wakes the reconnect thread. Under mu_.
-  void BreakLocked(std::shared_ptr<ControlCall> call, const absl::Status& cause);
+  void BreakLocked(const std::shared_ptr<ControlCall>& call, const absl::Status& cause);
   void ReconnectLoop();
 
   Client* client_;

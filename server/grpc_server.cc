@@ -9,11 +9,11 @@
 #include "absl/strings/str_cat.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "nupmpc/grpc_handover.h"
 #include "server/listen_probe.h"
 #include "server/metrics_exposition.h"
 #include "server/metrics_http.h"
 #include "server/observability/process_memory.h"
-#include "server/rpc/grpc_handover.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {

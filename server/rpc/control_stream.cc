@@ -1,9 +1,9 @@
 #include "server/rpc/control_stream.h"
 
 #include "absl/strings/str_cat.h"
+#include "nupmpc/grpc_handover.h"
 #include "server/observability/log_context.h"
 #include "server/rpc/catch_exceptions.h"
-#include "server/rpc/grpc_handover.h"
 #include "server/rpc/raw_messages.h"
 #include "server/sessions/session_factory.h"
 #include "server/sessions/step_solver.h"

@@ -9,10 +9,10 @@
 
 #include "absl/status/status.h"
 #include "grpcpp/grpcpp.h"
+#include "nupmpc/grpc_handover.h"
 #include "server/auth/caller.h"
 #include "server/observability/log_context.h"
 #include "server/rpc/catch_exceptions.h"
-#include "server/rpc/grpc_handover.h"
 #include "server/rpc/raw_messages.h"
 #include "server/sessions/step_solver.h"
 #include "server/state/server_state.h"

@@ -18,7 +18,8 @@ import re
 import sys
 
 # Most specific first: a file (or an included path) belongs to the first room whose folder
-# is a prefix of it. "proto" stands for the generated headers nupmpc/v1/*.pb.h.
+# is a prefix of it. "proto" stands for the generated headers nupmpc/v1/*.pb.h and the API's
+# shared gRPC helper nupmpc/grpc_handover.h.
 # The server's folders, lowest first (server/CMakeLists.txt says what each holds).
 SERVER_ROOMS = ["server/convert", "server/scheduling", "server/observability", "server/http", "server/auth",
                 "server/sessions", "server/state", "server/rpc", "server"]
@@ -78,7 +79,7 @@ ROOT_EXPORT = re.compile(r"include_directories\s*\([^)]*\$\{(?:PROJECT|CMAKE)_SO
 
 def room_of(path):
     """The room of a repository-relative path (or an included path), or None."""
-    if path.startswith("nupmpc/v1/"):
+    if path.startswith("nupmpc/"):
         return "proto"
     for room in ROOMS:
         if path == room or path.startswith(room + "/"):

@@ -10,7 +10,7 @@ instrumented code, so TSan reports those hand-overs as races between two pieces 
 protobuf's own code. Such a report is dismissed, by the rule below that names it; every
 other report (a race with our code on either side, a use after free, a lock-order
 inversion, ...) is a finding and fails the run. Our reactors state gRPC's ordering of their
-own reactions with annotations (server/rpc/grpc_handover.h), so reports about their fields are
+own reactions with annotations (proto/nupmpc/grpc_handover.h), so reports about their fields are
 findings too.
 
 A report is judged only when its stacks are symbolized: every access stack (or, for reports
@@ -46,7 +46,7 @@ RACE_KINDS = ("data race", "data race on vptr (ctor/dtor vs virtual call)")
 
 # gRPC calling a reaction (a virtual call, in its inline code on one of its threads) of a
 # reactor our handler constructed and handed over: the vtable read precedes the reaction's
-# own annotation (server/rpc/grpc_handover.h), so TSan cannot see libgrpc's ordering.
+# own annotation (proto/nupmpc/grpc_handover.h), so TSan cannot see libgrpc's ordering.
 REACTOR_DISPATCH = ("grpc-dispatch", "gRPC calling a reaction of a reactor the handler constructed and "
                     "handed over (the vtable read comes before the reaction's annotation)")
 CONSTRUCTOR = re.compile(r"\b(\w+)(<.*>)?::\1\(")

@@ -15,6 +15,7 @@
 
 #include "client/client.h"
 #include "gtest/gtest.h"
+#include "nupmpc/grpc_handover.h"
 
 namespace nupmpc {
 namespace {
@@ -52,24 +53,37 @@ class ScriptedControl final : public v1::MpcService::CallbackService {
  private:
   class Stream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
    public:
-    explicit Stream(ScriptedControl* service) : service_(service) { StartRead(&request_); }
+    explicit Stream(ScriptedControl* service) : service_(service) {
+      std::lock_guard<std::mutex> lock(mu_);
+      HandToGrpc(this);
+      StartRead(&request_);
+    }
     ~Stream() override {
-      for (std::thread& t : answerers_) t.join();
+      std::vector<std::thread> answerers;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        answerers.swap(answerers_);
+      }
+      for (std::thread& t : answerers) t.join();
     }
 
     void OnReadDone(bool ok) override {
+      TakeFromGrpc(this);
       if (!ok) {
         FinishOnce(grpc::Status::OK);
         return;
       }
+      // Under the stream's lock: gRPC hands the reactions from thread to thread through its
+      // own synchronisation, which ThreadSanitizer does not see.
+      std::lock_guard<std::mutex> lock(mu_);
       v1::ControlResponse response;
       response.set_sequence(request_.sequence());
       if (request_.has_spec()) {
-        std::lock_guard<std::mutex> lock(service_->mu_);
+        std::lock_guard<std::mutex> service_lock(service_->mu_);
         service_->attach_specs_.push_back(request_.spec());
         attach_ = static_cast<int>(service_->attach_specs_.size());
         response.set_session_id("scripted");
-        Answer(response, milliseconds(0));
+        AnswerLocked(response, milliseconds(0));
       } else {
         const double x0 = request_.step().state(0);
         if (service_->superseded(attach_, x0)) {
@@ -81,17 +95,21 @@ class ScriptedControl final : public v1::MpcService::CallbackService {
           response.mutable_result()->add_inputs(x0);
         }
         const milliseconds delay = service_->delay(attach_, x0);
-        if (delay.count() >= 0) Answer(response, delay);
+        if (delay.count() >= 0) AnswerLocked(response, delay);
       }
       request_.Clear();
+      if (finished_) return;
+      HandToGrpc(this);
       StartRead(&request_);
     }
     void OnWriteDone(bool /*ok*/) override {
+      TakeFromGrpc(this);
       std::lock_guard<std::mutex> lock(mu_);
       writing_ = false;
       if (!queue_.empty() && !finished_) WriteNextLocked();
     }
     void OnDone() override {
+      TakeFromGrpc(this);
       {
         std::lock_guard<std::mutex> lock(mu_);
         done_ = true;
@@ -100,17 +118,21 @@ class ScriptedControl final : public v1::MpcService::CallbackService {
       // The answerer threads may still be sleeping: let them end before this is freed.
       std::thread([this] { delete this; }).detach();
     }
-    void OnCancel() override { FinishOnce(grpc::Status::CANCELLED); }
+    void OnCancel() override {
+      TakeFromGrpc(this);
+      FinishOnce(grpc::Status::CANCELLED);
+    }
 
    private:
     void FinishOnce(const grpc::Status& status) {
       std::lock_guard<std::mutex> lock(mu_);
       if (finished_) return;
       finished_ = true;
+      HandToGrpc(this);
       Finish(status);
     }
-    // Writes `response` after `delay` (one write at a time, in order of their times).
-    void Answer(v1::ControlResponse response, milliseconds delay) {
+    // Writes `response` after `delay` (one write at a time, in order of their times). Under mu_.
+    void AnswerLocked(v1::ControlResponse response, milliseconds delay) {
       answerers_.emplace_back([this, response = std::move(response), delay] {
         std::unique_lock<std::mutex> lock(mu_);
         if (done_changed_.wait_for(lock, delay, [this] { return done_; })) return;
@@ -123,6 +145,7 @@ class ScriptedControl final : public v1::MpcService::CallbackService {
       writing_ = true;
       writing_response_ = queue_.front();
       queue_.erase(queue_.begin());
+      HandToGrpc(this);
       StartWrite(&writing_response_);
     }
 
