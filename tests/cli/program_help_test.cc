@@ -41,6 +41,7 @@ const Program kPrograms[] = {
     {"nupmpc-api-example-race-track", "--server=<string>", "NUPMPC_SERVER"},
     {"nupmpc-scaleout-probe", "--streams=<int>", "NUPMPC_SERVER"},
     {"nupmpc-metrics-cost", "--sessions=<int>", ""},
+    {"nupmpc-period-groups", "--seconds=<double>", "NUPMPC_SERVER"},
     {"nupmpc-gp-bench", "--sizes=<string>", ""},
     {"nupmpc-example-dac", "--out_dir=<string>", ""},
     {"nupmpc-example-corridor", "--out_dir=<string>", ""},
