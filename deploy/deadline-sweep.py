@@ -55,8 +55,9 @@ def period_groups(target, group_flag, client_cpus, *flags):
 
 
 def calibrate(server_cpus, client_cpus, seconds):
-    """Steps per second one stream of each group gets from the server: its capacity."""
-    with_one = ",".join(f"{name}:{BENCHMARKS / file}:1:1000" for name, file, _ in GROUPS)
+    """Steps per second the server gives each group's streams stepping as fast as answers
+    come: its capacity for that instance at that concurrency."""
+    with_one = ",".join(f"{name}:{BENCHMARKS / file}:{streams}:1000" for name, file, streams in GROUPS)
     s = server("edf", server_cpus).start()
     try:
         return period_groups(s.target, with_one, client_cpus, "--calibrate_s", str(seconds))["steps_per_s"]
@@ -76,7 +77,7 @@ def groups_at(level, capacity):
 
 def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s):
     capacity = calibrate(server_cpus, client_cpus, calibrate_s)
-    print(f"capacity (steps/s of one stream on the server's core): "
+    print(f"capacity (steps/s of each group's streams, unpaced, on the server's core): "
           + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
     runs = []
     for i, level in enumerate(levels):

@@ -146,28 +146,35 @@ absl::StatusOr<std::vector<GroupFigures>> RunPeriodGroups(const std::string& tar
 }
 
 absl::StatusOr<double> CalibrateStepsPerSecond(const std::string& target, const PeriodGroup& group,
-                                               std::chrono::milliseconds duration) {
-  Client client(target);
-  absl::StatusOr<std::unique_ptr<Session>> session = client.OpenSession(group.spec);
-  if (!session.ok()) return session.status();
-  long steps = 0;
-  const Clock::time_point warm_until = Clock::now() + std::chrono::milliseconds(200);
-  Clock::time_point from = warm_until;
-  const Clock::time_point until = warm_until + duration;
-  for (std::size_t t = 0; Clock::now() < until; ++t) {
-    v1::Step step;
-    const std::vector<double>& x = group.states[t % group.states.size()];
-    step.mutable_state()->Add(x.begin(), x.end());
-    absl::StatusOr<v1::SolveResult> result = (*session)->Step(step);
-    if (!result.ok()) return result.status();
-    if (Clock::now() < warm_until) {
-      from = Clock::now();
-      continue;
-    }
-    ++steps;
+                                               std::chrono::milliseconds duration, int streams) {
+  std::vector<std::unique_ptr<Client>> clients;
+  std::vector<std::unique_ptr<Session>> sessions;
+  for (int s = 0; s < streams; ++s) {
+    clients.push_back(std::make_unique<Client>(target));
+    absl::StatusOr<std::unique_ptr<Session>> session = clients.back()->OpenSession(group.spec);
+    if (!session.ok()) return session.status();
+    sessions.push_back(*std::move(session));
   }
-  (void)(*session)->Close();
-  return static_cast<double>(steps) / std::chrono::duration<double>(Clock::now() - from).count();
+  const Clock::time_point from = Clock::now() + std::chrono::milliseconds(300);  // warm first
+  const Clock::time_point until = from + duration;
+  std::atomic<long> steps{0};
+  std::atomic<bool> failed{false};
+  std::vector<std::thread> threads;
+  for (int s = 0; s < streams; ++s) {
+    threads.emplace_back([&, s] {
+      for (std::size_t t = 0; Clock::now() < until && !failed.load(); ++t) {
+        v1::Step step;
+        const std::vector<double>& x = group.states[t % group.states.size()];
+        step.mutable_state()->Add(x.begin(), x.end());
+        if (!sessions[static_cast<std::size_t>(s)]->Step(step).ok()) failed.store(true);
+        if (Clock::now() >= from && Clock::now() < until) steps.fetch_add(1);
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  for (const std::unique_ptr<Session>& session : sessions) (void)session->Close();
+  if (failed.load()) return absl::UnavailableError("a calibration step failed");
+  return static_cast<double>(steps.load()) / std::chrono::duration<double>(duration).count();
 }
 
 std::string GroupFiguresJson(const GroupFigures& f) {

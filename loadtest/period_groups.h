@@ -46,11 +46,11 @@ absl::StatusOr<std::vector<GroupFigures>> RunPeriodGroups(const std::string& tar
                                                           std::chrono::milliseconds duration,
                                                           std::chrono::milliseconds warmup);
 
-// Steps per second one stream of `group` gets from the server, stepping as fast as answers
-// come for `duration`: the inverse of the server's cost of one of its steps (with one
-// stream, on the cores the server has).
+// Steps per second the server gives `streams` streams of `group`'s instance stepping as
+// fast as answers come for `duration`: its capacity for that instance (enough streams that
+// the round trips overlap and the server's cores, not one stream's latency, set the rate).
 absl::StatusOr<double> CalibrateStepsPerSecond(const std::string& target, const PeriodGroup& group,
-                                               std::chrono::milliseconds duration);
+                                               std::chrono::milliseconds duration, int streams = 8);
 
 // One JSON object per group, on one line each.
 std::string GroupFiguresJson(const GroupFigures& figures);

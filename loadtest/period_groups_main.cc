@@ -90,7 +90,8 @@ int main(int argc, char** argv) {
   if (const double calibrate_s = absl::GetFlag(FLAGS_calibrate_s); calibrate_s > 0.0) {
     std::vector<std::string> parts;
     for (const lt::PeriodGroup& group : groups) {
-      absl::StatusOr<double> rate = lt::CalibrateStepsPerSecond(server, group, ms(calibrate_s));
+      // As many streams as the group has: the capacity at that concurrency.
+      absl::StatusOr<double> rate = lt::CalibrateStepsPerSecond(server, group, ms(calibrate_s), group.streams);
       if (!rate.ok()) return Fail("calibrating " + group.name, rate.status());
       parts.push_back(absl::StrCat("\"", group.name, "\":", *rate));
     }
