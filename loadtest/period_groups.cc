@@ -149,6 +149,8 @@ absl::StatusOr<double> CalibrateStepsPerSecond(const std::string& target, const 
                                                std::chrono::milliseconds duration, int streams) {
   std::vector<std::unique_ptr<Client>> clients;
   std::vector<std::unique_ptr<Session>> sessions;
+  clients.reserve(static_cast<std::size_t>(streams));
+  sessions.reserve(static_cast<std::size_t>(streams));
   for (int s = 0; s < streams; ++s) {
     clients.push_back(std::make_unique<Client>(target));
     absl::StatusOr<std::unique_ptr<Session>> session = clients.back()->OpenSession(group.spec);
@@ -160,6 +162,7 @@ absl::StatusOr<double> CalibrateStepsPerSecond(const std::string& target, const 
   std::atomic<long> steps{0};
   std::atomic<bool> failed{false};
   std::vector<std::thread> threads;
+  threads.reserve(static_cast<std::size_t>(streams));
   for (int s = 0; s < streams; ++s) {
     threads.emplace_back([&, s] {
       for (std::size_t t = 0; Clock::now() < until && !failed.load(); ++t) {
