@@ -255,7 +255,8 @@ TEST_F(ControlPeriodTest, KHeldPeriodsInARowRecreateTheSessionFromTheSpecTheAnsw
   // State 1's answer came late on the first stream: the server had applied it, so the
   // session was re-created from it; the later steps were never answered, so not from them.
   EXPECT_EQ(service_.attach_spec(1).initial_state().mean(0), 1.0);
-  EXPECT_EQ((*session)->late_answers(), 1);
+  // At least that one: on a slow machine the new stream's first answer may come late too.
+  EXPECT_GE((*session)->late_answers(), 1);
 }
 
 // The server answers SUPERSEDED for a newer step at once, while an older one is still being
@@ -284,7 +285,8 @@ TEST_F(ControlPeriodTest, ASupersededAnswerAheadOfAnEarlierResultLeavesThatResul
   ASSERT_EQ(service_.attaches(), 2);
   EXPECT_EQ(service_.attach_spec(1).initial_state().mean(0), 1.0)
       << "state 1's result, which came after state 2's SUPERSEDED, was not applied to the spec";
-  EXPECT_EQ((*session)->late_answers(), 2);
+  // At least those two: on a slow machine the new stream's first answer may come late too.
+  EXPECT_GE((*session)->late_answers(), 2);
 }
 
 // A server that answers every step, only later than the period: every step is held, the
