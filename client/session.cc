@@ -226,11 +226,11 @@ void Session::BreakLocked(const std::shared_ptr<ControlCall>& call, const absl::
 }
 
 absl::StatusOr<v1::SolveResult> Session::StepInPeriod(const v1::Step& step) {
-  const Clock::time_point deadline = Clock::now() + period_.period;
+  const Clock::time_point called_at = Clock::now(), deadline = called_at + period_.period;
   std::shared_ptr<ControlCall> call;
   {
     std::unique_lock<std::mutex> lock(mu_);
-    last_step_at_ = Clock::now();
+    last_step_at_ = called_at;
     // A copy: BreakLocked resets call_, which a reference to it would then see reset too.
     if (const std::shared_ptr<ControlCall> ended = call_; ended != nullptr && ended->Ended()) {
       BreakLocked(ended, absl::UnavailableError("the Control stream ended"));

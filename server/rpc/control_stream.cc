@@ -168,22 +168,19 @@ void ControlStream::OnReadDone(bool ok) {
   v1::ControlRequest request;
   const absl::Status parsed = ParseRaw(&read_buffer_, &request);
   read_buffer_.Clear();
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    last_message_at_ = Clock::now();
-  }
-  if (parsed.ok() && request.held_periods() > 0) NoteHeldPeriods(request.held_periods());
   // The next read starts only once the first message is handled. Taking the first message
   // moves the phase on under the lock, so the first-message timer cannot end the stream
   // while it is handled (and a message that arrives after the timer ended it is dropped).
   bool first_message;
   {
     std::lock_guard<std::mutex> lock(mu_);
+    last_message_at_ = Clock::now();
     // Ending before its first message was handled (its timer fired): drop what arrives.
     if (phase_ == Phase::kFinished || phase_ == Phase::kEnding) return;
     first_message = phase_ == Phase::kAwaitingFirst;
     if (first_message) phase_ = Phase::kAttaching;
   }
+  if (parsed.ok() && request.held_periods() > 0) NoteHeldPeriods(request.held_periods());
   if (first_message) first_message_timer_.Cancel();
   if (first_message && !parsed.ok()) {
     {

@@ -70,17 +70,18 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
       call.received_at.has_value() ? StepDue(entry.timing, step, *call.received_at) : std::nullopt;
   bool started_late = false;
   if (due.has_value()) {
-    const double left_s = std::chrono::duration<double>(*due - Clock::now()).count();
-    if (left_s - call.send_cost_ms * 1e-3 <= 0.0 && !entry.timing.solve_late_steps) {
+    // What is left once the answer has been sent.
+    const double left_s = std::chrono::duration<double>(*due - Clock::now()).count() - call.send_cost_ms * 1e-3;
+    if (left_s <= 0.0 && !entry.timing.solve_late_steps) {
       AnswerQueuedPastDeadline(*due, out);
       entry.Touch();
       return absl::OkStatus();
     }
-    started_late = left_s - call.send_cost_ms * 1e-3 <= 0.0;
+    started_late = left_s <= 0.0;
     if (!started_late) {
       // At least a little: a first pass gives an anytime plan if it can finish in time.
       const double pass_s = entry.last_pass_ms.load(std::memory_order_relaxed) * 1e-3;
-      const double limit_s = std::max(left_s - call.send_cost_ms * 1e-3 - pass_s, 1e-6);
+      const double limit_s = std::max(left_s - pass_s, 1e-6);
       limits.time_limit_seconds =
           limits.time_limit_seconds > 0.0 ? std::min(limits.time_limit_seconds, limit_s) : limit_s;
     }

@@ -18,7 +18,7 @@ from nupmpc.client import _Connection, spec_of
 from nupmpc.errors import NupmpcError, Unavailable, error_from_code, error_from_rpc
 from nupmpc.reconnect import ReconnectOptions, ReconnectStats, is_retryable, ride_out_outage_async
 from nupmpc.result import Plan
-from nupmpc.session import broken_stream_error
+from nupmpc.control_call import broken_stream_error
 from nupmpc.spec_update import apply_step_to_spec
 from nupmpc.step import build_step, dims_of
 
