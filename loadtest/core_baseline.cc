@@ -7,17 +7,11 @@
 #include "core/session/mpc_session.h"
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/load_stream.h"
+#include "loadtest/quantile.h"
 #include "loadtest/step_as_server.h"
 #include "server/sessions/session_factory.h"
 
 namespace nupmpc::loadtest {
-
-double Quantile(std::vector<double>& values, double q) {
-  if (values.empty()) return 0.0;
-  std::sort(values.begin(), values.end());
-  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(values.size())));
-  return values[std::clamp<std::size_t>(rank, 1, values.size()) - 1];
-}
 
 absl::StatusOr<CoreBaseline> MeasureCoreBaseline(const v1::ProblemSpec& spec,
                                                  const std::vector<std::vector<double>>& states, int rounds,

@@ -45,9 +45,6 @@ absl::StatusOr<FleetCoreBaseline> MeasureFleetCore(const v1::ProblemSpec& spec,
                                                    const std::vector<std::vector<double>>& states, int sessions,
                                                    int periods, int first_period = 1);
 
-// The q-quantile (0..1) of `values` by nearest rank; sorts them. 0 when empty.
-double Quantile(std::vector<double>& values, double q);
-
 }  // namespace nupmpc::loadtest
 
 #endif  // NUPMPC_LOADTEST_CORE_BASELINE_H_

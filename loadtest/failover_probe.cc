@@ -13,8 +13,8 @@
 #include "client/addressed_session.h"
 #include "client/client.h"
 #include "core/session/mpc_session.h"
-#include "loadtest/core_baseline.h"
 #include "loadtest/instances/benchmark_instance.h"
+#include "loadtest/quantile.h"
 #include "nlohmann/json.hpp"
 #include "server/sessions/session_factory.h"
 

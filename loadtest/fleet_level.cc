@@ -9,7 +9,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "client/client.h"
-#include "loadtest/core_baseline.h"
+#include "loadtest/quantile.h"
 
 namespace nupmpc::loadtest {
 

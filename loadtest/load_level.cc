@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
-#include "loadtest/core_baseline.h"
+#include "loadtest/quantile.h"
 
 namespace nupmpc::loadtest {
 namespace {
@@ -131,7 +131,7 @@ void Summarize(LevelReport& report) {
   report.p90_ms = Quantile(t.latency_ms, 0.90);
   report.p99_ms = Quantile(t.latency_ms, 0.99);
   report.p999_ms = Quantile(t.latency_ms, 0.999);
-  report.max_ms = t.latency_ms.empty() ? 0.0 : t.latency_ms.back();
+  report.max_ms = t.latency_ms.empty() ? 0.0 : *std::max_element(t.latency_ms.begin(), t.latency_ms.end());
   report.service_p50_ms = Quantile(t.service_ms, 0.50);
   report.service_p99_ms = Quantile(t.service_ms, 0.99);
   report.solve_p50_ms = Quantile(t.solve_ms, 0.50);

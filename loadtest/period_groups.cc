@@ -9,6 +9,7 @@
 
 #include "absl/strings/str_format.h"
 #include "client/client.h"
+#include "loadtest/quantile.h"
 
 namespace nupmpc::loadtest {
 namespace {
@@ -51,13 +52,6 @@ void Count(const absl::StatusOr<v1::SolveResult>& result, StreamCount* count) {
       ++f.other;  // superseded (no deadline outcome), or a server without deadlines
       break;
   }
-}
-
-double Quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  const auto k = static_cast<std::size_t>(q * static_cast<double>(v.size() - 1));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
 }
 
 }  // namespace

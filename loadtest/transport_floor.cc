@@ -6,7 +6,7 @@
 #include "absl/strings/str_cat.h"
 #include "grpcpp/generic/generic_stub.h"
 #include "grpcpp/grpcpp.h"
-#include "loadtest/core_baseline.h"
+#include "loadtest/quantile.h"
 
 namespace nupmpc::loadtest {
 namespace {

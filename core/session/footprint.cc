@@ -70,7 +70,7 @@ i64 GemmScratch(i64 Mg) {
   return 2 * Block(std::min<i64>(Mg, 320) * Mg * kDouble) + Block(320 * 320 * kDouble);
 }
 
-Parts Iake(const Dims& d) {
+Parts IakeParts(const Dims& d) {
   const i64 M = d.M, L = d.L, N = d.N, S = d.steps;
   const i64 rows = S * d.K + (d.terminal ? M : 0);
   Parts p;
@@ -88,7 +88,7 @@ Parts Iake(const Dims& d) {
   return p;
 }
 
-Parts Ibffd(const Dims& d) {
+Parts IbffdParts(const Dims& d) {
   const i64 M = d.M, L = d.L, N = d.N, S = d.steps;
   const i64 rows = S * d.K + (d.terminal ? M : 0);
   Parts p;
@@ -103,7 +103,7 @@ Parts Ibffd(const Dims& d) {
   return p;
 }
 
-Parts Iffbdd(const Dims& d, bool inputs_constrained) {
+Parts IffbddParts(const Dims& d, bool inputs_constrained) {
   const bool augmented = inputs_constrained && d.L > 0;
   const i64 Mg = augmented ? PaddedStateSize(static_cast<int>(d.M + d.L)) : d.M;
   const i64 L = d.L, N = d.N, S = d.steps;
@@ -128,7 +128,7 @@ Parts Iffbdd(const Dims& d, bool inputs_constrained) {
   p.transient = std::max(GraphTransient(rows), GemmScratch(Mg));
   if (augmented) {
     // The input sub-problem's IBFFD (polish): all of it is scratch, rebuilt after release.
-    const Parts input_polish = Ibffd(d);
+    const Parts input_polish = IbffdParts(d);
     p.workspace += input_polish.carried + input_polish.workspace;
     p.transient = std::max(p.transient, input_polish.transient);
     p.flops_per_step = std::max(p.flops_per_step, input_polish.flops_per_step);
@@ -163,10 +163,10 @@ Footprint EstimateFootprint(const ProblemShape& s) {
 
   // The algorithm: the one given, else the largest of all.
   std::vector<Parts> candidates;
-  if (s.algorithm == Algorithm::kAuto || s.algorithm == Algorithm::kIake) candidates.push_back(Iake(d));
-  if (s.algorithm == Algorithm::kAuto || s.algorithm == Algorithm::kIbffd) candidates.push_back(Ibffd(d));
+  if (s.algorithm == Algorithm::kAuto || s.algorithm == Algorithm::kIake) candidates.push_back(IakeParts(d));
+  if (s.algorithm == Algorithm::kAuto || s.algorithm == Algorithm::kIbffd) candidates.push_back(IbffdParts(d));
   if (s.algorithm == Algorithm::kAuto || s.algorithm == Algorithm::kIffbdd) {
-    candidates.push_back(Iffbdd(d, s.inputs_constrained));
+    candidates.push_back(IffbddParts(d, s.inputs_constrained));
   }
   Parts a;
   for (const Parts& c : candidates) {

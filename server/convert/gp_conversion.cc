@@ -7,20 +7,16 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
+#include "server/convert/invalid_argument.h"
 
 namespace nupmpc::server {
 namespace {
-
-template <typename... Args>
-absl::Status Invalid(const Args&... args) {
-  return absl::InvalidArgumentError(absl::StrCat(args...));
-}
 
 absl::StatusOr<Eigen::VectorXd> FiniteVector(const google::protobuf::RepeatedField<double>& values,
                                              const std::string& path) {
   Eigen::VectorXd out(values.size());
   for (int i = 0; i < values.size(); ++i) {
-    if (!std::isfinite(values[i])) return Invalid(path, "[", i, "] = ", values[i], ": must be finite");
+    if (!std::isfinite(values[i])) return InvalidArgument(path, "[", i, "] = ", values[i], ": must be finite");
     out(i) = values[i];
   }
   return out;
@@ -28,14 +24,14 @@ absl::StatusOr<Eigen::VectorXd> FiniteVector(const google::protobuf::RepeatedFie
 
 absl::StatusOr<gp::SeArdKernel> KernelFromProto(const v1::GpKernel& k, int dimension, const std::string& path) {
   const auto positive = [&](double v, const std::string& field) -> absl::Status {
-    if (!(v > 0.0) || !std::isfinite(v)) return Invalid(path, ".", field, " = ", v, ": must be finite and > 0");
+    if (!(v > 0.0) || !std::isfinite(v)) return InvalidArgument(path, ".", field, " = ", v, ": must be finite and > 0");
     return absl::OkStatus();
   };
   NUPMPC_RETURN_IF_ERROR(positive(k.signal_variance(), "signal_variance"));
   NUPMPC_RETURN_IF_ERROR(positive(k.noise_variance(), "noise_variance"));
   if (k.length_scales_size() != dimension) {
-    return Invalid(path, ".length_scales: expected ", dimension,
-                   " values (one per regressor: output_lags + input_lags + 1), got ", k.length_scales_size());
+    return InvalidArgument(path, ".length_scales: expected ", dimension,
+                           " values (one per regressor: output_lags + input_lags + 1), got ", k.length_scales_size());
   }
   gp::SeArdKernel kernel;
   kernel.signal_variance = k.signal_variance();
@@ -84,38 +80,40 @@ absl::StatusOr<GpTrainingData> GpTrainingDataFromProto(const v1::GpModel& model,
   GpTrainingData out;
   out.layout.output_lags = model.output_lags() == 0 ? 1 : static_cast<int>(model.output_lags());
   if (model.input_lags() > 64 || model.output_lags() > 64) {
-    return Invalid(path, ".output_lags/input_lags: at most 64 each");
+    return InvalidArgument(path, ".output_lags/input_lags: at most 64 each");
   }
   out.layout.input_lags = static_cast<int>(model.input_lags());
   const int d = out.layout.dimension();
   const bool logged = model.logged_outputs_size() > 0 || model.logged_inputs_size() > 0;
   const bool pairs = model.has_regressors() || model.targets_size() > 0;
   if (logged == pairs) {
-    return Invalid(path,
-                   ": give the training data either as logged_outputs + logged_inputs or as regressors + "
-                   "targets (exactly one of the two)");
+    return InvalidArgument(path,
+                           ": give the training data either as logged_outputs + logged_inputs or as regressors + "
+                           "targets (exactly one of the two)");
   }
   if (logged) {
     NUPMPC_RETURN_IF_ERROR(CheckLimit((path + ".logged_outputs").c_str(), model.logged_outputs_size(),
                                       static_cast<long long>(limits.max_gp_points) + out.layout.first_step()));
     if (model.logged_inputs_size() != model.logged_outputs_size()) {
-      return Invalid(path, ".logged_inputs: expected ", model.logged_outputs_size(),
-                     " values (as logged_outputs), got ", model.logged_inputs_size());
+      return InvalidArgument(path, ".logged_inputs: expected ", model.logged_outputs_size(),
+                             " values (as logged_outputs), got ", model.logged_inputs_size());
     }
     NUPMPC_ASSIGN_OR_RETURN(const Eigen::VectorXd y, FiniteVector(model.logged_outputs(), path + ".logged_outputs"));
     NUPMPC_ASSIGN_OR_RETURN(const Eigen::VectorXd u, FiniteVector(model.logged_inputs(), path + ".logged_inputs"));
     if (y.size() <= out.layout.first_step()) {
-      return Invalid(path, ".logged_outputs: ", y.size(),
-                     " samples give no training pair for these lags (need more than ", out.layout.first_step(), ")");
+      return InvalidArgument(path, ".logged_outputs: ", y.size(),
+                             " samples give no training pair for these lags (need more than ", out.layout.first_step(),
+                             ")");
     }
     NUPMPC_ASSIGN_OR_RETURN(out.data, gp::MakeNarxData(out.layout, y, u));
   } else {
     const int P = static_cast<int>(model.regressors().rows());
     NUPMPC_RETURN_IF_ERROR(CheckLimit((path + ".regressors.rows").c_str(), P, limits.max_gp_points));
-    if (P < 1) return Invalid(path, ".regressors: needs at least one row");
+    if (P < 1) return InvalidArgument(path, ".regressors: needs at least one row");
     NUPMPC_ASSIGN_OR_RETURN(out.data.regressors, MatrixFromProto(model.regressors(), P, d, path + ".regressors"));
     if (model.targets_size() != P) {
-      return Invalid(path, ".targets: expected ", P, " values (one per regressor row), got ", model.targets_size());
+      return InvalidArgument(path, ".targets: expected ", P, " values (one per regressor row), got ",
+                             model.targets_size());
     }
     NUPMPC_ASSIGN_OR_RETURN(out.data.targets, FiniteVector(model.targets(), path + ".targets"));
   }
@@ -148,32 +146,32 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
                                                                     const SizeLimits& limits, GpModelCache* cache,
                                                                     const gp::FitOptions& fit_options) {
   // A GP spec describes nothing else: refuse what would be silently ignored.
-  if (spec.has_model()) return Invalid("spec.model: must be empty when spec.gp is set (the GP is the model)");
+  if (spec.has_model()) return InvalidArgument("spec.model: must be empty when spec.gp is set (the GP is the model)");
   if (spec.input_priors_size() > 0)
-    return Invalid("spec.input_priors: must be empty when spec.gp is set (use spec.gp.input_min/max)");
+    return InvalidArgument("spec.input_priors: must be empty when spec.gp is set (use spec.gp.input_min/max)");
   if (spec.output_priors_size() > 0)
-    return Invalid("spec.output_priors: must be empty when spec.gp is set (use spec.gp)");
+    return InvalidArgument("spec.output_priors: must be empty when spec.gp is set (use spec.gp)");
   if (spec.has_terminal())
-    return Invalid("spec.terminal: must be empty when spec.gp is set (use spec.gp.terminal_tolerance)");
-  if (spec.input_levels_size() > 0) return Invalid("spec.input_levels: cannot be combined with spec.gp");
+    return InvalidArgument("spec.terminal: must be empty when spec.gp is set (use spec.gp.terminal_tolerance)");
+  if (spec.input_levels_size() > 0) return InvalidArgument("spec.input_levels: cannot be combined with spec.gp");
   if (spec.has_input_differences())
-    return Invalid("spec.input_differences: must be empty when spec.gp is set (use spec.gp.rate_min/max)");
-  if (spec.has_keep_out()) return Invalid("spec.keep_out: cannot be combined with spec.gp");
+    return InvalidArgument("spec.input_differences: must be empty when spec.gp is set (use spec.gp.rate_min/max)");
+  if (spec.has_keep_out()) return InvalidArgument("spec.keep_out: cannot be combined with spec.gp");
   const v1::SolverOptions& o = spec.options();
   if (o.algorithm() != v1::ALGORITHM_UNSPECIFIED || o.max_iterations() != 0 || o.objective_tolerance() != 0.0 ||
       o.violation_tolerance() != 0.0 || o.elastic_slope() != 0.0 || o.elastic_after_iterations() != 0) {
-    return Invalid("spec.options: GP sessions take time_limit_ms only (SCP limits are in spec.gp.scp)");
+    return InvalidArgument("spec.options: GP sessions take time_limit_ms only (SCP limits are in spec.gp.scp)");
   }
   if (!(o.time_limit_ms() >= 0.0) || !std::isfinite(o.time_limit_ms())) {
-    return Invalid("spec.options.time_limit_ms = ", o.time_limit_ms(), ": must be finite and >= 0");
+    return InvalidArgument("spec.options.time_limit_ms = ", o.time_limit_ms(), ": must be finite and >= 0");
   }
   const v1::GpMpc& g = spec.gp();
-  if (!g.has_model()) return Invalid("spec.gp.model: required");
+  if (!g.has_model()) return InvalidArgument("spec.gp.model: required");
   NUPMPC_ASSIGN_OR_RETURN(const GpTrainingData training, GpTrainingDataFromProto(g.model(), "spec.gp.model", limits));
 
   gp::GpMpcProblem problem;
   problem.layout = training.layout;
-  if (g.horizon() == 0) return Invalid("spec.gp.horizon: must be >= 1");
+  if (g.horizon() == 0) return InvalidArgument("spec.gp.horizon: must be >= 1");
   NUPMPC_RETURN_IF_ERROR(CheckLimit("spec.gp.horizon", g.horizon(), std::min(limits.max_horizon, 10000)));
   problem.horizon = static_cast<int>(g.horizon());
   problem.output_weight = g.output_weight();
@@ -196,16 +194,17 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   // The cold start holds levels of the input box, and the rate limit bounds the steps.
   for (const auto& [value, field] : {std::pair{g.input_min(), "input_min"}, std::pair{g.input_max(), "input_max"},
                                      std::pair{g.rate_min(), "rate_min"}, std::pair{g.rate_max(), "rate_max"}}) {
-    if (!std::isfinite(value)) return Invalid("spec.gp.", field, " = ", value, ": must be finite");
+    if (!std::isfinite(value)) return InvalidArgument("spec.gp.", field, " = ", value, ": must be finite");
   }
 
   gp::ScpOptions options;
   const v1::GpScpOptions& s = g.scp();
-  if (s.max_iterations() > 10000) return Invalid("spec.gp.scp.max_iterations: at most 10000");
+  if (s.max_iterations() > 10000) return InvalidArgument("spec.gp.scp.max_iterations: at most 10000");
   if (s.max_iterations() > 0) options.max_iterations = static_cast<int>(s.max_iterations());
   const auto optional_positive = [](double v, double* out, const char* field) -> absl::Status {
     if (v == 0.0) return absl::OkStatus();
-    if (!(v > 0.0) || !std::isfinite(v)) return Invalid("spec.gp.scp.", field, " = ", v, ": must be finite and > 0");
+    if (!(v > 0.0) || !std::isfinite(v))
+      return InvalidArgument("spec.gp.scp.", field, " = ", v, ": must be finite and > 0");
     *out = v;
     return absl::OkStatus();
   };
@@ -215,8 +214,8 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   NUPMPC_RETURN_IF_ERROR(optional_positive(s.tolerance(), &options.tolerance, "tolerance"));
   // The SCP stops when its radius falls below min_trust_radius: a smaller start is no start.
   if (options.initial_trust_radius < options.min_trust_radius) {
-    return Invalid("spec.gp.scp.initial_trust_radius = ", s.initial_trust_radius(),
-                   ": must be >= ", options.min_trust_radius, " (the radius at which the SCP stops)");
+    return InvalidArgument("spec.gp.scp.initial_trust_radius = ", s.initial_trust_radius(),
+                           ": must be >= ", options.min_trust_radius, " (the radius at which the SCP stops)");
   }
   options.max_trust_radius = std::max(options.max_trust_radius, options.initial_trust_radius);
   // Every rule of the SCP options here, before the O(P³) set-up (LinGpScp::Create checks
@@ -231,7 +230,7 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   Eigen::VectorXd reference = Eigen::VectorXd::Zero(1);
   if (g.reference_size() > 0) {
     if (g.reference_size() != 1 && g.reference_size() != problem.horizon) {
-      return Invalid("spec.gp.reference: expected 1 or ", problem.horizon, " values, got ", g.reference_size());
+      return InvalidArgument("spec.gp.reference: expected 1 or ", problem.horizon, " values, got ", g.reference_size());
     }
     NUPMPC_ASSIGN_OR_RETURN(reference, FiniteVector(g.reference(), "spec.gp.reference"));
   }
@@ -239,13 +238,13 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   Eigen::VectorXd x0 = Eigen::VectorXd::Zero(window);
   if (spec.has_initial_state()) {
     if (spec.initial_state().has_covariance()) {
-      return Invalid("spec.initial_state.covariance: GP sessions take a measured past window (no covariance)");
+      return InvalidArgument("spec.initial_state.covariance: GP sessions take a measured past window (no covariance)");
     }
     if (spec.initial_state().mean_size() > 0) {
       if (spec.initial_state().mean_size() != window) {
-        return Invalid("spec.initial_state.mean: expected ", window,
-                       " values (the past window [y[t-l..t-1], u[t-m-1..t-1]]), got ",
-                       spec.initial_state().mean_size());
+        return InvalidArgument("spec.initial_state.mean: expected ", window,
+                               " values (the past window [y[t-l..t-1], u[t-m-1..t-1]]), got ",
+                               spec.initial_state().mean_size());
       }
       NUPMPC_ASSIGN_OR_RETURN(x0, FiniteVector(spec.initial_state().mean(), "spec.initial_state.mean"));
     }
@@ -284,14 +283,14 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
 
 absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& limits,
                         const gp::FitOptions& fit_limits, v1::FitGpModelResponse* response) {
-  if (!request.has_model()) return Invalid("model: required");
+  if (!request.has_model()) return InvalidArgument("model: required");
   NUPMPC_ASSIGN_OR_RETURN(const GpTrainingData training, GpTrainingDataFromProto(request.model(), "model", limits));
   gp::SeArdKernel start = DefaultKernelStart(training.data);
   if (request.model().has_kernel()) {
     NUPMPC_ASSIGN_OR_RETURN(start,
                             KernelFromProto(request.model().kernel(), training.layout.dimension(), "model.kernel"));
   }
-  if (request.max_iterations() > 100000) return Invalid("max_iterations: at most 100000");
+  if (request.max_iterations() > 100000) return InvalidArgument("max_iterations: at most 100000");
   gp::FitOptions options = fit_limits;
   if (request.max_iterations() > 0) options.max_iterations = static_cast<int>(request.max_iterations());
   const auto start_time = std::chrono::steady_clock::now();

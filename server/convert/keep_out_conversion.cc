@@ -10,7 +10,7 @@ namespace {
 
 constexpr char kField[] = "spec.keep_out";
 
-absl::Status Invalid(const std::string& field, const std::string& rule) {
+absl::Status InvalidKeepOut(const std::string& field, const std::string& rule) {
   return absl::InvalidArgumentError(absl::StrCat(kField, ".", field, ": ", rule));
 }
 
@@ -25,23 +25,23 @@ absl::StatusOr<core::KeepOutRegion> RegionFromSpec(const v1::KeepOutRegion& r, c
       region.shape = core::KeepOutShape::kRectangle;
       break;
     default:
-      return Invalid(field + ".shape", absl::StrCat("unknown value ", r.shape()));
+      return InvalidKeepOut(field + ".shape", absl::StrCat("unknown value ", r.shape()));
   }
-  if (!std::isfinite(r.centre_x())) return Invalid(field + ".centre_x", "must be finite");
-  if (!std::isfinite(r.centre_y())) return Invalid(field + ".centre_y", "must be finite");
+  if (!std::isfinite(r.centre_x())) return InvalidKeepOut(field + ".centre_x", "must be finite");
+  if (!std::isfinite(r.centre_y())) return InvalidKeepOut(field + ".centre_y", "must be finite");
   if (!std::isfinite(r.half_axis_a()) || !(r.half_axis_a() > 0.0)) {
-    return Invalid(field + ".half_axis_a", absl::StrCat("must be finite and > 0, got ", r.half_axis_a()));
+    return InvalidKeepOut(field + ".half_axis_a", absl::StrCat("must be finite and > 0, got ", r.half_axis_a()));
   }
   if (!std::isfinite(r.half_axis_b()) || r.half_axis_b() < 0.0) {
-    return Invalid(field + ".half_axis_b",
-                   absl::StrCat("must be finite and > 0 (0: equal to half_axis_a), got ", r.half_axis_b()));
+    return InvalidKeepOut(field + ".half_axis_b",
+                          absl::StrCat("must be finite and > 0 (0: equal to half_axis_a), got ", r.half_axis_b()));
   }
-  if (!std::isfinite(r.rotation_rad())) return Invalid(field + ".rotation_rad", "must be finite");
+  if (!std::isfinite(r.rotation_rad())) return InvalidKeepOut(field + ".rotation_rad", "must be finite");
   if (!std::isfinite(r.margin()) || r.margin() < 0.0) {
-    return Invalid(field + ".margin", absl::StrCat("must be finite and ≥ 0, got ", r.margin()));
+    return InvalidKeepOut(field + ".margin", absl::StrCat("must be finite and ≥ 0, got ", r.margin()));
   }
   if (std::isnan(r.slope()) || r.slope() < 0.0) {
-    return Invalid(field + ".slope", absl::StrCat("must be > 0 (0 or Infinity: hard), got ", r.slope()));
+    return InvalidKeepOut(field + ".slope", absl::StrCat("must be > 0 (0 or Infinity: hard), got ", r.slope()));
   }
   region.centre = Eigen::Vector2d(r.centre_x(), r.centre_y());
   region.half_axes = Eigen::Vector2d(r.half_axis_a(), r.half_axis_b() > 0.0 ? r.half_axis_b() : r.half_axis_a());
@@ -56,17 +56,18 @@ absl::StatusOr<core::KeepOutRegion> RegionFromSpec(const v1::KeepOutRegion& r, c
 absl::StatusOr<core::KeepOut> KeepOutFromSpec(const v1::KeepOut& spec, int num_outputs) {
   core::KeepOut keep_out;
   if (spec.first_output() >= static_cast<unsigned>(num_outputs)) {
-    return Invalid("first_output",
-                   absl::StrCat("must be < num_outputs = ", num_outputs, ", got ", spec.first_output()));
+    return InvalidKeepOut("first_output",
+                          absl::StrCat("must be < num_outputs = ", num_outputs, ", got ", spec.first_output()));
   }
   if (spec.second_output() >= static_cast<unsigned>(num_outputs)) {
-    return Invalid("second_output",
-                   absl::StrCat("must be < num_outputs = ", num_outputs, ", got ", spec.second_output()));
+    return InvalidKeepOut("second_output",
+                          absl::StrCat("must be < num_outputs = ", num_outputs, ", got ", spec.second_output()));
   }
-  if (spec.second_output() == spec.first_output()) return Invalid("second_output", "must differ from first_output");
-  if (spec.regions_size() == 0) return Invalid("regions", "at least one region is required");
+  if (spec.second_output() == spec.first_output())
+    return InvalidKeepOut("second_output", "must differ from first_output");
+  if (spec.regions_size() == 0) return InvalidKeepOut("regions", "at least one region is required");
   if (spec.rectangle_order() != 0 && (spec.rectangle_order() < 2 || spec.rectangle_order() > 32)) {
-    return Invalid("rectangle_order", absl::StrCat("must be in [2, 32] (0: 8), got ", spec.rectangle_order()));
+    return InvalidKeepOut("rectangle_order", absl::StrCat("must be in [2, 32] (0: 8), got ", spec.rectangle_order()));
   }
   keep_out.first_output = static_cast<int>(spec.first_output());
   keep_out.second_output = static_cast<int>(spec.second_output());
@@ -82,11 +83,12 @@ absl::StatusOr<core::KeepOut> KeepOutFromSpec(const v1::KeepOut& spec, int num_o
 absl::StatusOr<core::SequentialOptions> SequentialOptionsFromSpec(const v1::KeepOut& spec) {
   core::SequentialOptions options;
   if (spec.max_linearisations() > 10000) {
-    return Invalid("max_linearisations", absl::StrCat("must be ≤ 10000, got ", spec.max_linearisations()));
+    return InvalidKeepOut("max_linearisations", absl::StrCat("must be ≤ 10000, got ", spec.max_linearisations()));
   }
   if (spec.max_linearisations() > 0) options.max_linearisations = static_cast<int>(spec.max_linearisations());
   if (!std::isfinite(spec.step_tolerance()) || spec.step_tolerance() < 0.0) {
-    return Invalid("step_tolerance", absl::StrCat("must be finite and ≥ 0 (0: 1e-6), got ", spec.step_tolerance()));
+    return InvalidKeepOut("step_tolerance",
+                          absl::StrCat("must be finite and ≥ 0 (0: 1e-6), got ", spec.step_tolerance()));
   }
   if (spec.step_tolerance() > 0.0) options.step_tolerance = spec.step_tolerance();
   return options;

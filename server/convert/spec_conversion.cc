@@ -8,16 +8,12 @@
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "core/util/status_macros.h"
+#include "server/convert/invalid_argument.h"
 
 namespace nupmpc::server {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-
-template <typename... Args>
-absl::Status Invalid(const Args&... args) {
-  return absl::InvalidArgumentError(absl::StrCat(args...));
-}
 
 std::string Path(const std::string& base, const char* member) { return absl::StrCat(base, ".", member); }
 std::string Path(const std::string& base, const char* member, int index) {
@@ -30,10 +26,10 @@ class PerStep {
   static absl::StatusOr<PerStep> Make(const google::protobuf::RepeatedField<double>& values, int steps,
                                       double default_value, const std::string& path) {
     if (!values.empty() && values.size() != 1 && values.size() != steps) {
-      return Invalid(path, ": expected 0, 1 or ", steps, " values (one per step), got ", values.size());
+      return InvalidArgument(path, ": expected 0, 1 or ", steps, " values (one per step), got ", values.size());
     }
     for (int i = 0; i < values.size(); ++i) {
-      if (std::isnan(values[i])) return Invalid(path, "[", i, "]: must not be NaN");
+      if (std::isnan(values[i])) return InvalidArgument(path, "[", i, "]: must not be NaN");
     }
     return PerStep(&values, default_value);
   }
@@ -60,48 +56,51 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
   NUPMPC_ASSIGN_OR_RETURN(const PerStep radius, PerStep::Make(c.radius(), steps, 1.0, Path(path, "radius")));
   NUPMPC_ASSIGN_OR_RETURN(const PerStep exponent, PerStep::Make(c.exponent(), steps, 1.0, Path(path, "exponent")));
   const v1::PriorKind kind = c.kind();
-  if (!v1::PriorKind_IsValid(kind)) return Invalid(Path(path, "kind"), " = ", static_cast<int>(kind), ": unknown");
+  if (!v1::PriorKind_IsValid(kind))
+    return InvalidArgument(Path(path, "kind"), " = ", static_cast<int>(kind), ": unknown");
   if (!v1::Estimation_IsValid(c.estimation())) {
-    return Invalid(Path(path, "estimation"), " = ", static_cast<int>(c.estimation()), ": unknown");
+    return InvalidArgument(Path(path, "estimation"), " = ", static_cast<int>(c.estimation()), ": unknown");
   }
   const bool em = c.estimation() != v1::ESTIMATION_AM;
   if (kind == v1::PRIOR_KIND_BINARY && (lower.empty() || upper.empty())) {
-    return Invalid(path, ": BINARY needs both levels (lower and upper)");
+    return InvalidArgument(path, ": BINARY needs both levels (lower and upper)");
   }
-  if (kind == v1::PRIOR_KIND_LP && slope.empty()) return Invalid(Path(path, "slope"), ": required for LP");
+  if (kind == v1::PRIOR_KIND_LP && slope.empty()) return InvalidArgument(Path(path, "slope"), ": required for LP");
   const bool needs_lower = kind == v1::PRIOR_KIND_AT_LEAST;
   const bool needs_upper = kind == v1::PRIOR_KIND_AT_MOST;
-  if (needs_lower && lower.empty()) return Invalid(Path(path, "lower"), ": required for AT_LEAST");
-  if (needs_upper && upper.empty()) return Invalid(Path(path, "upper"), ": required for AT_MOST");
+  if (needs_lower && lower.empty()) return InvalidArgument(Path(path, "lower"), ": required for AT_LEAST");
+  if (needs_upper && upper.empty()) return InvalidArgument(Path(path, "upper"), ": required for AT_MOST");
   if (kind == v1::PRIOR_KIND_BOX && lower.empty() && upper.empty()) {
-    return Invalid(path, ": BOX needs lower and/or upper");
+    return InvalidArgument(path, ": BOX needs lower and/or upper");
   }
   const bool penalty = kind == v1::PRIOR_KIND_L1 || kind == v1::PRIOR_KIND_HUBER;
-  if (penalty && slope.empty()) return Invalid(Path(path, "slope"), ": required for L1 and HUBER");
+  if (penalty && slope.empty()) return InvalidArgument(Path(path, "slope"), ": required for L1 and HUBER");
 
   for (int n = 0; n < steps; ++n) {
     const double w = weight.at(n);
     if (!(w >= 0.0) || !std::isfinite(w)) {
-      return Invalid(Path(path, "weight"), " at step ", n, " = ", w, ": must be finite and >= 0");
+      return InvalidArgument(Path(path, "weight"), " at step ", n, " = ", w, ": must be finite and >= 0");
     }
     const double t = target.at(n);
-    if (!std::isfinite(t)) return Invalid(Path(path, "target"), " at step ", n, " = ", t, ": must be finite");
+    if (!std::isfinite(t)) return InvalidArgument(Path(path, "target"), " at step ", n, " = ", t, ": must be finite");
     const double s = slope.at(n);
-    if (!(s > 0.0)) return Invalid(Path(path, "slope"), " at step ", n, " = ", s, ": must be > 0");
+    if (!(s > 0.0)) return InvalidArgument(Path(path, "slope"), " at step ", n, " = ", s, ": must be > 0");
     const double a = lower.at(n), b = upper.at(n);
     core::ScalarPrior p;
     switch (kind) {
       case v1::PRIOR_KIND_L1:
       case v1::PRIOR_KIND_HUBER: {
         const double centre = lower.empty() ? 0.0 : a;
-        if (!std::isfinite(centre)) return Invalid(Path(path, "lower"), " at step ", n, ": the centre must be finite");
-        if (!std::isfinite(s)) return Invalid(Path(path, "slope"), " at step ", n, ": must be finite for L1/HUBER");
+        if (!std::isfinite(centre))
+          return InvalidArgument(Path(path, "lower"), " at step ", n, ": the centre must be finite");
+        if (!std::isfinite(s))
+          return InvalidArgument(Path(path, "slope"), " at step ", n, ": must be finite for L1/HUBER");
         if (kind == v1::PRIOR_KIND_L1) {
           p = core::ScalarPrior::L1(centre, s);
         } else {
           const double r = radius.at(n);
           if (!(r > 0.0) || !std::isfinite(r)) {
-            return Invalid(Path(path, "radius"), " at step ", n, " = ", r, ": must be finite and > 0");
+            return InvalidArgument(Path(path, "radius"), " at step ", n, " = ", r, ": must be finite and > 0");
           }
           p = core::ScalarPrior::Huber(centre, r, s);
         }
@@ -111,28 +110,29 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
       case v1::PRIOR_KIND_SMOOTHED_NUV:
       case v1::PRIOR_KIND_LP: {
         const double centre = lower.empty() ? 0.0 : a;
-        if (!std::isfinite(centre)) return Invalid(Path(path, "lower"), " at step ", n, ": the centre must be finite");
+        if (!std::isfinite(centre))
+          return InvalidArgument(Path(path, "lower"), " at step ", n, ": the centre must be finite");
         if (kind == v1::PRIOR_KIND_PLAIN_NUV) {
           p = core::ScalarPrior::PlainNuv(centre, em);
         } else if (kind == v1::PRIOR_KIND_SMOOTHED_NUV) {
           const double r = radius.at(n);
           if (!(r > 0.0) || !std::isfinite(r)) {
-            return Invalid(Path(path, "radius"), " at step ", n, " = ", r, ": must be finite and > 0");
+            return InvalidArgument(Path(path, "radius"), " at step ", n, " = ", r, ": must be finite and > 0");
           }
           p = core::ScalarPrior::SmoothedNuv(centre, r, em);
         } else {
           const double e = exponent.at(n);
           if (!(e > 0.0 && e <= 1.0))
-            return Invalid(Path(path, "exponent"), " at step ", n, " = ", e, ": must be in (0, 1]");
-          if (!std::isfinite(s)) return Invalid(Path(path, "slope"), " at step ", n, ": must be finite for LP");
+            return InvalidArgument(Path(path, "exponent"), " at step ", n, " = ", e, ": must be in (0, 1]");
+          if (!std::isfinite(s)) return InvalidArgument(Path(path, "slope"), " at step ", n, ": must be finite for LP");
           p = core::ScalarPrior::Lp(centre, e, s);
         }
         break;
       }
       case v1::PRIOR_KIND_BINARY:
         if (!std::isfinite(a) || !std::isfinite(b) || !(a < b)) {
-          return Invalid(path, " at step ", n, ": levels lower = ", a, ", upper = ", b,
-                         " must be finite with lower < upper");
+          return InvalidArgument(path, " at step ", n, ": levels lower = ", a, ", upper = ", b,
+                                 " must be finite with lower < upper");
         }
         p = core::ScalarPrior::Binary(a, b, em);
         break;
@@ -143,10 +143,10 @@ absl::Status ComponentFromProto(const v1::ComponentPrior& c, int steps, const st
         const bool has_lower = kind != v1::PRIOR_KIND_AT_MOST && a > -kInf;
         const bool has_upper = kind != v1::PRIOR_KIND_AT_LEAST && b < kInf;
         if ((kind != v1::PRIOR_KIND_AT_MOST && a == kInf) || (kind != v1::PRIOR_KIND_AT_LEAST && b == -kInf)) {
-          return Invalid(path, " at step ", n, ": bounds [", a, ", ", b, "] leave no feasible value");
+          return InvalidArgument(path, " at step ", n, ": bounds [", a, ", ", b, "] leave no feasible value");
         }
         if (has_lower && has_upper) {
-          if (!(a < b)) return Invalid(path, " at step ", n, ": lower = ", a, " must be < upper = ", b);
+          if (!(a < b)) return InvalidArgument(path, " at step ", n, ": lower = ", a, " must be < upper = ", b);
           p = core::ScalarPrior::Box(a, b, s);
         } else if (has_lower) {
           p = core::ScalarPrior::AtLeast(a, s);
@@ -184,16 +184,17 @@ std::string InSpecTerms(absl::string_view core_message) {
 
 absl::StatusOr<Eigen::MatrixXd> MatrixFromProto(const v1::Matrix& m, int rows, int cols, const std::string& path) {
   if (static_cast<int>(m.rows()) != rows || static_cast<int>(m.cols()) != cols) {
-    return Invalid(path, ": expected ", rows, "x", cols, ", got ", m.rows(), "x", m.cols());
+    return InvalidArgument(path, ": expected ", rows, "x", cols, ", got ", m.rows(), "x", m.cols());
   }
   if (m.data_size() != rows * cols) {
-    return Invalid(path, ".data: expected ", rows * cols, " values (rows*cols, row-major), got ", m.data_size());
+    return InvalidArgument(path, ".data: expected ", rows * cols, " values (rows*cols, row-major), got ",
+                           m.data_size());
   }
   Eigen::MatrixXd out(rows, cols);
   for (int i = 0; i < rows; ++i) {
     for (int j = 0; j < cols; ++j) {
       const double v = m.data(i * cols + j);
-      if (!std::isfinite(v)) return Invalid(path, ".data[", i * cols + j, "] = ", v, ": must be finite");
+      if (!std::isfinite(v)) return InvalidArgument(path, ".data[", i * cols + j, "] = ", v, ": must be finite");
       out(i, j) = v;
     }
   }
@@ -213,13 +214,13 @@ absl::Status ComponentPriorsFromProto(const v1::ComponentPrior& component, int s
 }
 
 absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const SizeLimits& limits) {
-  if (!spec.has_model()) return Invalid("spec.model: required");
+  if (!spec.has_model()) return InvalidArgument("spec.model: required");
   const v1::Model& m = spec.model();
   const int M = static_cast<int>(m.num_states()), L = static_cast<int>(m.num_inputs());
   const int K = static_cast<int>(m.num_outputs()), N = static_cast<int>(m.horizon());
-  if (m.num_states() == 0) return Invalid("spec.model.num_states: must be >= 1");
-  if (m.num_inputs() == 0) return Invalid("spec.model.num_inputs: must be >= 1");
-  if (m.horizon() == 0) return Invalid("spec.model.horizon: must be >= 1");
+  if (m.num_states() == 0) return InvalidArgument("spec.model.num_states: must be >= 1");
+  if (m.num_inputs() == 0) return InvalidArgument("spec.model.num_inputs: must be >= 1");
+  if (m.horizon() == 0) return InvalidArgument("spec.model.horizon: must be >= 1");
   NUPMPC_RETURN_IF_ERROR(CheckLimit("spec.model.num_states", m.num_states(), limits.max_states));
   NUPMPC_RETURN_IF_ERROR(CheckLimit("spec.model.num_inputs", m.num_inputs(), limits.max_inputs));
   NUPMPC_RETURN_IF_ERROR(CheckLimit("spec.model.num_outputs", m.num_outputs(), limits.max_outputs));
@@ -238,8 +239,8 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
   const auto read_matrices = [&](const auto& list, const char* name, int rows, int cols, int per_step_count,
                                  std::vector<Eigen::MatrixXd>* out) -> absl::Status {
     if (list.size() != 1 && list.size() != per_step_count) {
-      return Invalid("spec.model.", name, ": expected 1 (time-invariant) or ", per_step_count,
-                     " (per step) matrices, got ", list.size());
+      return InvalidArgument("spec.model.", name, ": expected 1 (time-invariant) or ", per_step_count,
+                             " (per step) matrices, got ", list.size());
     }
     for (int i = 0; i < list.size(); ++i) {
       NUPMPC_ASSIGN_OR_RETURN(Eigen::MatrixXd mat, MatrixFromProto(list[i], rows, cols, Path("spec.model", name, i)));
@@ -258,10 +259,12 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
                                 std::vector<Eigen::VectorXd>* out) -> absl::Status {
     if (values.empty()) return absl::OkStatus();
     if (values.size() != size && values.size() != size * steps) {
-      return Invalid("spec.model.", name, ": expected 0, ", size, " or ", size * steps, " values, got ", values.size());
+      return InvalidArgument("spec.model.", name, ": expected 0, ", size, " or ", size * steps, " values, got ",
+                             values.size());
     }
     for (int i = 0; i < values.size(); ++i) {
-      if (!std::isfinite(values[i])) return Invalid("spec.model.", name, "[", i, "] = ", values[i], ": must be finite");
+      if (!std::isfinite(values[i]))
+        return InvalidArgument("spec.model.", name, "[", i, "] = ", values[i], ": must be finite");
     }
     for (int s = 0; s * size < values.size(); ++s) {
       out->push_back(Eigen::Map<const Eigen::VectorXd>(values.data() + s * size, size));
@@ -273,20 +276,21 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
 
   const v1::InitialState& x0 = spec.initial_state();
   if (x0.mean_size() != M) {
-    return Invalid("spec.initial_state.mean: expected ", M, " values (num_states), got ", x0.mean_size());
+    return InvalidArgument("spec.initial_state.mean: expected ", M, " values (num_states), got ", x0.mean_size());
   }
   p.initial_mean = Eigen::Map<const Eigen::VectorXd>(x0.mean().data(), M);
-  if (!p.initial_mean.allFinite()) return Invalid("spec.initial_state.mean: must be finite");
+  if (!p.initial_mean.allFinite()) return InvalidArgument("spec.initial_state.mean: must be finite");
   if (x0.has_covariance()) {
     NUPMPC_ASSIGN_OR_RETURN(p.initial_covariance,
                             MatrixFromProto(x0.covariance(), M, M, "spec.initial_state.covariance"));
   }
 
   if (spec.input_priors_size() != L) {
-    return Invalid("spec.input_priors: expected ", L, " entries (num_inputs), got ", spec.input_priors_size());
+    return InvalidArgument("spec.input_priors: expected ", L, " entries (num_inputs), got ", spec.input_priors_size());
   }
   if (spec.output_priors_size() != K) {
-    return Invalid("spec.output_priors: expected ", K, " entries (num_outputs), got ", spec.output_priors_size());
+    return InvalidArgument("spec.output_priors: expected ", K, " entries (num_outputs), got ",
+                           spec.output_priors_size());
   }
   p.input_priors.assign(static_cast<std::size_t>(N) * L, core::ScalarPrior::Free());
   p.output_priors.assign(static_cast<std::size_t>(N + 1) * K, core::ScalarPrior::Free());
@@ -300,19 +304,20 @@ absl::StatusOr<core::Problem> ProblemFromSpec(const v1::ProblemSpec& spec, const
   }
   if (spec.has_terminal()) {
     const v1::TerminalCost& t = spec.terminal();
-    if (t.target_size() != M) return Invalid("spec.terminal.target: expected ", M, " values, got ", t.target_size());
+    if (t.target_size() != M)
+      return InvalidArgument("spec.terminal.target: expected ", M, " values, got ", t.target_size());
     core::Problem::Terminal terminal;
     terminal.target = Eigen::Map<const Eigen::VectorXd>(t.target().data(), M);
-    if (!terminal.target.allFinite()) return Invalid("spec.terminal.target: must be finite");
+    if (!terminal.target.allFinite()) return InvalidArgument("spec.terminal.target: must be finite");
     NUPMPC_ASSIGN_OR_RETURN(terminal.weight, MatrixFromProto(t.weight(), M, M, "spec.terminal.weight"));
     if (!terminal.weight.isApprox(terminal.weight.transpose(), 1e-12)) {
-      return Invalid("spec.terminal.weight: must be symmetric");
+      return InvalidArgument("spec.terminal.weight: must be symmetric");
     }
     p.terminal = std::move(terminal);
   }
   // The core's own checks (covariance definiteness, ...) as the last line.
   absl::Status core_check = core::Validate(p);
-  if (!core_check.ok()) return Invalid(InSpecTerms(core_check.message()));
+  if (!core_check.ok()) return InvalidArgument(InSpecTerms(core_check.message()));
   return p;
 }
 
@@ -332,7 +337,7 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, 
       out.algorithm = core::Algorithm::kIffbdd;
       break;
     default:
-      return Invalid("spec.options.algorithm = ", static_cast<int>(o.algorithm()), ": unknown");
+      return InvalidArgument("spec.options.algorithm = ", static_cast<int>(o.algorithm()), ": unknown");
   }
   if (o.max_iterations() > static_cast<unsigned>(limits.max_iterations)) {
     return absl::ResourceExhaustedError(absl::StrCat("spec.options.max_iterations = ", o.max_iterations(),
@@ -340,7 +345,8 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, 
   }
   if (o.max_iterations() > 0) out.max_iterations = static_cast<int>(o.max_iterations());
   const auto positive_or_zero = [](double v, const char* field) -> absl::Status {
-    if (!(v >= 0.0) || !std::isfinite(v)) return Invalid("spec.options.", field, " = ", v, ": must be finite and >= 0");
+    if (!(v >= 0.0) || !std::isfinite(v))
+      return InvalidArgument("spec.options.", field, " = ", v, ": must be finite and >= 0");
     return absl::OkStatus();
   };
   NUPMPC_RETURN_IF_ERROR(positive_or_zero(o.objective_tolerance(), "objective_tolerance"));
@@ -351,8 +357,8 @@ absl::StatusOr<core::SolverOptions> OptionsFromSpec(const v1::SolverOptions& o, 
   NUPMPC_RETURN_IF_ERROR(positive_or_zero(o.elastic_slope(), "elastic_slope"));
   out.elastic_slope = o.elastic_slope();
   if (o.elastic_after_iterations() > static_cast<unsigned>(limits.max_iterations)) {
-    return Invalid("spec.options.elastic_after_iterations = ", o.elastic_after_iterations(),
-                   ": must not exceed the server's iteration limit ", limits.max_iterations);
+    return InvalidArgument("spec.options.elastic_after_iterations = ", o.elastic_after_iterations(),
+                           ": must not exceed the server's iteration limit ", limits.max_iterations);
   }
   if (o.elastic_after_iterations() > 0) out.elastic_after_iterations = static_cast<int>(o.elastic_after_iterations());
   NUPMPC_RETURN_IF_ERROR(core::Validate(out));

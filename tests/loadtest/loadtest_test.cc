@@ -15,6 +15,7 @@
 #include "loadtest/idle_sessions.h"
 #include "loadtest/load_level.h"
 #include "loadtest/loadtest_report.h"
+#include "loadtest/quantile.h"
 #include "loadtest/transport_floor.h"
 #include "server/sessions/session_factory.h"
 #include "server/sessions/session_registry.h"

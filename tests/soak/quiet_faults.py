@@ -30,7 +30,7 @@ they touch nothing else on the machine; each prints a PASS/FAIL line and its fig
 The scenarios given (default: all) run at once, each in its own namespace (--jobs bounds
 how many at a time), so a group takes about as long as its longest scenario. Needs root
 (unshare, nft), nftables, iproute2 and haproxy (deploy/install-deps.sh). Exit 1 when any
-scenario fails. --quick: shorter phases around the faults (the ctests QuietFaults.*);
+scenario fails. --quick: shorter phases around the faults (the ctest QuietFaults.*);
 the faults themselves last what the names say either way.
 
 Every bound is on a mechanism (held steps counted, a step line every period, plans again

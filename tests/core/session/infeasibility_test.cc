@@ -11,6 +11,7 @@
 #include "core/session/session.h"
 #include "gtest/gtest.h"
 #include "loadtest/instances/benchmark_instance.h"
+#include "tests/util/benchmark_files.h"
 #include "tests/util/bounded_integrator.h"
 #include "tests/util/status_matchers.h"
 
@@ -75,7 +76,7 @@ TEST(Infeasibility, FeasibleTightIntegratorStatesStillConverge) {
 // bound 4 before the inputs (|u| ≤ 0.5) can stop it. Without detection IFFBDD ran to the
 // cap with exploding values.
 TEST(Infeasibility, MassesFromAStateOutOfReachEndInfeasibleWithFiniteValues) {
-  auto inst = bench::LoadBenchmarkInstance(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  auto inst = bench::LoadBenchmarkInstance(nupmpc::testing::BenchmarkPath("masses_N30"));
   ASSERT_TRUE(inst.ok()) << inst.status();
   Problem p = inst->problem;
   p.initial_mean.setConstant(3.9);
@@ -109,7 +110,7 @@ TEST(Infeasibility, MassesFromAStateOutOfReachEndInfeasibleWithFiniteValues) {
 // Not bit for bit: after a warm solve and an infeasible one, the cold plan differs from a
 // fresh session's in the last digits (some algorithm state survives ColdStart; open).
 TEST(Infeasibility, AfterAnInfeasibleStepAColdSolveIsAFreshSessions) {
-  auto inst = bench::LoadBenchmarkInstance(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
+  auto inst = bench::LoadBenchmarkInstance(nupmpc::testing::BenchmarkPath("masses_N30"));
   ASSERT_TRUE(inst.ok()) << inst.status();
   const auto& x1 = inst->closed_loop->x1;
   SolveLimits cold;
