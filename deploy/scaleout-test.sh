@@ -248,13 +248,14 @@ check "$out" 'd["failed_steps"] == 0' "scale-up: a step failed"
 #    compose stack's smoke test (podman kube play).
 if [ $quick = 0 ]; then
   if command -v podman >/dev/null && podman image exists localhost/nupmpc:latest 2>/dev/null &&
-     podman image exists localhost/nupmpc-haproxy:latest 2>/dev/null; then
+     podman image exists localhost/nupmpc-haproxy:latest 2>/dev/null &&
+     podman image exists localhost/nupmpc-prometheus:latest 2>/dev/null; then
     say "compose stack (podman kube play): deploy/compose/smoke.sh"
     NUPMPC_BIN_DIR="$bin" deploy/compose/smoke.sh --port "$("$py" tests/util/loopback_port.py)" ||
       fail "the compose stack's smoke test"
   else
-    say "compose stack: not run (needs podman and the images of deploy/container/build-image.sh and" \
-        "deploy/compose/build-balancer-image.sh)"
+    say "compose stack: not run (needs podman and the images of deploy/container/build-image.sh," \
+        "deploy/compose/build-balancer-image.sh and deploy/compose/build-prometheus-image.sh)"
   fi
 fi
 say "all checks passed"

@@ -4,6 +4,13 @@
 #      no plan that differs from the core's, and how HAProxy spread the streams;
 #   2. 20 sessions by client-drawn id, each solved 10 times by id (--probe addressed): every
 #      call reaches its session (none failed, none had to be re-created);
+# then Prometheus in the pod, through its HTTP API, each within 30 s of the probes' end:
+#   3. its job nupmpc's targets are the three replicas' metrics endpoints, all health "up"
+#      (/api/v1/targets);
+#   4. the rule groups of deploy/prometheus/nupmpc-alerts.yml are loaded with every rule of
+#      the file, each evaluated without error, health "ok" (/api/v1/rules);
+#   5. up{job="nupmpc"} is 1 and nupmpc_solves_total (the probes' solves) above 0 on each
+#      replica (/api/v1/query);
 # then down.sh: every container exits 0 on SIGTERM. Exit status 0 only if all passed.
 #
 # Usage: deploy/compose/smoke.sh [--port P]          (default 50051)
@@ -55,6 +62,67 @@ echo "smoke: addressed: $addressed"
 echo "smoke: addressed: calls by id per replica (HAProxy): $(spread pinned "$before")"
 check "$addressed" 'd["failed"] == 0 and d["recreated"] == 0 and d["miscounted"] == 0 and d["solves"] == 200' \
   "addressed: a call by session id missed its session"
+
+# Prometheus: each look is one GET through `podman exec` (stack_prometheus) and a judgement of
+# its JSON here (the expected count: the three replicas); a look that fails is repeated until
+# it passes or 30 s after the probes are up.
+read -r -d '' prometheus_judge <<'PY' || true
+import json, re, sys
+what, expected = sys.argv[1], int(sys.argv[2])
+try:
+    data = json.load(sys.stdin)
+except ValueError:
+    print("no answer from Prometheus")
+    sys.exit(1)
+if data.get("status") != "success":
+    print(f"API status {data.get('status')}: {data.get('error')}")
+    sys.exit(1)
+data = data["data"]
+if what == "targets":
+    targets = sorted((t["labels"].get("instance", t["scrapeUrl"]), t["health"], t.get("lastError", ""))
+                     for t in data["activeTargets"] if t["labels"].get("job") == "nupmpc")
+    print(", ".join(f"{i} {h}" + (f" ({e})" if e else "") for i, h, e in targets) or "no targets of job nupmpc")
+    sys.exit(0 if len(targets) == expected and all(h == "up" for _, h, _ in targets) else 1)
+if what == "rules":
+    text = open("deploy/prometheus/nupmpc-alerts.yml").read()
+    want_groups = set(re.findall(r"^  - name:\s*(\S+)", text, re.M))
+    want_rules = set(re.findall(r"^\s*- (?:alert|record):\s*(\S+)", text, re.M))
+    groups = {g["name"]: g for g in data["groups"] if g["name"] in want_groups}
+    rules = {r["name"]: r for g in groups.values() for r in g["rules"]}
+    missing = sorted(want_groups - groups.keys()) + sorted(want_rules - rules.keys())
+    unhealthy = [f"{n} {r['health']}" + (f" ({r['lastError']})" if r.get("lastError") else "")
+                 for n, r in sorted(rules.items()) if r["health"] != "ok"]
+    print("; ".join(f"group {n} ({g['file']}): {len(g['rules'])} rules, "
+                    f"{sum(r['type'] == 'alerting' for r in g['rules'])} of them alerts, health "
+                    + ",".join(sorted({r['health'] for r in g['rules']})) for n, g in sorted(groups.items()))
+          + (f"; missing: {', '.join(missing)}" if missing else "")
+          + (f"; not evaluated or failing: {', '.join(unhealthy)}" if unhealthy else ""))
+    sys.exit(0 if groups and not missing and not unhealthy else 1)
+# An instant query: one sample per replica, each above 0.
+samples = sorted((s["metric"].get("instance", "?"), float(s["value"][1])) for s in data["result"])
+print(", ".join(f"{i} {v:g}" for i, v in samples) or "no samples")
+sys.exit(0 if len(samples) == expected and all(v > 0 for _, v in samples) else 1)
+PY
+prometheus_start=$(date +%s%N) prometheus_deadline=$((SECONDS + 30))
+prometheus_expect() {  # WHAT PATH FAILURE
+  local answer
+  until answer=$(stack_prometheus "$2" | python3 -c "$prometheus_judge" "$1" 3); do
+    if [ "$SECONDS" -ge "$prometheus_deadline" ]; then
+      echo "smoke: FAIL: prometheus: $3 within 30 s: ${answer:-no answer}"
+      failures+=("prometheus: $3")
+      return 0
+    fi
+    sleep 0.5
+  done
+  echo "smoke: prometheus: $1 after" \
+       "$(awk -v a="$prometheus_start" -v b="$(date +%s%N)" 'BEGIN { printf "%.1f s", (b - a) / 1e9 }'): $answer"
+}
+query_path() { echo "/api/v1/query?query=$(python3 -c 'import sys, urllib.parse; print(urllib.parse.quote(sys.argv[1]))' "$1")"; }
+prometheus_expect targets '/api/v1/targets?state=active' "the 3 replicas' metrics endpoints are not all up"
+prometheus_expect rules /api/v1/rules "the rules of deploy/prometheus/nupmpc-alerts.yml are not all loaded and evaluated"
+prometheus_expect 'up{job="nupmpc"}' "$(query_path 'up{job="nupmpc"}')" 'up{job="nupmpc"} is not 1 on each replica'
+prometheus_expect 'sum by (instance) (nupmpc_solves_total)' "$(query_path 'sum by (instance) (nupmpc_solves_total)')" \
+  "the probes' solves (nupmpc_solves_total) are not above 0 on each replica"
 
 trap - EXIT
 deploy/compose/down.sh || failures+=("down: a container did not exit 0 on SIGTERM")

@@ -7,6 +7,9 @@
 #                               ulimits into CONTAINERS_CONF for `podman kube play`
 #   stack_servers [BACKEND]     one line per replica from HAProxy's stats: name, status,
 #                               last check, current and total calls (default backend streams)
+#   stack_prometheus PATH       the body of Prometheus' answer to GET PATH (status 1 unless 200)
+#   stack_prometheus_config_sum the checksum of deploy/prometheus/'s configuration and rules
+#                               (the Prometheus image's label io.nupmpc.prometheus-config)
 #
 # Why a containers.conf: `podman kube play` (4.3) has no --ulimit or --runtime option, and
 # the containers it starts would get podman's default nofile=1048576, which the runtime may not
@@ -52,4 +55,24 @@ stack_servers() {
       $1 == backend && $2 != "FRONTEND" && $2 != "BACKEND" {
         check = $col["check_status"] == "" ? "-" : $col["check_status"]
         print $2, $col["status"], check, $col["scur"], $col["stot"] }'
+}
+
+# Prometheus listens on the pod's loopback only (127.0.0.1:9090, not published: see the
+# YAML). Its image has bash but no curl or python, so the request is made in its container
+# with bash's /dev/tcp: HTTP/1.0, so that the server closes the connection after the answer,
+# headers skipped. PATH must be URL-encoded.
+read -r -d '' stack_http_get <<'SH' || true
+exec 3<>"/dev/tcp/$1/$2" || exit 1
+printf 'GET %s HTTP/1.0\r\nHost: %s:%s\r\n\r\n' "$3" "$1" "$2" >&3
+IFS= read -r status <&3 || exit 1
+case $status in "HTTP/1."?" 200 "*) ;; *) exit 1 ;; esac
+while IFS= read -r line <&3 && [ "$line" != $'\r' ]; do :; done
+cat <&3
+SH
+stack_prometheus() {
+  "${podman_base[@]}" exec "$stack_pod-prometheus" bash -c "$stack_http_get" bash 127.0.0.1 9090 "$1" 2>/dev/null
+}
+
+stack_prometheus_config_sum() {
+  cat deploy/prometheus/prometheus.yml deploy/prometheus/nupmpc-alerts.yml | sha256sum | cut -d' ' -f1
 }
