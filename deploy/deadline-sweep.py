@@ -21,6 +21,7 @@ import os
 import pathlib
 import subprocess
 import sys
+import time
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "client" / "python"))
@@ -86,15 +87,28 @@ def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s):
         for scheduling in order:
             s = server(scheduling, server_cpus).start()
             try:
+                cpu_before, started = cpu_seconds(s.process.pid), time.monotonic()
                 figures = period_groups(s.target, flag, client_cpus, "--seconds", str(seconds), "--warmup_s", "1")
+                server_cpu_share = (cpu_seconds(s.process.pid) - cpu_before) / (time.monotonic() - started)
             finally:
                 s.stop()
-            runs.append({"level": level, "scheduling": scheduling, "periods_ms": periods, **figures})
+            runs.append({"level": level, "scheduling": scheduling, "periods_ms": periods,
+                         "server_cpu_share": round(server_cpu_share, 3), **figures})
             print_run(runs[-1])
     return {"capacity_steps_per_s": capacity, "runs": runs}
 
 
+def cpu_seconds(pid):
+    """User and system CPU time of a process so far (/proc/PID/stat, fields 14 and 15)."""
+    fields = pathlib.Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def print_run(run):
+    # A side near 100 % of its one CPU set the pace: the server's (misses are the
+    # scheduler's) or the streams' (held steps are partly the load generator's own).
+    print(f"load {run['level']:4.0%} {run['scheduling']:4} CPU: server {run['server_cpu_share']:.0%}, "
+          f"streams {run['client_cpu_share']:.0%}", flush=True)
     for g in run["groups"]:
         m = g["missed_by_cause"]
         print(f"load {run['level']:4.0%} {run['scheduling']:4} {g['group']:5} {g['streams']:3} x {g['period_ms']:7.2f} ms: "

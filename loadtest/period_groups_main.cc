@@ -6,6 +6,8 @@
 //   nupmpc-period-groups --server HOST:PORT
 //       --group short:benchmarks/masses_N30.json:32:10,long:benchmarks/masses_N300.json:8:50 [--seconds 5]
 //   nupmpc-period-groups --server HOST:PORT --group ... --calibrate_s 2
+#include <sys/resource.h>
+
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -33,6 +35,16 @@ ABSL_FLAG(double, calibrate_s, 0.0,
 namespace {
 
 namespace lt = nupmpc::loadtest;
+
+// User and system CPU time of this process so far.
+double ProcessCpuSeconds() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  const auto seconds = [](const timeval& t) {
+    return static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_usec);
+  };
+  return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+}
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-period-groups",
@@ -98,11 +110,17 @@ int main(int argc, char** argv) {
     std::printf("{\"steps_per_s\":{%s}}\n", absl::StrJoin(parts, ",").c_str());
     return 0;
   }
+  // This process's CPU time over the run's wall time: near 1 per CPU it may use, the
+  // streams' own side (not the server) set the pace, and held steps are partly its own.
+  const double cpu_before_s = ProcessCpuSeconds();
+  const auto started = std::chrono::steady_clock::now();
   absl::StatusOr<std::vector<lt::GroupFigures>> figures =
       lt::RunPeriodGroups(server, groups, ms(absl::GetFlag(FLAGS_seconds)), ms(absl::GetFlag(FLAGS_warmup_s)));
   if (!figures.ok()) return Fail("running the groups", figures.status());
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   std::vector<std::string> lines;
   for (const lt::GroupFigures& f : *figures) lines.push_back(lt::GroupFiguresJson(f));
-  std::printf("{\"groups\":[%s]}\n", absl::StrJoin(lines, ",").c_str());
+  std::printf("{\"groups\":[%s],\"client_cpu_share\":%.3f}\n", absl::StrJoin(lines, ",").c_str(),
+              (ProcessCpuSeconds() - cpu_before_s) / wall_s);
   return 0;
 }

@@ -139,8 +139,12 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
           "Seconds the cores spent running tasks; its rate over nupmpc_solver_cores is the pool's utilisation.",
           pool.busy_seconds());
   Counter(out, "nupmpc_solves_in_place_total",
-          "Control steps solved on the gRPC thread that received them (short solves, a core free: no hand-off).",
+          "Control steps solved on the gRPC thread that received them (short solves, or ones a hand-off would make "
+          "late; a core free).",
           static_cast<double>(pool.run_here()));
+  Gauge(out, "nupmpc_worker_handoff_seconds",
+        "What handing a solve to an idle worker costs here (weighted average; 0 until measured).",
+        pool.handoff_ms() / 1000.0);
 
   Gauge(out, "nupmpc_memory_budget_bytes", "The memory budget sessions and calls reserve in.",
         static_cast<double>(state.budget.capacity()));

@@ -13,11 +13,13 @@ ABSL_FLAG(std::string, address, "[::]:50051", "listen address host:port (env NUP
 ABSL_FLAG(int, threads, 2,
           "solver worker threads; solves at once: this many, or 2 if fewer and steps are solved on gRPC's threads "
           "(env NUPMPC_THREADS)");
-ABSL_FLAG(double, inline_solve_max_ms, 0.5,
-          "a Control step is solved on the gRPC thread that received it (no hand-off to a worker) when its "
-          "session's last solve took at most this long (CPU time) and a core is free (that thread also runs such steps "
-          "queued behind it, for up to this long); 0: always on a worker "
-          "(env NUPMPC_INLINE_SOLVE_MAX_MS)");
+ABSL_FLAG(
+    double, inline_solve_max_ms, 0.5,
+    "a Control step is solved on the gRPC thread that received it (no hand-off to a worker) when its "
+    "session's last solve took at most this long (CPU time) and a core is free (that thread also runs such steps "
+    "queued behind it, for up to this long), or took up to 10 times this long and the step meets its deadline only "
+    "without the hand-off; 0: always on a worker "
+    "(env NUPMPC_INLINE_SOLVE_MAX_MS)");
 ABSL_FLAG(int, max_fleet_steps, 10000, "steps in one SolveFleet call (env NUPMPC_MAX_FLEET_STEPS)");
 ABSL_FLAG(int, queue_capacity, 64, "solves waiting for a worker before RESOURCE_EXHAUSTED (env NUPMPC_QUEUE_CAPACITY)");
 ABSL_FLAG(std::string, scheduling, "edf",

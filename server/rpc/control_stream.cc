@@ -5,6 +5,7 @@
 #include "server/observability/log_context.h"
 #include "server/rpc/catch_exceptions.h"
 #include "server/rpc/raw_messages.h"
+#include "server/scheduling/solve_in_place.h"
 #include "server/sessions/session_factory.h"
 #include "server/sessions/step_solver.h"
 #include "spdlog/spdlog.h"
@@ -220,7 +221,8 @@ void ControlStream::OnReadDone(bool ok) {
     read_more = ShouldReadLocked();
     // Reading on first: a newer step that arrives during the solve supersedes the parked
     // one; unless the client waits for its answers and the step is solved here (ReadTiming).
-    read_after_solve = read_more && start.has_value() && !read_ahead && SolvesHere();
+    read_after_solve =
+        read_more && start.has_value() && !read_ahead && PlaceStep(start->step(), solving_received_at_).in_place;
     if (read_more && !read_after_solve) ++reads_starting_;
   }
   if (read_more && !read_after_solve) ReadNext();
@@ -313,14 +315,17 @@ void ControlStream::SetSolvingLocked(bool solving) {
   solving_ = solving;
 }
 
-bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms) {
-  // A session's first solve (no time known) and long ones go to the pool: a reaction
-  // thread is held at most about inline_solve_max_ms by a solve.
-  const double expected_ms = session.last_solve_cpu_ms.load(std::memory_order_relaxed);
-  return inline_solve_max_ms > 0.0 && expected_ms >= 0.0 && expected_ms <= inline_solve_max_ms;
+ControlStream::WhereToSolve ControlStream::PlaceStep(const v1::Step& step, Clock::time_point received_at) const {
+  InPlaceInputs in;
+  in.expected_cpu_ms = entry_->last_solve_cpu_ms.load(std::memory_order_relaxed);
+  in.inline_max_ms = state_->options.inline_solve_max_ms;
+  in.handoff_ms = state_->pool.handoff_ms();
+  if (const std::optional<Clock::time_point> due = StepDue(entry_->timing, step, received_at)) {
+    in.left_ms = std::chrono::duration<double, std::milli>(*due - Clock::now()).count() -
+                 send_cost_ms_.load(std::memory_order_relaxed);
+  }
+  return {.in_place = SolvesInPlace(in), .short_solve = IsShortSolve(in)};
 }
-
-bool ControlStream::SolvesHere() const { return SolvesInPlace(*entry_, state_->options.inline_solve_max_ms); }
 
 void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve) {
   for (;;) {
@@ -333,20 +338,21 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
     // keeps the core for up to inline_solve_max_ms more of short steps that arrived
     // meanwhile (other streams', and this one's next), as a worker would, but without
     // handing each to another thread.
-    const bool short_solve = SolvesHere();
     Clock::time_point received_at;
     {
       std::lock_guard<std::mutex> lock(mu_);
       received_at = solving_received_at_;
     }
     const std::optional<Clock::time_point> due = StepDue(entry_->timing, request.step(), received_at);
-    if (short_solve && SessionStrand::TryRunHere(
-                           entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },
-                           [this, read_after_solve] {
-                             Pump();  // the answer first: the read must not start before it left
-                             if (read_after_solve) ReadHeldBack();
-                           },
-                           state_->options.inline_solve_max_ms)) {
+    const WhereToSolve placement = PlaceStep(request.step(), received_at);
+    if (placement.in_place &&
+        SessionStrand::TryRunHere(
+            entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },
+            [this, read_after_solve] {
+              Pump();  // the answer first: the read must not start before it left
+              if (read_after_solve) ReadHeldBack();
+            },
+            state_->options.inline_solve_max_ms)) {
       return;
     }
     if (read_after_solve) {  // not solved here after all: read ahead of the solve on the pool
@@ -362,7 +368,7 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
            self->FailQueuedSolve(sequence, refused);
          },
          entry_->last_solve_ms.load(std::memory_order_relaxed),
-         short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker, due});
+         placement.short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker, due});
     if (queued.ok()) return;
     std::optional<v1::ControlRequest> next;
     {

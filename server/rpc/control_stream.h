@@ -16,12 +16,6 @@
 
 namespace nupmpc::server {
 
-// Whether a Control step of `session` is short enough to solve on the gRPC thread that has
-// it (ServerLimits.inline_solve_max_ms, 0: never): by its last solve's CPU time, which a
-// core shared with other threads does not inflate; a session's first step (no time known)
-// goes to the pool.
-bool SolvesInPlace(const SessionEntry& session, double inline_solve_max_ms);
-
 // One Control stream (the main path). The first message attaches to a session or creates
 // one owned by the stream; every message with a step is answered once, in order.
 //
@@ -86,14 +80,20 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   std::optional<v1::ControlRequest> TakeParkedLocked();
   // Sets solving_, counting the step in ServerState::work_in_flight while it is set.
   void SetSolvingLocked(bool solving);
-  // Whether this session's steps are short enough to solve on the thread that has them.
-  bool SolvesHere() const;
-  // Solves a step taken by TakeParkedLocked: here if the session and a core are free and its
-  // solves are short (no hand-off to a worker: the latency of a transport-bound step),
-  // else on the pool through the session's strand. Called without mu_; the caller Pumps
-  // afterwards (an answer solved in place is written then). `read_after_solve`: the next
-  // read was held back for this step (ReadTiming): it starts once the answer is written if
-  // the step is solved here, else at once, ahead of the solve on the pool.
+  // Whether `step`, received at `received_at`, is solved on the thread that has it
+  // (server/scheduling/solve_in_place.h), and whether it is short (a core-holding thread may
+  // take it from the queue). Reads only atomics: callable with or without mu_.
+  struct WhereToSolve {
+    bool in_place = false;
+    bool short_solve = false;
+  };
+  WhereToSolve PlaceStep(const v1::Step& step, Clock::time_point received_at) const;
+  // Solves a step taken by TakeParkedLocked: here if the session and a core are free and
+  // PlaceStep says so (no hand-off to a worker: the latency of a transport-bound step, or of
+  // a step the hand-off would make late), else on the pool through the session's strand. Called without mu_; the caller
+  // Pumps afterwards (an answer solved in place is written then). `read_after_solve`: the next read was held back for
+  // this step (ReadTiming): it starts once the answer is written if the step is solved here, else at once, ahead of the
+  // solve on the pool.
   void StartSolve(v1::ControlRequest request, bool read_after_solve);
   // Starts the read StartSolve held back, unless the stream stopped reading meanwhile.
   void ReadHeldBack();

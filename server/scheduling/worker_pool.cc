@@ -50,10 +50,12 @@ absl::Status WorkerPool::TrySubmit(std::function<void()> task, double expected_m
     const Clock::time_point now = Clock::now();
     Clock::time_point order = now;
     if (scheduling_ == Scheduling::kEarliestDeadlineFirst) order = due.value_or(now + kNoDeadlineGrace);
-    InsertLocked(Task{std::move(task), expected_ms, placement, order});
-    queued_ms_ += expected_ms;
     // With every core taken a woken worker would only go back to sleep; ReleaseCore wakes one.
     wake = running_ < cores_ && here_waiting_ == 0;
+    std::optional<Clock::time_point> handed_to_idle_at;
+    if (wake && queue_.empty() && running_ - running_here_ < threads_started_) handed_to_idle_at = now;
+    InsertLocked(Task{std::move(task), expected_ms, placement, order, handed_to_idle_at});
+    queued_ms_ += expected_ms;
   }
   if (wake) ready_.notify_one();
   return absl::OkStatus();
@@ -198,6 +200,11 @@ void WorkerPool::Run() {
       if (task.placement == Placement::kWorker) ++running_long_;
     }
     const auto start = std::chrono::steady_clock::now();
+    if (task.handed_to_idle_at.has_value()) {
+      const double took_ms = std::chrono::duration<double, std::milli>(start - *task.handed_to_idle_at).count();
+      const double before = handoff_ms_.load(std::memory_order_relaxed);
+      handoff_ms_.store(before == 0.0 ? took_ms : 0.9 * before + 0.1 * took_ms, std::memory_order_relaxed);
+    }
     busy_.fetch_add(1, std::memory_order_relaxed);
     const bool long_task = task.placement == Placement::kWorker;
     RunQueued(task);

@@ -87,6 +87,10 @@ class WorkerPool {
   // spent running since start (its rate over cores() is the pool's utilisation).
   int busy() const { return busy_.load(std::memory_order_relaxed); }
   double busy_seconds() const { return busy_seconds_.load(std::memory_order_relaxed); }
+  // What handing a task to an idle worker costs on this machine: from TrySubmit to the
+  // worker starting it, for tasks that found a core free and nothing queued (so the wait
+  // is the wake-up and the thread switch alone), exponentially weighted; 0 until measured.
+  double handoff_ms() const { return handoff_ms_.load(std::memory_order_relaxed); }
 
  private:
   struct Task {
@@ -94,6 +98,8 @@ class WorkerPool {
     double expected_ms = 0.0;
     Placement placement = Placement::kWorker;
     Clock::time_point order;  ///< the queue is sorted by this (stable): deadline, or arrival
+    /// When it was submitted to a free core with nothing queued (handoff_ms measures it).
+    std::optional<Clock::time_point> handed_to_idle_at;
   };
   // Where a task with `order` goes: after every queued task with an order not later.
   void InsertLocked(Task task);
@@ -130,6 +136,7 @@ class WorkerPool {
   std::atomic<int> busy_{0};
   std::atomic<double> busy_seconds_{0.0};
   std::atomic<std::uint64_t> run_here_{0};
+  std::atomic<double> handoff_ms_{0.0};
   std::vector<std::thread> threads_;
 };
 

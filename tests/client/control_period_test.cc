@@ -262,7 +262,9 @@ TEST_F(ControlPeriodTest, KHeldPeriodsInARowRecreateTheSessionFromTheSpecTheAnsw
 // The server answers SUPERSEDED for a newer step at once, while an older one is still being
 // solved: that answer overtakes the older step's result, which must still reach the spec.
 TEST_F(ControlPeriodTest, ASupersededAnswerAheadOfAnEarlierResultLeavesThatResultInTheSpec) {
-  const milliseconds period(50);
+  // Long enough that state 1's answer (3 periods) comes two periods before the K rule
+  // breaks the stream even on a loaded machine under TSan.
+  const milliseconds period(150);
   // On the first stream: state 1 solved after 3 periods, state 2 superseded after 1.1
   // periods (both after their own step was held), nothing else. The second answers all.
   service_.superseded = [](int attach, double x0) { return attach == 1 && x0 == 2.0; };

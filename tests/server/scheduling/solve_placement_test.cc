@@ -15,7 +15,7 @@
 
 #include "gmock/gmock.h"
 #include "loadtest/transport_floor.h"
-#include "server/rpc/control_stream.h"
+#include "server/scheduling/solve_in_place.h"
 #include "server/sessions/session_factory.h"
 #include "server/sessions/session_registry.h"
 #include "server/sessions/step_solver.h"
@@ -169,19 +169,42 @@ TEST_F(SolvePlacementTest, LongSolvesOnEveryWorkerHoldBackHealthChecksAndShortSt
 // Where a step is solved depends on its session's last solve time: that must be the CPU
 // time the solve took, or a solve slowed by sharing its core (gRPC's two reaction threads
 // on a one-core server do) would look long and send the session's next steps to a worker.
-// Placement reads the CPU time of the session's last solve: a short solve that took a time
-// slice of wall time on a shared core stays in place, and the wall time (the pool's wait
-// estimate) plays no part.
-TEST(SolvesInPlace, ByTheLastSolvesCpuTimeNotItsWallTime) {
-  server::SessionEntry session;
-  EXPECT_FALSE(server::SolvesInPlace(session, 0.5)) << "first step: no time known";
-  session.last_solve_cpu_ms.store(0.05);
-  session.last_solve_ms.store(8.0);  // preempted for a time slice
-  EXPECT_TRUE(server::SolvesInPlace(session, 0.5));
-  EXPECT_FALSE(server::SolvesInPlace(session, 0.0)) << "0: every step on a worker";
-  session.last_solve_cpu_ms.store(2.0);
-  session.last_solve_ms.store(0.05);
-  EXPECT_FALSE(server::SolvesInPlace(session, 0.5));
+// The control stream passes the CPU time (last_solve_cpu_ms) to the rule below.
+TEST(SolvesInPlace, ShortStepsInPlaceLongOnesOnAWorker) {
+  server::InPlaceInputs in{.expected_cpu_ms = -1.0, .inline_max_ms = 0.5, .handoff_ms = 0.4, .left_ms = {}};
+  EXPECT_FALSE(server::SolvesInPlace(in)) << "first step: no time known";
+  in.expected_cpu_ms = 0.05;
+  EXPECT_TRUE(server::SolvesInPlace(in));
+  EXPECT_TRUE(server::IsShortSolve(in));
+  in.inline_max_ms = 0.0;
+  EXPECT_FALSE(server::SolvesInPlace(in)) << "0: every step on a worker";
+  EXPECT_FALSE(server::IsShortSolve(in));
+  in.inline_max_ms = 0.5;
+  in.expected_cpu_ms = 2.0;
+  EXPECT_FALSE(server::SolvesInPlace(in)) << "long, no deadline";
+  EXPECT_FALSE(server::IsShortSolve(in));
+}
+
+// A longer step with a deadline: in place exactly when the hand-off is what would make it
+// late, and never longer than kDeadlineInPlaceFactor short solves.
+TEST(SolvesInPlace, ALongerStepStaysWhenTheHandOffWouldCostItsDeadline) {
+  server::InPlaceInputs in{.expected_cpu_ms = 2.0, .inline_max_ms = 0.5, .handoff_ms = 0.4, .left_ms = 20.0};
+  EXPECT_FALSE(server::SolvesInPlace(in)) << "20 ms left: the hand-off costs nothing that matters";
+  in.left_ms = 2.2;
+  EXPECT_TRUE(server::SolvesInPlace(in)) << "2 + 0.4 > 2.2 >= 2: only in place is it in time";
+  EXPECT_FALSE(server::IsShortSolve(in)) << "still not a step a core-holding thread drains";
+  in.left_ms = 1.9;
+  EXPECT_FALSE(server::SolvesInPlace(in)) << "late either way: not worth holding gRPC's thread";
+  in.handoff_ms = 0.0;
+  in.left_ms = 2.0;
+  EXPECT_FALSE(server::SolvesInPlace(in)) << "no hand-off cost measured yet";
+  in.handoff_ms = 1.0;
+  in.expected_cpu_ms = server::kDeadlineInPlaceFactor * in.inline_max_ms + 0.1;
+  in.left_ms = in.expected_cpu_ms + 0.5;
+  EXPECT_FALSE(server::SolvesInPlace(in)) << "too long to hold a reaction thread for";
+  in.expected_cpu_ms = server::kDeadlineInPlaceFactor * in.inline_max_ms;
+  in.left_ms = in.expected_cpu_ms + 0.5;
+  EXPECT_TRUE(server::SolvesInPlace(in));
 }
 
 // A session of an instance in a registry of its own, as SolveStep finds it on the server.

@@ -126,6 +126,31 @@ TEST(WorkerPool, WithoutAWaitBoundOnlyTheCapacityCounts) {
   blocker.Release();
 }
 
+// The hand-off's cost is measured on tasks handed to an idle worker, and only on those: a
+// task that waited behind another one would count its queueing as hand-off.
+TEST(WorkerPool, MeasuresTheHandOffToAnIdleWorkerOnly) {
+  WorkerPool pool(1, 8);
+  EXPECT_EQ(pool.handoff_ms(), 0.0) << "nothing handed over yet";
+  for (int i = 0; i < 5; ++i) {
+    std::promise<void> ran;
+    ASSERT_TRUE(pool.TrySubmit([&ran] { ran.set_value(); }).ok());
+    ran.get_future().wait();
+    // Until the worker has given its core back the next task would find it busy.
+    while (pool.busy() > 0) std::this_thread::yield();
+  }
+  const double measured = pool.handoff_ms();
+  EXPECT_GT(measured, 0.0);
+  // A task queued behind a 500 ms one waits 500 ms for the worker: not a hand-off (counted,
+  // it would raise the weighted average by at least 50 ms).
+  Blocker blocker(pool);
+  std::promise<void> queued_ran;
+  ASSERT_TRUE(pool.TrySubmit([&queued_ran] { queued_ran.set_value(); }).ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  blocker.Release();
+  queued_ran.get_future().wait();
+  EXPECT_LT(pool.handoff_ms(), measured + 20.0) << "the queued task's wait was counted";
+}
+
 TEST(WorkerPool, RunsATaskHereWhenACoreIsFree) {
   WorkerPool pool(2, 4);
   std::thread::id ran_on;
