@@ -22,11 +22,12 @@ import pathlib
 import subprocess
 import sys
 import time
+import urllib.request
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "client" / "python"))
 sys.path.insert(0, os.environ.get("NUPMPC_PYTHON_STUBS", str(REPO / "build" / "python")))
-from nupmpc.local_server import LocalServer  # noqa: E402
+from nupmpc.local_server import LocalServer, free_loopback_ports  # noqa: E402
 
 BIN = pathlib.Path(os.environ.get("NUPMPC_BIN_DIR", str(REPO / "build" / "bin")))
 BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO / "benchmarks")))
@@ -41,8 +42,25 @@ def cpus():
 
 
 def server(scheduling, server_cpus):
-    return LocalServer(BIN / "nupmpc-server", "--threads", "1", "--scheduling", scheduling, cpus=server_cpus,
-                       env={**os.environ, "NUPMPC_LOG_LEVEL": "warn"})
+    """A server on `server_cpus` with one worker, and its metrics endpoint's address."""
+    metrics = f"127.0.0.1:{free_loopback_ports(1)[0]}"
+    s = LocalServer(BIN / "nupmpc-server", "--threads", "1", "--scheduling", scheduling, "--metrics_address", metrics,
+                    cpus=server_cpus, env={**os.environ, "NUPMPC_LOG_LEVEL": "warn"})
+    s.metrics_address = metrics
+    return s
+
+
+def server_deadlines(s):
+    """The server's own count of steps by deadline outcome (nupmpc_step_deadlines_total),
+    warm-up included: met by the server's clock, from its receipt to its send."""
+    with urllib.request.urlopen(f"http://{s.metrics_address}/metrics", timeout=10) as reply:
+        text = reply.read().decode()
+    counts = {}
+    for line in text.splitlines():
+        if line.startswith("nupmpc_step_deadlines_total{"):
+            outcome = line.split('outcome="', 1)[1].split('"', 1)[0]
+            counts[outcome] = int(float(line.rsplit(" ", 1)[1]))
+    return counts
 
 
 def period_groups(target, group_flag, client_cpus, *flags):
@@ -90,10 +108,11 @@ def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s):
                 cpu_before, started = cpu_seconds(s.process.pid), time.monotonic()
                 figures = period_groups(s.target, flag, client_cpus, "--seconds", str(seconds), "--warmup_s", "1")
                 server_cpu_share = (cpu_seconds(s.process.pid) - cpu_before) / (time.monotonic() - started)
+                deadlines = server_deadlines(s)
             finally:
                 s.stop()
             runs.append({"level": level, "scheduling": scheduling, "periods_ms": periods,
-                         "server_cpu_share": round(server_cpu_share, 3), **figures})
+                         "server_cpu_share": round(server_cpu_share, 3), "server_deadlines": deadlines, **figures})
             print_run(runs[-1])
     return {"capacity_steps_per_s": capacity, "runs": runs}
 
@@ -107,8 +126,12 @@ def cpu_seconds(pid):
 def print_run(run):
     # A side near 100 % of its one CPU set the pace: the server's (misses are the
     # scheduler's) or the streams' (held steps are partly the load generator's own).
+    # The server's count is by its own clock (receipt to send): steps it met that the
+    # streams held lost their time between the two processes.
+    d = run["server_deadlines"]
     print(f"load {run['level']:4.0%} {run['scheduling']:4} CPU: server {run['server_cpu_share']:.0%}, "
-          f"streams {run['client_cpu_share']:.0%}", flush=True)
+          f"streams {run['client_cpu_share']:.0%}; the server's own count: met {d.get('met', 0)} of "
+          f"{sum(d.values())} steps with a deadline", flush=True)
     for g in run["groups"]:
         m = g["missed_by_cause"]
         print(f"load {run['level']:4.0%} {run['scheduling']:4} {g['group']:5} {g['streams']:3} x {g['period_ms']:7.2f} ms: "
