@@ -89,7 +89,7 @@ class BalancerAuthTest : public ::testing::Test {
     Decorate(&context, forwarded, token);
     v1::GetSessionRequest request;
     request.set_session_id(id);
-    v1::SessionInfo info;
+    v1::GetSessionResponse info;
     return stub.GetSession(&context, request, &info);
   }
   absl::StatusOr<std::string> CreateSession(v1::MpcService::Stub& stub,
