@@ -3,10 +3,12 @@
 // names. A forwarded subject is the same principal as a direct mTLS caller with that
 // certificate; from any other peer the header is ignored; the balancer's certificate alone
 // is UNAUTHENTICATED; bearer tokens through the balancer authenticate as they do directly.
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <optional>
+#include <thread>
 #include <tuple>
 
 #include "client/channel_security.h"
@@ -41,7 +43,8 @@ class BalancerAuthTest : public ::testing::Test {
     }
     tokens_file_ = pki_->dir() + "/tokens";
     std::ofstream(tokens_file_) << kAliceToken << " alice\n";
-    spec_ = SpecOrDie(LoadInstanceOrDie("masses_N30").problem);
+    inst_ = LoadInstanceOrDie("masses_N30");
+    spec_ = SpecOrDie(inst_.problem);
   }
   void TearDown() override {
     if (server_ != nullptr) server_->Shutdown();
@@ -109,6 +112,7 @@ class BalancerAuthTest : public ::testing::Test {
   std::map<std::string, KeyPair> keys_;
   std::map<std::string, std::string> subjects_;
   std::string tokens_file_;
+  bench::BenchmarkInstance inst_;
   v1::ProblemSpec spec_;
   std::unique_ptr<server::GrpcServer> server_;
   std::string target_;
@@ -182,6 +186,38 @@ TEST_F(BalancerAuthTest, BearerTokensThroughTheBalancerAuthenticateAsTheyDoDirec
   EXPECT_EQ(GetSession(*balancer, *id, subjects_["bob"]).error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(GetSession(*balancer, *id, std::nullopt, "not-a-token-of-the-file").error_code(),
             grpc::StatusCode::UNAUTHENTICATED);
+}
+
+// The balancer's one connection carries many callers' calls (gRPC shares a connection's
+// AuthContext among them): each call is who its own headers say, never what an earlier call on
+// the connection was. Here a token call comes first; the certificate caller's stream after it
+// must not be taken for a token's and ended when that token goes.
+TEST_F(BalancerAuthTest, CallersSharingTheBalancersConnectionStayApart) {
+  Start();
+  auto balancer = StubAs("balancer");
+  ASSERT_TRUE(CreateSession(*balancer, std::nullopt, kAliceToken).ok());
+  grpc::ClientContext context;
+  context.AddMetadata("x-nupmpc-client-subject", subjects_["bob"]);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto stream = balancer->Control(&context);
+  v1::ControlRequest request;
+  *request.mutable_spec() = spec_;
+  const Eigen::VectorXd& x = inst_.closed_loop->x1.front();
+  request.mutable_step()->mutable_state()->Add(x.data(), x.data() + x.size());
+  v1::ControlResponse answer;
+  ASSERT_TRUE(stream->Write(request) && stream->Read(&answer));
+
+  std::ofstream(tokens_file_ + ".new") << "other-0123456789abcdef other\n";
+  std::filesystem::rename(tokens_file_ + ".new", tokens_file_);
+  // The janitor re-reads the file and ends the streams of removed tokens once a second.
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  v1::ControlRequest next;
+  *next.mutable_step() = request.step();
+  EXPECT_TRUE(stream->Write(next) && stream->Read(&answer)) << "bob's stream was ended";
+  stream->WritesDone();
+  while (stream->Read(&answer)) {
+  }
+  EXPECT_TRUE(stream->Finish().ok());
 }
 
 TEST_F(BalancerAuthTest, TheTrustedSubjectNeedsMutualTlsAndMustLookLikeOne) {
