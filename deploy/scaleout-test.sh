@@ -16,11 +16,14 @@
 #   5. scale-up:  a fourth replica and a balancer reload: new streams reach it;
 #   6. compose:   (full run, where podman and the images are) deploy/compose/smoke.sh.
 #
-#   deploy/scaleout-test.sh [--quick]     (--quick: short phases, as the ctest entry)
+#   deploy/scaleout-test.sh [--quick]            (--quick: short phases, as the ctest entry)
+#   deploy/scaleout-test.sh --secure [--quick]   TLS on both hops, tokens and mTLS callers through
+#                                                the balancer: deploy/scaleout-secure-test.sh
 #
 # Needs the build (deploy/build.sh) and haproxy (deploy/install-deps.sh installs it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+if [ "${1:-}" = "--secure" ]; then shift; exec deploy/scaleout-secure-test.sh "$@"; fi
 quick=0
 [ "${1:-}" = "--quick" ] && quick=1
 if [ $quick = 1 ]; then phase_s=4; streams=24; else phase_s=20; streams=24; fi

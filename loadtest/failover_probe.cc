@@ -67,8 +67,14 @@ struct StreamOutcome {
 StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& config, int index,
                            Clock::time_point until) {
   StreamOutcome out;
-  Client client(work.target);  // its own connection, as a separate plant computer would have
-  absl::StatusOr<std::unique_ptr<Session>> session = client.OpenSession(work.spec);
+  // Its own connection, as a separate plant computer would have.
+  absl::StatusOr<std::unique_ptr<Client>> client = Client::Connect(work.target, work.security);
+  if (!client.ok()) {
+    ++out.failed;
+    ++out.errors[CodeName(client.status())];
+    return out;
+  }
+  absl::StatusOr<std::unique_ptr<Session>> session = (*client)->OpenSession(work.spec);
   if (!session.ok()) {
     ++out.failed;
     ++out.errors[CodeName(session.status())];
@@ -158,7 +164,9 @@ absl::StatusOr<StreamsProbeReport> RunStreamsProbe(const ProbeWorkload& work, co
 
 absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work, int sessions, int solves_each) {
   if (sessions < 1 || solves_each < 1) return absl::InvalidArgumentError("sessions, solves: must be at least 1");
-  Client client(work.target);
+  absl::StatusOr<std::unique_ptr<Client>> connected = Client::Connect(work.target, work.security);
+  if (!connected.ok()) return connected.status();
+  Client& client = **connected;
   AddressedProbeReport report;
   report.sessions = sessions;
   std::vector<std::unique_ptr<AddressedSession>> opened;

@@ -16,12 +16,14 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "client/channel_security.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::loadtest {
 
 struct ProbeWorkload {
   std::string target;
+  ChannelSecurity security;  ///< TLS, client certificate, bearer token; none by default
   v1::ProblemSpec spec;
   std::vector<std::vector<double>> states;  ///< cycled through
 };

@@ -10,6 +10,7 @@
 #include "absl/flags/flag.h"
 #include "cli/program_flags.h"
 #include "client/problem_file.h"
+#include "client/security_flags.h"
 #include "loadtest/failover_probe.h"
 
 ABSL_FLAG(std::string, server, "127.0.0.1:50051", "balancer (or server) address host:port (env NUPMPC_SERVER)");
@@ -31,7 +32,9 @@ const nupmpc::cli::ProgramInfo kProgram{
         "re-created after a replica was lost, and a sample of plans checked against the core solving the "
         "same state (--probe streams); or whether calls addressed by session id all reached their session "
         "(--probe addressed). Used by deploy/scaleout-test.sh.",
-    .usage = "nupmpc-scaleout-probe --server HOST:PORT [--probe streams|addressed] [--instance FILE] ...",
+    .usage =
+        "nupmpc-scaleout-probe --server HOST:PORT [--probe streams|addressed] [--instance FILE] [--tls_ca_file FILE] "
+        "[--tls_cert_file FILE --tls_key_file FILE] [--token_file FILE] ...",
     .environment = {{"NUPMPC_SERVER", "address when --server is not given"}},
     .max_arguments = 0,
 };
@@ -49,7 +52,9 @@ int main(int argc, char** argv) {
   nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
   absl::StatusOr<nupmpc::ProblemFile> file = nupmpc::LoadProblemFile(absl::GetFlag(FLAGS_instance));
   if (!file.ok()) return Fail("--instance", file.status());
-  lt::ProbeWorkload work{absl::GetFlag(FLAGS_server), file->spec, file->closed_loop_states};
+  absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
+  if (!security.ok()) return Fail("security flags", security.status());
+  lt::ProbeWorkload work{absl::GetFlag(FLAGS_server), *security, file->spec, file->closed_loop_states};
   if (work.states.empty()) {
     const auto& mean = file->spec.initial_state().mean();
     work.states.emplace_back(mean.begin(), mean.end());

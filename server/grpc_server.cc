@@ -40,7 +40,8 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
     state.tokens = *std::move(tokens);
   }
   if (state.tokens != nullptr || options.tls.mutual()) {
-    state.auth = std::make_shared<AuthProcessor>(state.tokens, options.tls.mutual());
+    state.auth =
+        std::make_shared<AuthProcessor>(state.tokens, options.tls.mutual(), options.tls.trusted_balancer_subject);
   }
   absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials =
       ServerCredentialsFor(options.tls, options.address, state.auth);

@@ -77,6 +77,11 @@ ABSL_FLAG(std::string, tls_key_file, "", "PEM private key of --tls_cert_file (en
 ABSL_FLAG(std::string, tls_client_ca_file, "",
           "PEM CA bundle: clients must present a certificate it signed (mTLS); the certificate's subject is the "
           "caller's principal when the call carries no bearer token (env NUPMPC_TLS_CLIENT_CA_FILE)");
+ABSL_FLAG(std::string, trusted_balancer_subject, "",
+          "subject of the balancer's client certificate as RFC 2253 prints it (e.g. CN=nupmpc-balancer,O=example); "
+          "a call from that peer without a bearer token is the caller the balancer verified and named in the "
+          "x-nupmpc-client-subject header, and UNAUTHENTICATED without it; from other peers the header is ignored. "
+          "Needs --tls_client_ca_file (env NUPMPC_TRUSTED_BALANCER_SUBJECT)");
 ABSL_FLAG(int, tls_reload_interval_s, 10,
           "how often the TLS files are checked for changes (env NUPMPC_TLS_RELOAD_INTERVAL_S)");
 ABSL_FLAG(std::string, auth_tokens_file, "",
@@ -179,6 +184,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                            "tls_key_file",
                            "tls_client_ca_file",
                            "tls_reload_interval_s",
+                           "trusted_balancer_subject",
                            "auth_tokens_file",
                            "max_sessions_per_principal",
                            "max_streams_per_principal",
@@ -226,6 +232,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.tls.key_file = absl::GetFlag(FLAGS_tls_key_file);
   o.tls.client_ca_file = absl::GetFlag(FLAGS_tls_client_ca_file);
   o.tls.reload_interval_s = absl::GetFlag(FLAGS_tls_reload_interval_s);
+  o.tls.trusted_balancer_subject = absl::GetFlag(FLAGS_trusted_balancer_subject);
   o.auth_tokens_file = absl::GetFlag(FLAGS_auth_tokens_file);
   o.max_sessions_per_principal = absl::GetFlag(FLAGS_max_sessions_per_principal);
   o.max_streams_per_principal = absl::GetFlag(FLAGS_max_streams_per_principal);

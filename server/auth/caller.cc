@@ -4,16 +4,23 @@
 
 namespace nupmpc::server {
 
-Caller CallerOf(const grpc::ServerContextBase& context) {
+Caller CallerOf(const grpc::ServerContextBase& context, const AuthProcessor* auth) {
   Caller caller;
   caller.connection = context.peer();
-  const std::shared_ptr<const grpc::AuthContext> auth = context.auth_context();
   if (auth == nullptr) return caller;
-  for (const grpc::string_ref& value : auth->FindPropertyValues(kPrincipalProperty)) {
-    caller.principal.assign(value.data(), value.size());
+  const std::shared_ptr<const grpc::AuthContext> connection = context.auth_context();
+  if (connection == nullptr) {
+    caller.principal = kNobody;
+    return caller;
   }
-  caller.admin = !auth->FindPropertyValues(kAdminProperty).empty();
-  caller.by_token = !auth->FindPropertyValues(kBearerTokenProperty).empty();
+  const absl::StatusOr<AuthProcessor::Identity> identity = auth->Identify(context.client_metadata(), *connection);
+  if (!identity.ok()) {
+    caller.principal = kNobody;
+    return caller;
+  }
+  caller.principal = identity->principal.name;
+  caller.admin = identity->principal.admin;
+  caller.by_token = identity->by_token;
   return caller;
 }
 

@@ -2,18 +2,19 @@
 #define NUPMPC_SERVER_AUTH_CALLER_H_
 
 // Who made a call, and what that caller may do with a session: sessions belong to the
-// principal that created them (server/auth/auth_processor.h sets it on the call).
+// principal that created them (server/auth/auth_processor.h identifies it).
 
 #include <string>
 
 #include "grpcpp/server_context.h"
+#include "server/auth/auth_processor.h"
 
 namespace nupmpc::server {
 
-// Properties the authentication processor adds to a call's AuthContext.
-inline constexpr char kPrincipalProperty[] = "nupmpc_principal";
-inline constexpr char kAdminProperty[] = "nupmpc_admin";
-inline constexpr char kBearerTokenProperty[] = "nupmpc_bearer_token";  ///< set when a token authenticated the call
+// The principal of a call that authentication would refuse now (its token was removed
+// between the processor's check and the handler): never a token's or a certificate's, so
+// it owns nothing and reaches nothing.
+inline constexpr char kNobody[] = " nobody";
 
 struct Caller {
   std::string principal;   ///< empty: authentication is off
@@ -24,7 +25,9 @@ struct Caller {
   bool authenticated() const { return !principal.empty(); }
 };
 
-Caller CallerOf(const grpc::ServerContextBase& context);
+// The caller of `context`'s call, identified from the call's own metadata by `auth` (null:
+// authentication is off, the caller has no principal).
+Caller CallerOf(const grpc::ServerContextBase& context, const AuthProcessor* auth);
 
 // What a session records of the caller that created it.
 struct SessionOwner {

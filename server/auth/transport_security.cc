@@ -3,8 +3,10 @@
 #include <fstream>
 #include <sstream>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/strip.h"
 #include "grpcpp/security/tls_certificate_provider.h"
 #include "grpcpp/security/tls_credentials_options.h"
 
@@ -27,6 +29,19 @@ absl::Status CheckPemFile(const char* flag, const std::string& path, absl::strin
 absl::Status CheckTlsFiles(const TlsFiles& tls) {
   if (tls.cert_file.empty() != tls.key_file.empty()) {
     return absl::InvalidArgumentError("--tls_cert_file and --tls_key_file: give both or neither");
+  }
+  if (!tls.trusted_balancer_subject.empty()) {
+    if (!tls.mutual()) {
+      return absl::InvalidArgumentError(
+          "--trusted_balancer_subject: needs --tls_client_ca_file (the balancer is known by its client certificate)");
+    }
+    const absl::string_view subject = tls.trusted_balancer_subject;
+    if (!absl::StrContains(subject, '=') || absl::StripAsciiWhitespace(subject) != subject) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--trusted_balancer_subject = \"", subject,
+                       "\": expected a certificate subject as RFC 2253 prints it, e.g. CN=nupmpc-balancer,O=example "
+                       "(openssl x509 -noout -subject -nameopt RFC2253)"));
+    }
   }
   if (!tls.enabled()) {
     if (tls.mutual())

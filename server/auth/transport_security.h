@@ -20,6 +20,9 @@ struct TlsFiles {
   std::string key_file;        ///< its PEM private key
   std::string client_ca_file;  ///< PEM CA bundle: client certificates required and verified (mTLS)
   int reload_interval_s = 10;  ///< how often the files are checked for changes
+  /// The subject (RFC 2253) of the balancer's client certificate: that peer may name the
+  /// caller in a header (server/auth/auth_processor.h); empty: no peer may.
+  std::string trusted_balancer_subject;
 
   bool enabled() const { return !cert_file.empty(); }
   bool mutual() const { return !client_ca_file.empty(); }

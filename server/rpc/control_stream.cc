@@ -35,7 +35,7 @@ ControlStream* ControlStream::Start(ServerState* state, grpc::CallbackServerCont
 }
 
 ControlStream::ControlStream(ServerState* state, grpc::CallbackServerContext* context)
-    : state_(state), context_(context), caller_(CallerOf(*context)) {}
+    : state_(state), context_(context), caller_(CallerOf(*context, state->auth.get())) {}
 
 void ControlStream::Begin() {
   if (state_->draining.load()) {

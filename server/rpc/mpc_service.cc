@@ -35,7 +35,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
   v1::CreateSessionResponse* response = call->response();
   call->RunOnPool(
       "CreateSession", /*solve_result=*/nullptr,
-      [state, request, response, owner = OwnerFor(CallerOf(*context))](const CallContext& c) {
+      [state, request, response, owner = OwnerFor(CallerOf(*context, state_->auth.get()))](const CallContext& c) {
         absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
             CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
                               &state->registry, c, /*owned_by_stream=*/false, request->session_id(), owner);
@@ -64,7 +64,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
   auto* call = UnaryCall<v1::SolveRequest, v1::SolveResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
   absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
-      state_->registry.Find(call->request().session_id(), CallerOf(*context));
+      state_->registry.Find(call->request().session_id(), CallerOf(*context, state_->auth.get()));
   if (!entry.ok()) {
     call->Reply(entry.status());
     return call;
@@ -104,7 +104,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::GetSession(grpc::CallbackServerContext
       UnaryCall<v1::GetSessionRequest, v1::GetSessionResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
   absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
-      state_->registry.Find(call->request().session_id(), CallerOf(*context));
+      state_->registry.Find(call->request().session_id(), CallerOf(*context, state_->auth.get()));
   if (entry.ok()) (*entry)->Describe(call->response()->mutable_session());
   call->Reply(entry.status());
   return call;
@@ -115,7 +115,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::ListSessions(grpc::CallbackServerConte
   auto* call =
       UnaryCall<v1::ListSessionsRequest, v1::ListSessionsResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
-  for (const auto& entry : state_->registry.ListFor(CallerOf(*context), state_->options.list_all_sessions)) {
+  for (const auto& entry :
+       state_->registry.ListFor(CallerOf(*context, state_->auth.get()), state_->options.list_all_sessions)) {
     entry->Describe(call->response()->add_sessions());
   }
   call->Reply(absl::OkStatus());
@@ -128,7 +129,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
       UnaryCall<v1::CloseSessionRequest, v1::CloseSessionResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
   const std::string& id = call->request().session_id();
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(id, CallerOf(*context));
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
+      state_->registry.Find(id, CallerOf(*context, state_->auth.get()));
   if (!entry.ok()) {
     call->Reply(entry.status());
     return call;
@@ -200,7 +202,7 @@ grpc::ServerUnaryReactor* MpcServiceImpl::SolveFleet(grpc::CallbackServerContext
                                                      Raw* raw_response) {
   auto* call = FleetCall::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
-  StartFleet(call, CallerOf(*context));
+  StartFleet(call, CallerOf(*context, state_->auth.get()));
   return call;
 }
 

@@ -139,7 +139,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     }
     // A malformed id is the client's text: shown escaped and cut short.
     if (!session.empty() && !CheckSessionIdForm(session).ok()) session = QuoteSessionId(session);
-    const Caller caller = CallerOf(*context_);
+    const Caller caller = CallerOf(*context_, state_->auth.get());
     const LogContext log_context(session, caller.principal);
     spdlog::debug("access: {} {} {:.3f} ms peer {}", std::string(RpcName(RpcOf<Request>::value)),
                   absl::StatusCodeToString(static_cast<absl::StatusCode>(sent.error_code())),

@@ -22,7 +22,9 @@ python3-kubernetes and yamllint. Every YAML document under deploy/k8s/ goes thro
    against the server's thread and memory settings, every NUPMPC_* key against the server's
    real flags (parsed out of server/server_flags.cc), the balancer's configuration (HTTP/2
    frames of its health check, its server slots against the HPA, `haproxy -c` when haproxy
-   is installed).
+   is installed, with made-up certificates in place of the Secrets), and the TLS wiring
+   (k8s_tls_check.py: Secrets made by make-secrets.sh, the files the flags and the balancer
+   name mounted, probes that work with TLS, the caller's subject header).
 
 Exit status 1 with one line per finding, naming file, document and field.
 """
@@ -32,7 +34,6 @@ import json
 import os
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
 
@@ -47,6 +48,8 @@ except ImportError as error:
              f"yamllint, and Debian's interpreter /usr/bin/python3 (this is {sys.executable})")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import k8s_tls_check as k8s_tls  # noqa: E402 (beside this file)
 LINT_CONFIG = os.path.join(HERE, "yamllint.yaml")
 
 # The model class of each apiVersion/kind the manifests may use.
@@ -428,7 +431,6 @@ def cross_findings(m, source_dir, notes):
     server_name = server["metadata"]["name"]
     pod_spec = server["spec"]["template"]["spec"]
     container = next(c for c in containers_of(server) if image_name(c) == SERVER_IMAGE)
-    ports = {p.get("containerPort") for p in container.get("ports", []) or []}
 
     # Every Deployment's own selector picks its pods.
     for w, d in deployments:
@@ -436,7 +438,7 @@ def cross_findings(m, source_dir, notes):
              f"{w} spec.selector.matchLabels: does not match spec.template.metadata.labels")
 
     # The configuration: every key a real server flag read from the environment.
-    config = {}
+    config, cm_where = {}, where
     refs = [e["configMapRef"]["name"] for e in container.get("envFrom", []) or [] if "configMapRef" in e]
     if need(refs, f"{where} containers[{container.get('name')}].envFrom: no configMapRef (the NUPMPC_* settings)"):
         for ref in refs:
@@ -481,19 +483,10 @@ def cross_findings(m, source_dir, notes):
              f"+ NUPMPC_GRACE_PERIOD_S {grace:g} + {MIN_TERMINATION_MARGIN_S} s margin: the kubelet would kill "
              f"in-flight solves")
 
-    # Probes: native gRPC on the container's port.
+    # Probes (native gRPC, or HTTP on the metrics port with TLS), TLS files, Secrets.
     cname = f"containers[{container.get('name')}]"
-    for probe_name in ("readinessProbe", "livenessProbe", "startupProbe"):
-        probe = container.get(probe_name)
-        if probe is None:
-            need(probe_name == "startupProbe", f"{where} {cname}.{probe_name}: missing")
-            continue
-        handlers = sorted(k for k in ("grpc", "httpGet", "tcpSocket", "exec") if k in probe)
-        if need(handlers == ["grpc"], f"{where} {cname}.{probe_name}: must be a native grpc probe "
-                                      f"(grpc.health.v1), has {handlers or 'no handler'}"):
-            need(probe["grpc"].get("port") in ports,
-                 f"{where} {cname}.{probe_name}.grpc.port: {probe['grpc'].get('port')} is not a containerPort "
-                 f"of the container ({sorted(ports)})")
+    findings += k8s_tls.server_findings(where, server, container, config, cm_where)
+    findings += k8s_tls.secret_findings(os.path.join(source_dir, "deploy", "k8s"), deployments)
     liveness = container.get("livenessProbe") or {}
     window = liveness.get("periodSeconds", 10) * liveness.get("failureThreshold", 3)
     if drain is not None and liveness:
@@ -577,7 +570,7 @@ def cross_findings(m, source_dir, notes):
     # The balancer.
     if need(len(balancers) == 1, f"deploy/k8s: {len(balancers)} Deployments run the image {BALANCER_IMAGE}, "
                                  f"expected 1"):
-        slots = balancer_findings(m, balancers[0], headless, drain, findings, notes)
+        slots = balancer_findings(m, balancers[0], headless, drain, config, findings, notes)
     if slots is not None:
         for w, hpa in hpas:
             need(hpa["spec"].get("maxReplicas", 0) <= slots,
@@ -586,7 +579,7 @@ def cross_findings(m, source_dir, notes):
     return findings
 
 
-def balancer_findings(m, balancer, headless, drain, findings, notes):
+def balancer_findings(m, balancer, headless, drain, server_config, findings, notes):
     """The HAProxy Deployment and its configuration. Returns the number of server slots."""
     where, deployment = balancer
 
@@ -677,17 +670,15 @@ def balancer_findings(m, balancer, headless, drain, findings, notes):
 
     # HAProxy's own verdict (Debian package haproxy, which deploy/install-deps.sh installs):
     # without it the check fails rather than passing the configuration unchecked.
+    # TLS: the files it names are mounted, TLS to TLS replicas, the caller's subject header.
+    findings += k8s_tls.balancer_findings(cfg_where, sections, where, deployment, container, server_config)
     haproxy = shutil.which("haproxy")
     if haproxy is None:
         findings.append(f"{cfg_where}: haproxy is not installed (deploy/install-deps.sh): `haproxy -c` not run")
     else:
         values = {name: e.get("value", "nupmpc") for name, e in env.items()}  # fieldRef: a namespace
-        with tempfile.NamedTemporaryFile("w", suffix=".cfg") as f:
-            f.write(cfg)
-            f.flush()
-            run = subprocess.run([haproxy, "-c", "-f", f.name], env=dict(os.environ, **values),
-                                 capture_output=True, text=True)
-        need(run.returncode == 0, f"{cfg_where}: haproxy -c failed:\n{run.stdout}{run.stderr}")
+        status, output = k8s_tls.haproxy_check(haproxy, cfg, deployment, container, dict(os.environ, **values))
+        need(status == 0, f"{cfg_where}: haproxy -c failed:\n{output}")
     return slots
 
 
@@ -696,6 +687,9 @@ def balancer_findings(m, balancer, headless, drain, findings, notes):
 
 # (file, text to replace (exactly once), replacement, what a finding must contain); or
 # (file, a regular expression (matching once), a function of its first group, ...).
+# The server's readiness probe, as deployment.yaml has it.
+READINESS_HTTP = ("          readinessProbe:\n            httpGet:\n              path: /readyz\n"
+                  "              port: metrics")
 PLANTED = [
     ("deployment.yaml", "readinessProbe:", "readinesProbe:", "readinesProbe: unknown field of V1Container"),
     ("service.yaml", "  selector:\n    app.kubernetes.io/name: nupmpc\n    app.kubernetes.io/component: server",
@@ -706,11 +700,33 @@ PLANTED = [
     ("configmap.yaml", 'NUPMPC_LOG_LEVEL: "info"', 'NUPMPC_LOG_LEVEL: "info"\n  NUPMPC_THREDS: "2"',
      "data.NUPMPC_THREDS: no server flag --threds"),
     ("configmap.yaml", 'NUPMPC_THREADS: "2"', "NUPMPC_THREADS: 2", "data.NUPMPC_THREADS: 2 (int) does not fit"),
-    ("deployment.yaml", "          livenessProbe:\n            grpc:\n              port: 50051",
-     "          livenessProbe:\n            grpc:\n              port: 50052", "livenessProbe.grpc.port: 50052"),
-    ("deployment.yaml", "          readinessProbe:\n            grpc:\n              port: 50051",
-     "          readinessProbe:\n            tcpSocket:\n              port: 50051",
-     "readinessProbe: must be a native"),
+    ("deployment.yaml", "              path: /healthz\n              port: metrics",
+     "              path: /healthz\n              port: grpc", "livenessProbe.httpGet.port: 'grpc'"),
+    ("deployment.yaml", READINESS_HTTP,
+     "          readinessProbe:\n            tcpSocket:\n              port: metrics", "must be an httpGet probe"),
+    ("deployment.yaml", READINESS_HTTP, "          readinessProbe:\n            grpc:\n              port: 50051",
+     "the gRPC port speaks TLS"),
+    ("deployment.yaml", "          readinessProbe:\n            httpGet:\n              path: /readyz",
+     "          readinessProbe:\n            httpGet:\n              path: /healthz", "readinessProbe.httpGet.path"),
+    # TLS wiring: Secrets, their keys, the files the flags name, the balancer's TLS and header.
+    ("deployment.yaml", "secretName: nupmpc-server-tls", "secretName: nupmpc-server-tsl",
+     "Secret 'nupmpc-server-tsl' is not made by"),
+    ("deployment.yaml", "              - key: tokens", "              - key: token", "key 'token' is not in Secret"),
+    ("deployment.yaml", "                path: server.key", "                path: server-key.pem",
+     "data.NUPMPC_TLS_KEY_FILE: /etc/nupmpc/tls/server.key is not a file"),
+    ("configmap.yaml", "NUPMPC_TRUSTED_BALANCER_SUBJECT:", "NUPMPC_TRUSTED_BALANCER:",
+     "no server flag --trusted_balancer "),
+    ("configmap.yaml", '  NUPMPC_TLS_CLIENT_CA_FILE: "/etc/nupmpc/ca/ca.pem"\n', "",
+     "NUPMPC_TRUSTED_BALANCER_SUBJECT: needs NUPMPC_TLS_CLIENT_CA_FILE"),
+    ("haproxy.yaml", "verify required ca-file ca.pem", "verify none ca-file ca.pem", "need `ssl verify required"),
+    ("haproxy.yaml", "tcp-check connect ssl alpn h2", "tcp-check connect", "needs `tcp-check connect ssl`"),
+    ("haproxy.yaml", "      http-request del-header x-nupmpc-client-subject\n", "", "without first `http-request"),
+    ("haproxy.yaml", " if { ssl_c_used } { ssl_c_verify 0 }", "", "must be set only `if"),
+    ("haproxy.yaml", "                path: client.pem.key", "                path: client.key",
+     "crt balancer-client-tls/client.pem: its key"),
+    ("haproxy.yaml", "      default-server crt balancer-client-tls/client.pem\n", "", "present none (`crt`)"),
+    ("make-secrets.sh", "nupmpc-balancer-tls --cert", "nupmpc-frontend-tls --cert",
+     "Secret 'nupmpc-balancer-tls' is not made by"),
     ("deployment.yaml", 'limits:\n              cpu: "2"', 'limits:\n              cpu: "4"', "limits.cpu: '4'"),
     ("deployment.yaml", "enableServiceLinks: false", "enableServiceLinks: true", "enableServiceLinks: must be false"),
     ("configmap.yaml", 'NUPMPC_MEMORY_BUDGET_MB: "3072"', 'NUPMPC_MEMORY_BUDGET_MB: "4000"',

@@ -2,11 +2,14 @@
 
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/strip.h"
 
 namespace nupmpc::testing {
 namespace {
@@ -55,6 +58,20 @@ absl::StatusOr<KeyPair> TestPki::Issue(const std::string& name, const std::strin
     return s;
   }
   return KeyPair{base + ".pem", base + ".key"};
+}
+
+absl::StatusOr<std::string> TestPki::SubjectOf(const std::string& cert_file) {
+  const std::string command = absl::StrCat("openssl x509 -noout -subject -nameopt RFC2253 -in ", cert_file);
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return absl::InternalError(absl::StrCat("failed: ", command));
+  std::string out;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof buffer, pipe) != nullptr) out += buffer;
+  if (pclose(pipe) != 0) return absl::InternalError(absl::StrCat("failed: ", command));
+  constexpr absl::string_view kPrefix = "subject=";
+  absl::string_view subject = absl::StripAsciiWhitespace(out);
+  if (!absl::ConsumePrefix(&subject, kPrefix)) return absl::InternalError(absl::StrCat(command, ": ", out));
+  return std::string(absl::StripLeadingAsciiWhitespace(subject));
 }
 
 }  // namespace nupmpc::testing

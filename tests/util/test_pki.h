@@ -24,6 +24,9 @@ class TestPki {
   // "other_ca"); `server`: with the names localhost and 127.0.0.1.
   absl::StatusOr<KeyPair> Issue(const std::string& name, const std::string& subject, const std::string& ca,
                                 bool server) const;
+  // The subject of the certificate in `cert_file` as RFC 2253 prints it (openssl's
+  // -nameopt RFC2253): how gRPC names an mTLS peer and HAProxy's ssl_c_s_dn(,,rfc2253).
+  static absl::StatusOr<std::string> SubjectOf(const std::string& cert_file);
   std::string CaFile(const std::string& ca) const { return dir_ + "/" + ca + ".pem"; }
   const std::string& dir() const { return dir_; }
 
