@@ -44,7 +44,7 @@ asan_stage() {
                 log_format_test hostile_numbers_test hostile_spec_rules_test hostile_sessions_test
                 hostile_control_protocol_test hostile_transport_test hostile_solves_test service_model_update_test
                 listen_probe_test http_listener_test metrics_port_hostile_test client_control_period_test
-                service_deadline_test)
+                service_deadline_test balancer_auth_test)
   targets=()
   for t in "${core_tests[@]}" "${server_tests[@]}"; do targets+=(--target "$t"); done
   cmake --build build-asan -j "$jobs" "${targets[@]}"
