@@ -221,8 +221,8 @@ void ControlStream::OnReadDone(bool ok) {
     read_more = ShouldReadLocked();
     // Reading on first: a newer step that arrives during the solve supersedes the parked
     // one; unless the client waits for its answers and the step is solved here (ReadTiming).
-    read_after_solve =
-        read_more && start.has_value() && !read_ahead && PlaceStep(start->step(), solving_received_at_).in_place;
+    read_after_solve = read_more && start.has_value() && !read_ahead &&
+                       PlaceStep(StepDue(entry_->timing, start->step(), solving_received_at_)).in_place;
     if (read_more && !read_after_solve) ++reads_starting_;
   }
   if (read_more && !read_after_solve) ReadNext();
@@ -315,12 +315,12 @@ void ControlStream::SetSolvingLocked(bool solving) {
   solving_ = solving;
 }
 
-ControlStream::WhereToSolve ControlStream::PlaceStep(const v1::Step& step, Clock::time_point received_at) const {
+ControlStream::WhereToSolve ControlStream::PlaceStep(std::optional<Clock::time_point> due) const {
   InPlaceInputs in;
   in.expected_cpu_ms = entry_->last_solve_cpu_ms.load(std::memory_order_relaxed);
   in.inline_max_ms = state_->options.inline_solve_max_ms;
   in.handoff_ms = state_->pool.handoff_ms();
-  if (const std::optional<Clock::time_point> due = StepDue(entry_->timing, step, received_at)) {
+  if (due.has_value()) {
     in.left_ms = std::chrono::duration<double, std::milli>(*due - Clock::now()).count() -
                  send_cost_ms_.load(std::memory_order_relaxed);
   }
@@ -344,7 +344,7 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
       received_at = solving_received_at_;
     }
     const std::optional<Clock::time_point> due = StepDue(entry_->timing, request.step(), received_at);
-    const WhereToSolve placement = PlaceStep(request.step(), received_at);
+    const WhereToSolve placement = PlaceStep(due);
     if (placement.in_place &&
         SessionStrand::TryRunHere(
             entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },

@@ -80,14 +80,14 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   std::optional<v1::ControlRequest> TakeParkedLocked();
   // Sets solving_, counting the step in ServerState::work_in_flight while it is set.
   void SetSolvingLocked(bool solving);
-  // Whether `step`, received at `received_at`, is solved on the thread that has it
-  // (server/scheduling/solve_in_place.h), and whether it is short (a core-holding thread may
-  // take it from the queue). Reads only atomics: callable with or without mu_.
+  // Whether a step due at `due` (StepDue; none: no deadline) is solved on the thread that
+  // has it (server/scheduling/solve_in_place.h), and whether it is short (a core-holding
+  // thread may take it from the queue). Reads only atomics: callable with or without mu_.
   struct WhereToSolve {
     bool in_place = false;
     bool short_solve = false;
   };
-  WhereToSolve PlaceStep(const v1::Step& step, Clock::time_point received_at) const;
+  WhereToSolve PlaceStep(std::optional<Clock::time_point> due) const;
   // Solves a step taken by TakeParkedLocked: here if the session and a core are free and
   // PlaceStep says so (no hand-off to a worker: the latency of a transport-bound step, or of
   // a step the hand-off would make late), else on the pool through the session's strand. Called without mu_; the caller
