@@ -32,8 +32,8 @@ constexpr std::size_t kMaxUnanswered = 256;
 
 int ControlPeriod::HeldPeriodsToReconnect() const {
   if (held_periods_to_reconnect > 0) return held_periods_to_reconnect;
-  const auto per_second =
-      static_cast<int>(std::ceil(1000.0 / static_cast<double>(std::max<std::int64_t>(period.count(), 1))));
+  const double period_s = std::max(std::chrono::duration<double>(period).count(), 1e-3);
+  const auto per_second = static_cast<int>(std::ceil(1.0 / period_s));
   return std::max(3, per_second);
 }
 
@@ -46,7 +46,7 @@ Session::Session(Client* client, v1::ProblemSpec spec, ReconnectOptions reconnec
   // The server learns the period as the session's deadline (ProblemSpec.timing), unless
   // the spec sets one of its own.
   if (period_.period.count() > 0 && spec_.timing().period_ms() == 0.0) {
-    spec_.mutable_timing()->set_period_ms(static_cast<double>(period_.period.count()));
+    spec_.mutable_timing()->set_period_ms(std::chrono::duration<double, std::milli>(period_.period).count());
   }
 }
 

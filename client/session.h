@@ -49,8 +49,10 @@ namespace nupmpc {
 class Client;
 
 struct ControlPeriod {
-  std::chrono::milliseconds period{0};  // 0: none (a step waits for its answer)
-  int held_periods_to_reconnect = 0;    // K; 0: max(3, ceil(1 s / period))
+  // 0: none (a step waits for its answer). Finer than a millisecond, so that a period
+  // such as 7.35 ms is kept as the client paces it, not truncated on its way to the server.
+  std::chrono::microseconds period{0};
+  int held_periods_to_reconnect = 0;  // K; 0: max(3, ceil(1 s / period))
 
   // The K in force, and the caps a period puts on the reconnect options.
   int HeldPeriodsToReconnect() const;

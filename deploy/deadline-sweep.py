@@ -4,11 +4,21 @@
 Two groups of Control streams (nupmpc-period-groups, the client library's period option):
 many short-period streams of a small problem and a few long-period streams of a larger one,
 each group offering half of the load. The server runs on one CPU with one worker, the
-streams on another. First the server's capacity for each instance is measured (one stream
-stepping as fast as answers come); then, for each load level (a share of that capacity),
-an EDF and a FIFO server are run in turn (their order alternating from level to level),
-and the script prints per level, scheduling and group: steps, met, missed by cause, the
-slack's median and worst percent, and how evenly the group's streams were served.
+streams on another.
+
+The load levels are shares of the core's capacity for this mix, paced: the rate of steps
+at which the server's core would be busy all the time. It is calibrated in two steps.
+First each instance's streams step as fast as answers come, alone: that sets the two
+groups' shares (half of the work each). Paced steps cost the server more than that (each
+arrives alone, so every one pays its own wake-ups and writes), so the mix is then run paced
+at two levels of that first estimate, and the server's CPU share, a straight line in the
+offered rate, is extrapolated to one full CPU. Both estimates are printed, and every run
+prints the server's CPU share, so a reader can see what each level really loaded.
+
+Then, for each load level, an EDF and a FIFO server are run in turn (their order
+alternating from level to level), and the script prints per level, scheduling and group:
+steps, met, missed by cause, the slack's median and worst percent, and how evenly the
+group's streams were served.
 
     deploy/deadline-sweep.py [--levels 0.5,0.9,1.0,1.2] [--seconds 5] [--json FILE]
 
@@ -33,6 +43,9 @@ BIN = pathlib.Path(os.environ.get("NUPMPC_BIN_DIR", str(REPO / "build" / "bin"))
 BENCHMARKS = pathlib.Path(os.environ.get("NUPMPC_BENCHMARK_DIR", str(REPO / "benchmarks")))
 GROUPS = [("short", "masses_N30.json", 32), ("long", "masses_N300.json", 8)]
 SCHEDULINGS = ("edf", "fifo")
+# Shares of the unpaced estimate the paced calibration runs at: far enough apart for a
+# slope, and below saturation (where the CPU share stops growing with the load).
+PACED_CALIBRATION_LEVELS = (0.3, 0.6)
 
 
 def cpus():
@@ -73,9 +86,9 @@ def period_groups(target, group_flag, client_cpus, *flags):
     return json.loads(done.stdout)
 
 
-def calibrate(server_cpus, client_cpus, seconds):
+def unpaced_capacity(server_cpus, client_cpus, seconds):
     """Steps per second the server gives each group's streams stepping as fast as answers
-    come: its capacity for that instance at that concurrency."""
+    come, each group alone: its capacity for that instance at that concurrency."""
     with_one = ",".join(f"{name}:{BENCHMARKS / file}:{streams}:1000" for name, file, streams in GROUPS)
     s = server("edf", server_cpus).start()
     try:
@@ -94,9 +107,40 @@ def groups_at(level, capacity):
     return ",".join(parts), periods
 
 
+def paced_cpu_share(level, capacity, server_cpus, client_cpus, seconds):
+    """The server's CPU share under the paced mix offered at `level` of `capacity`."""
+    flag, _ = groups_at(level, capacity)
+    s = server("edf", server_cpus).start()
+    try:
+        cpu_before, started = cpu_seconds(s.process.pid), time.monotonic()
+        period_groups(s.target, flag, client_cpus, "--seconds", str(seconds), "--warmup_s", "0.5")
+        return (cpu_seconds(s.process.pid) - cpu_before) / (time.monotonic() - started)
+    finally:
+        s.stop()
+
+
+def paced_capacity(unpaced, server_cpus, client_cpus, seconds):
+    """The capacity for the paced mix: the unpaced estimate scaled to where the server's
+    CPU share, measured at two paced levels below saturation, reaches one CPU."""
+    low, high = PACED_CALIBRATION_LEVELS
+    share_low = paced_cpu_share(low, unpaced, server_cpus, client_cpus, seconds)
+    share_high = paced_cpu_share(high, unpaced, server_cpus, client_cpus, seconds)
+    slope = (share_high - share_low) / (high - low)
+    if slope <= 0.0:
+        sys.exit(f"deadline-sweep: the server's CPU share did not grow with the load "
+                 f"({share_low:.2f} at {low}, {share_high:.2f} at {high}); is the machine busy?")
+    full = high + (1.0 - share_high) / slope
+    print(f"paced calibration: server CPU {share_low:.0%} at {low:.0%} and {share_high:.0%} at {high:.0%} "
+          f"of the unpaced estimate: one full CPU at {full:.0%} of it", flush=True)
+    return {name: rate * full for name, rate in unpaced.items()}, {"low": [low, share_low], "high": [high, share_high]}
+
+
 def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s):
-    capacity = calibrate(server_cpus, client_cpus, calibrate_s)
-    print(f"capacity (steps/s of each group's streams, unpaced, on the server's core): "
+    unpaced = unpaced_capacity(server_cpus, client_cpus, calibrate_s)
+    print(f"unpaced capacity (steps/s of each group's streams alone, as fast as answers come): "
+          + ", ".join(f"{k} {v:.0f}" for k, v in unpaced.items()), flush=True)
+    capacity, paced_shares = paced_capacity(unpaced, server_cpus, client_cpus, 2 * calibrate_s)
+    print(f"capacity for the paced mix (steps/s of each group at one full CPU): "
           + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
     runs = []
     for i, level in enumerate(levels):
@@ -114,7 +158,8 @@ def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s):
             runs.append({"level": level, "scheduling": scheduling, "periods_ms": periods,
                          "server_cpu_share": round(server_cpu_share, 3), "server_deadlines": deadlines, **figures})
             print_run(runs[-1])
-    return {"capacity_steps_per_s": capacity, "runs": runs}
+    return {"unpaced_capacity_steps_per_s": unpaced, "paced_calibration_cpu_shares": paced_shares,
+            "capacity_steps_per_s": capacity, "runs": runs}
 
 
 def cpu_seconds(pid):

@@ -72,8 +72,8 @@ absl::StatusOr<std::vector<GroupFigures>> RunPeriodGroups(const std::string& tar
       Stream stream;
       stream.group = &group;
       stream.client = std::make_unique<Client>(target);  // a connection of its own
-      absl::StatusOr<std::unique_ptr<Session>> session = stream.client->OpenSession(
-          group.spec, {}, ControlPeriod{.period = std::chrono::duration_cast<std::chrono::milliseconds>(group.period)});
+      absl::StatusOr<std::unique_ptr<Session>> session =
+          stream.client->OpenSession(group.spec, {}, ControlPeriod{.period = group.period});
       if (!session.ok()) return session.status();
       stream.session = *std::move(session);
       streams.push_back(std::move(stream));
@@ -87,10 +87,14 @@ absl::StatusOr<std::vector<GroupFigures>> RunPeriodGroups(const std::string& tar
     threads.emplace_back([&, i] {
       Stream& stream = streams[i];
       const PeriodGroup& group = *stream.group;
-      // Streams of a group start spread over one period, as independent controllers would.
-      Clock::time_point next = start + group.period * static_cast<long>(i % static_cast<std::size_t>(group.streams)) /
-                                           std::max(group.streams, 1);
-      for (std::size_t t = 0; next < until; ++t) {
+      // Streams of a group start spread over one period and over the states they cycle
+      // through, as independent controllers would: in step, every stream would meet the
+      // costly steps of the cycle (its start, its jump back) in the same period, a burst
+      // of work no fleet of separate plants produces.
+      const std::size_t in_group = i % static_cast<std::size_t>(group.streams);
+      const auto group_size = static_cast<std::size_t>(std::max(group.streams, 1));
+      Clock::time_point next = start + group.period * static_cast<long>(in_group) / static_cast<long>(group_size);
+      for (std::size_t t = in_group * group.states.size() / group_size; next < until; ++t) {
         std::this_thread::sleep_until(next);
         const Clock::time_point began = Clock::now();
         v1::Step step;
