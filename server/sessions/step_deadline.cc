@@ -14,6 +14,16 @@ std::chrono::nanoseconds Milliseconds(double ms) {
   return std::chrono::nanoseconds(static_cast<std::int64_t>(std::llround(ms * 1e6)));
 }
 
+void AnswerWithoutPlan(Clock::time_point due, v1::DeadlineOutcome outcome, v1::SolveResult* out) {
+  out->Clear();
+  out->set_status(v1::SOLVE_STATUS_TIME_LIMIT);
+  out->set_has_plan(false);
+  out->set_objective(std::numeric_limits<double>::quiet_NaN());
+  out->set_max_violation(std::numeric_limits<double>::quiet_NaN());
+  out->set_deadline(outcome);
+  out->set_deadline_slack_ms(std::chrono::duration<double, std::milli>(due - Clock::now()).count());
+}
+
 }  // namespace
 
 absl::StatusOr<SessionTiming> SessionTimingFromSpec(const v1::ProblemSpec& spec) {
@@ -37,13 +47,11 @@ std::optional<Clock::time_point> StepDue(const SessionTiming& timing, const v1::
 }
 
 void AnswerQueuedPastDeadline(Clock::time_point due, v1::SolveResult* out) {
-  out->Clear();
-  out->set_status(v1::SOLVE_STATUS_TIME_LIMIT);
-  out->set_has_plan(false);
-  out->set_objective(std::numeric_limits<double>::quiet_NaN());
-  out->set_max_violation(std::numeric_limits<double>::quiet_NaN());
-  out->set_deadline(v1::DEADLINE_OUTCOME_QUEUED_PAST_DEADLINE);
-  out->set_deadline_slack_ms(std::chrono::duration<double, std::milli>(due - Clock::now()).count());
+  AnswerWithoutPlan(due, v1::DEADLINE_OUTCOME_QUEUED_PAST_DEADLINE, out);
+}
+
+void AnswerCannotFinishAPass(Clock::time_point due, v1::SolveResult* out) {
+  AnswerWithoutPlan(due, v1::DEADLINE_OUTCOME_SOLVE_TOO_LONG, out);
 }
 
 void RecordDeadlineOutcome(std::optional<Clock::time_point> due, bool started_late, v1::SolveResult* out) {

@@ -35,6 +35,11 @@ std::optional<Clock::time_point> StepDue(const SessionTiming& timing, const v1::
 // being solved late: TIME_LIMIT, no plan, QUEUED_PAST_DEADLINE.
 void AnswerQueuedPastDeadline(Clock::time_point due, v1::SolveResult* out);
 
+// A step left less time than one pass of its session's solver takes: no plan could be
+// ready by its deadline, so it is answered at once (TIME_LIMIT, no plan, SOLVE_TOO_LONG)
+// instead of spending a pass that would end late anyway, time the steps behind it need.
+void AnswerCannotFinishAPass(Clock::time_point due, v1::SolveResult* out);
+
 // Sets out->deadline and deadline_slack_ms for an answer handed over now (nothing without
 // a deadline). `started_late`: the solve began after the deadline (solve_late_steps).
 void RecordDeadlineOutcome(std::optional<Clock::time_point> due, bool started_late, v1::SolveResult* out);

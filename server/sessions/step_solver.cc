@@ -63,9 +63,10 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   }
   // The step's deadline (step_deadline.h): the solve gets what is left of it, less the cost
   // of sending the answer and one pass (the solver looks at its time limit between passes,
-  // so the last one may end a pass after it); one that could not start in time is answered
-  // at once without a plan (its update applied above, as for any answered step) unless the
-  // session wants it solved late.
+  // so the last one may end a pass after it). One that could not start in time, or whose
+  // time left is shorter than the session's last pass, is answered at once without a plan
+  // (its update applied above, as for any answered step) unless the session wants it
+  // solved late.
   const std::optional<Clock::time_point> due =
       call.received_at.has_value() ? StepDue(entry.timing, step, *call.received_at) : std::nullopt;
   bool started_late = false;
@@ -78,9 +79,18 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
       return absl::OkStatus();
     }
     started_late = left_s <= 0.0;
-    if (!started_late) {
-      // At least a little: a first pass gives an anytime plan if it can finish in time.
-      const double pass_s = entry.last_pass_ms.load(std::memory_order_relaxed) * 1e-3;
+    const double pass_s = entry.last_pass_ms.load(std::memory_order_relaxed) * 1e-3;
+    const bool cannot_finish_a_pass = !started_late && left_s < pass_s;
+    if (cannot_finish_a_pass && !entry.timing.solve_late_steps) {
+      AnswerCannotFinishAPass(*due, out);
+      entry.Touch();
+      return absl::OkStatus();
+    }
+    // A session that wants late plans gets one here as for a step that started late: a
+    // limit shorter than a pass would end the solve before its first.
+    if (!started_late && !cannot_finish_a_pass) {
+      // A pass may start until one pass before the deadline (limits are checked between
+      // passes), so the first, which gives an anytime plan, always can.
       const double limit_s = std::max(left_s - pass_s, 1e-6);
       limits.time_limit_seconds =
           limits.time_limit_seconds > 0.0 ? std::min(limits.time_limit_seconds, limit_s) : limit_s;

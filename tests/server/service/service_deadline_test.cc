@@ -1,7 +1,8 @@
 // Steps with deadlines (ProblemSpec.timing, Step.budget_ms) through the service: a step
 // whose deadline passed while it waited behind other work is answered at once without a
 // plan (or solved late when the session asks), and a step whose solve cannot converge
-// within its budget is answered by it with the best plan reached for its own state. The
+// within its budget is answered by it with the best plan reached for its own state, and
+// one left less time than a pass is answered at once. The
 // machine's speed only sets the budgets (from a measured pass), never what is asserted.
 #include <chrono>
 #include <future>
@@ -102,6 +103,36 @@ TEST_F(ServiceDeadlineTest, AStepThatCannotConvergeInItsBudgetIsAnsweredByItWith
   EXPECT_GE(anytime->deadline_slack_ms(), 0.0);
   EXPECT_EQ(anytime->inputs_size(), full->inputs_size());
   EXPECT_NE(anytime->objective(), full->objective());  // an earlier iterate, not the converged plan
+}
+
+TEST_F(ServiceDeadlineTest, AStepLeftLessTimeThanOnePassIsAnsweredAtOnceWithoutSpendingIt) {
+  const bench::BenchmarkInstance inst = LoadInstanceOrDie("random_outbox_M40_K20_L20_N1000_s1");
+  const Eigen::VectorXd x = inst.problem.initial_mean;
+  const std::string session = CreateSession("random_outbox_M40_K20_L20_N1000_s1");
+  absl::StatusOr<v1::SolveResult> full = client_->Solve(session, StepAt(x));  // sets the session's pass time
+  ASSERT_TRUE(full.ok()) << full.status();
+  ASSERT_GE(full->iterations(), 2u);
+  const double pass_ms = full->solve_ms() / full->iterations();
+  // Half a pass: no plan could be ready by the deadline, so none is started.
+  v1::Step step = StepAt(x, pass_ms / 2);
+  step.set_warm_start(v1::WARM_START_COLD);
+  absl::StatusOr<v1::SolveResult> answer = client_->Solve(session, step);
+  ASSERT_TRUE(answer.ok()) << answer.status();
+  EXPECT_EQ(answer->deadline(), v1::DEADLINE_OUTCOME_SOLVE_TOO_LONG);
+  EXPECT_EQ(answer->status(), v1::SOLVE_STATUS_TIME_LIMIT);
+  EXPECT_FALSE(answer->has_plan());
+  EXPECT_EQ(answer->iterations(), 0u) << "a pass was spent that could not end by the deadline";
+  EXPECT_EQ(server_->state().metrics.deadlines(v1::DEADLINE_OUTCOME_SOLVE_TOO_LONG), 1u);
+
+  // A session that prefers a late plan to none still gets one.
+  const std::string solving_late = CreateSession("random_outbox_M40_K20_L20_N1000_s1", [](v1::ProblemSpec* s) {
+    s->mutable_timing()->set_solve_late_steps(true);
+  });
+  ASSERT_TRUE(client_->Solve(solving_late, StepAt(x)).ok());
+  absl::StatusOr<v1::SolveResult> late = client_->Solve(solving_late, step);
+  ASSERT_TRUE(late.ok()) << late.status();
+  EXPECT_GE(late->iterations(), 1u);
+  EXPECT_TRUE(late->has_plan());
 }
 
 TEST_F(ServiceDeadlineTest, StepsWithoutADeadlineSayNothingOfOne) {
