@@ -1,4 +1,4 @@
-# Per-target include roots (issue 19): no target exports the repository root, so a target
+# Per-target include roots: no target exports the repository root, so a target
 # sees only the folders of the libraries it links. A library exports a directory in the
 # build tree that holds its own source folder, by symbolic link, under the folder's path in
 # the repository: build/include/core/core/problem.h is core/problem.h. `#include

@@ -2,7 +2,7 @@
 # Installs dependencies (if missing) and builds into build/ (executables in build/bin/).
 #   deploy/build.sh [TARGET...]     only these targets (default: everything)
 # NUPMPC_CPU_BASELINE=x86-64|x86-64-v2|x86-64-v3|x86-64-v4|native chooses the instructions
-# the build may use (default: x86-64-v3 where this machine has it, see README). The
+# the build may use (default: x86-64-v3 where this machine has it, see deploy/README.md). The
 # choice is kept in build/ and every later build uses it until it is given again.
 set -euo pipefail
 cd "$(dirname "$0")/.."

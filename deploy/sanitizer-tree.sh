@@ -4,7 +4,7 @@
 # assertions on, warnings as errors (CMakeLists.txt: NUPMPC_SANITIZE).
 #   deploy/sanitizer-tree.sh asan    build-asan/: AddressSanitizer + UndefinedBehaviorSanitizer,
 #        Eigen's alignment raised to 64 bytes (what AVX-512 builds use: the aligned-allocation
-#        path on which AVX-512 servers crashed, issue 17, runs under ASan whatever CPU runs the
+#        path whose misuse crashes AVX-512 servers, runs under ASan whatever CPU runs the
 #        tests), and libFuzzer's coverage instrumentation, so the fuzz targets of tests/fuzz/ build
 #        in the same tree as the tests (one sanitizer build in CI, not two).
 #   deploy/sanitizer-tree.sh tsan    build-tsan/: ThreadSanitizer, the dynamic-size solver

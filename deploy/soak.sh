@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Soak and fault scenarios of the service (issue 23 §3), real processes on loopback:
+# Soak and fault scenarios of the service, real processes on loopback:
 #   deploy/soak.sh [MINUTES]           the soak: MINUTES (default 10, at least 4) of saturating mixed load
 #                                      (tests/soak/soak.py), then every fault scenario
 #                                      (tests/soak/faults.py) in its full form

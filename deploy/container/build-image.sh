@@ -12,7 +12,7 @@
 #   --rebuild-base  make the base image again even if it exists (e.g. for security updates)
 #   --smoke         afterwards run deploy/container/run-image-smoke.sh on the new image
 # Environment:
-#   NUPMPC_CPU_BASELINE   x86-64 psABI level of the binaries (default x86-64-v3, README)
+#   NUPMPC_CPU_BASELINE   x86-64 psABI level of the binaries (default x86-64-v3, deploy/README.md)
 #   JOBS                  parallel compile jobs in the build stage (default 2)
 #   NUPMPC_PODMAN_RUNTIME OCI runtime (default: the first of runc, crun that runs a container)
 #   NUPMPC_PODMAN_STORAGE podman storage driver, overlay or vfs (default: overlay if it works)

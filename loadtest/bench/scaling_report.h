@@ -11,8 +11,8 @@
 
 namespace nupmpc::bench {
 
-// nupmpc-bench --scaling: cost per horizon step across horizons (issue 26), each sweep's
-// instances solved again interleaved.
+// nupmpc-bench --scaling: cost per horizon step across horizons (a solve must stay linear
+// in N), each sweep's instances solved again interleaved.
 
 // An instance of a sweep, kept to be solved again.
 struct ScalingEntry {

@@ -4,8 +4,8 @@
 // A small HTTP/1.x listener for GET-only endpoints on a port anyone on the network may
 // reach (the operators' /metrics, /healthz, /readyz). One thread, one epoll set,
 // non-blocking sockets: a slow or hostile peer costs a few kilobytes and never a thread,
-// and every connection has a deadline from the moment it is accepted. See README.md in
-// this folder for why this is not cpp-httplib.
+// and every connection has a deadline from the moment it is accepted. See server/README.md
+// for why this is not cpp-httplib.
 //
 // Bounds, each a field of HttpListenerLimits:
 // - a request head (request line and header fields) of at most max_head_bytes and

@@ -12,7 +12,7 @@ namespace nupmpc::server {
 // (open loop, bursts): the steps that arrive during a solve are read, and each replaces
 // the one waiting. But a read pending while the thread solves costs the service a chain of
 // wake-ups between gRPC's threads on the solve's core, on the round trip's critical path
-// (the README has the measurements). A client that
+// (server/README.md, "When a stream reads its next step"). A client that
 // waits for each answer before it sends the next step (a closed loop) sends nothing during
 // the solve, so for it reading after the solve loses nothing.
 //

@@ -98,8 +98,8 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   }
   // Read on every solve, short ones included, although the thread CPU clock is a system
   // call: the reading also brings the scheduler's account of this thread up to date, and
-  // without it p99 at 8 streams on one core doubled (README, "Where a step is solved":
-  // measured on one kernel, cause inferred, not traced).
+  // without it the tail latency at many streams on one core grew (server/README.md, "Where
+  // a step is solved").
   const std::chrono::nanoseconds cpu_before = ThreadCpuTime();
   NUPMPC_ASSIGN_OR_RETURN(const core::SolveSummary summary, solver.Solve(limits, &entry.solution));
   entry.compacted = false;  // Solve() took its scratch back

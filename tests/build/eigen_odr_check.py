@@ -5,8 +5,8 @@ Eigen's inline functions (aligned_malloc/aligned_free among them) are compiled
 differently for each vector width: 16-byte alignment under SSE, 32 under AVX, 64 under
 AVX-512, with different allocators. Every translation unit that instantiates them emits
 a weak copy and the linker keeps one, so a program whose objects were compiled with two
-settings can allocate with one copy and free with the other (issue 17: a prebuilt static
-Ceres compiled for plain x86-64 inside an AVX-512 build corrupted the heap).
+settings can allocate with one copy and free with the other (a prebuilt static Ceres
+compiled for plain x86-64 inside an AVX-512 build corrupts the heap that way).
 
 Checks, for a configured and built build directory:
   1. every object of ours that includes Eigen was compiled with the same vectorisation

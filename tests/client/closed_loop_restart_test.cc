@@ -196,7 +196,7 @@ TEST(ClosedLoopRestart, GivesUpWhenTheBudgetIsSpent) {
   EXPECT_LT(run.took.count(), 20.0);
 }
 
-// Issue 18, item 5: a step with x0 = [-1e300, 0, ...] after a normal one comes back
+// A step with x0 = [-1e300, 0, ...] after a normal one comes back
 // NUMERICAL_ERROR without a plan (the server used to return the previous step's plan with
 // it). The CLI, replaying recorded states, must hold the input it applied before and say
 // so; the next normal step applies its own plan again.

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Checks the Kubernetes manifests of deploy/k8s/ (issue 20, section 3) without a cluster.
+"""Checks the Kubernetes manifests of deploy/k8s/ without a cluster.
 
     k8s_manifest_check.py SOURCE_DIR             check SOURCE_DIR/deploy/k8s/
     k8s_manifest_check.py --selftest SOURCE_DIR  plant mistakes in a copy, see each one caught
@@ -62,7 +62,8 @@ MODELS = {
 }
 
 # Server flags the manifests may set before server/server_flags.cc declares them: each is added
-# by work under way (issue 20, section 2: the drain delay). Harmless once the flag exists.
+# by work under way (a manifest may land before the server change that adds its flag).
+# Harmless once the flag exists.
 PENDING_FLAGS = {}  # flags a manifest may name before the server has them: {flag: why}
 
 # Seconds the pod needs beyond drain delay + grace: closing the listener and the streams left,

@@ -508,9 +508,9 @@ def slow_loris(quick):
 
 
 def fair_share(quick):
-    """The schedule on which a stream once starved (issue 24): many more streams than workers,
-    one worker, the server pinned to one CPU and the load generator to another, so that a
-    gRPC thread that solves steps in place competes with the worker for the same core."""
+    """The schedule on which an unfair drain rule starves a stream: many more streams than
+    workers, one worker, the server pinned to one CPU and the load generator to another, so
+    that a gRPC thread that solves steps in place competes with the worker for the same core."""
     r = Result("fair_share")
     cpus = sorted(os.sched_getaffinity(0))
     pinned = len(cpus) >= 2

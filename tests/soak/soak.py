@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Soak: the real nupmpc-server under saturating mixed load for a while, its memory
-sampled throughout (issue 23 §3).
+sampled throughout, to catch leaks and slow growth that short tests miss.
 
     tests/soak/soak.py [--seconds 600] [--period_s 60] [--streams 16] [--warmup_s 120]
 

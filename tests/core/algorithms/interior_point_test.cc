@@ -1,7 +1,7 @@
 // The interior-point iteration IFFBDD runs on problems whose only constraints are hard
 // output bounds (core/algorithms/interior_point_rows.h): its means pass against the full
 // Kalman filter, its solves against reference.json and against IFFBDD's own dual
-// iteration, and its pass counts on the instances issue 26 names.
+// iteration, and its pass counts on the instances where IFFBDD's dual iteration is slowest.
 #include <cmath>
 #include <map>
 #include <string>
@@ -82,9 +82,9 @@ Solved SolveCold(const Problem& problem, bool interior_point) {
   return out;
 }
 
-// Exact to the references in at most the passes issue 26 asks for (12 on the random output
-// boxes, 20 on the corridor: IFFBDD's dual iteration needs 18–29 and 41), and the same
-// optimum as IFFBDD's own iteration.
+// Exact to the references in at most the passes that make it worth its cost (12 on the
+// random output boxes, 20 on the corridor: IFFBDD's dual iteration needs 18–29 and 41),
+// and the same optimum as IFFBDD's own iteration.
 TEST(InteriorPoint, SolvesTheOutputBoxInstancesExactlyInFewPasses) {
   auto refs = bench::LoadReferences(kDir + "/reference.json");
   ASSERT_TRUE(refs.ok()) << refs.status();

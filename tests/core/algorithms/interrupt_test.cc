@@ -1,4 +1,5 @@
-// Time limits and cancellation inside a pass (issue 18; core/algorithms/interrupt.h).
+// Time limits and cancellation inside a pass (core/algorithms/interrupt.h): a
+// long pass must not hold its worker past a deadline.
 // Bounds are relative to one pass of the same problem measured in the same test (the
 // machine is shared and may run under a sanitizer): never an absolute speed.
 #include "core/algorithms/interrupt.h"

@@ -1,6 +1,6 @@
-// Where the time of one large solve goes (issue 18: a SolveOnce with M = 300, L = 30,
-// K = 300, N = 200 and a 1 s deadline held a worker 13-16 s), and how long a solve with
-// a time limit takes. Not a test; run by hand:
+// Where the time of one large solve goes (a SolveOnce with M = 300, L = 30, K = 300,
+// N = 200 and a 1 s deadline must not hold a worker long past its deadline), and how
+// long a solve with a time limit takes. Not a test; run by hand:
 //
 //   pass_profile M L K N algorithm(iffbdd|ibffd|iake) time_limit_seconds
 //   pass_profile overhead M L K N algorithm

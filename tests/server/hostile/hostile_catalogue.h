@@ -1,7 +1,7 @@
 #ifndef NUPMPC_TESTS_SERVER_HOSTILE_CATALOGUE_H_
 #define NUPMPC_TESTS_SERVER_HOSTILE_CATALOGUE_H_
 
-// The hostile-input catalogue's harness (issue 23 §4): a server with a healthy session on
+// The hostile-input catalogue's harness: a server with a healthy session on
 // masses_N30, and what every case of the catalogue ends with: the refusal has its code and
 // names the field (or the rule), the healthy session still answers with the bit-identical
 // plan, and the server's resident memory has not jumped. Also the raw-bytes calls that

@@ -1,4 +1,4 @@
-// The hostile-input catalogue's Control-stream class (issue 23 §4): violations of the
+// The hostile-input catalogue's Control-stream class: violations of the
 // stream's protocol. A first message that attaches to nothing (a step before attaching, an
 // empty message, a bad spec) ends the stream with the code and the field named; a later
 // message that breaks a rule (opening or attaching again, no step, a bad step, bytes that

@@ -1,4 +1,4 @@
-// The hostile-input catalogue's numeric class (issue 23 §4): NaN, +Inf and -Inf in every
+// The hostile-input catalogue's numeric class: NaN, +Inf and -Inf in every
 // numeric field kind of a spec and of a step, denormal and huge finite values, and
 // dimensions whose product is a memory bomb while each is within its limit. Every case
 // gets its code and a message naming the field; after each one a healthy session still

@@ -1,4 +1,4 @@
-// The hostile-input catalogue's session classes (issue 23 §4): ids that name no usable
+// The hostile-input catalogue's session classes: ids that name no usable
 // session (unknown, closed, malformed, another principal's) on every call that takes one,
 // and a session used across calls and streams (solved by id while a stream is attached,
 // attached twice, closed while a stream uses it, a stream-owned session reached from

@@ -1,4 +1,4 @@
-// Numerical hostility that passes validation (issue 23 §3): ill-conditioned models,
+// Numerical hostility that passes validation: ill-conditioned models,
 // bounds 1e-300 and 1e300 wide, contradictory output bounds, a state the inputs cannot
 // bring inside its bounds, tiny time limits and a cap of one pass. Every answer is
 // finite wherever it describes a plan, its status is the honest one for the case, and

@@ -1,4 +1,4 @@
-// The hostile-input catalogue's rule class (issue 23 §4): every validation rule of a spec
+// The hostile-input catalogue's rule class: every validation rule of a spec
 // (dimensions and limits, each matrix, per-step array, enum, bound relation, prior
 // parameter, option, multi-level inputs, input differences, keep-out regions, the GP
 // model), of a step and of a FitGpModel request, broken one at a time. Each case gets its

@@ -1,4 +1,4 @@
-// The hostile-input catalogue's transport classes (issue 23 §4): messages over
+// The hostile-input catalogue's transport classes: messages over
 // --max_message_bytes (RESOURCE_EXHAUSTED from gRPC before anything is parsed, in either
 // direction), and bytes that are no message of the method's type, sent to every RPC
 // (INVALID_ARGUMENT naming the expected type). After each case a healthy session answers

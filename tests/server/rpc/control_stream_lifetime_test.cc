@@ -1,6 +1,6 @@
 // Control streams that end while their solve is queued or running: the stream's reactor
-// must outlive the worker's task (issue 17: a worker touched a stream that a gRPC thread
-// had already deleted). Under AddressSanitizer (deploy/test-sanitizers.sh) any access to a
+// must outlive the worker's task (otherwise a worker touches a stream that a gRPC thread
+// has already deleted). Under AddressSanitizer (deploy/test-sanitizers.sh) any access to a
 // freed stream fails the test; in every build the server must go on serving and close
 // every session the streams created.
 #include <chrono>

@@ -1,4 +1,4 @@
-// Step.model through the service (issue 25): a linear-time-varying problem sent as model
+// Step.model through the service: a linear-time-varying problem sent as model
 // updates is solved as the core solves the same problem; every kind of update works
 // through unary Solve and a Control stream; a rejected update names its field and leaves
 // the session bit-identical; sessions that cannot take a model say so.
