@@ -33,8 +33,8 @@
 #include "client/security_flags.h"
 #include "loadtest/core_baseline.h"
 #include "loadtest/echo_process.h"
-#include "loadtest/echo_server.h"
 #include "loadtest/idle_sessions.h"
+#include "loadtest/interleaved_runs.h"
 #include "loadtest/load_level.h"
 #include "loadtest/loadtest_report.h"
 #include "loadtest/transport_floor.h"
@@ -73,10 +73,6 @@ ABSL_FLAG(bool, bare_solve, false,
           "also run every level against a bare server in a child process: each stream's session built from its "
           "spec and each step solved in the gRPC reaction as nupmpc-server's SolveStep does, and nothing else (no "
           "worker pool, registry, admission, deadlines, metrics): what the server's own machinery costs");
-ABSL_FLAG(bool, serve_bare, false, "internal: run as the bare peer's child process until stdin closes");
-ABSL_FLAG(std::string, serve_echo_busy_us, "",
-          "internal: run as the echo peer's child process until stdin closes, busy per step for these microseconds "
-          "(comma-separated, cycled per stream; 0: no work)");
 ABSL_FLAG(bool, new_references, false,
           "every step also sends new output references (the instance's output priors with a moving target)");
 ABSL_FLAG(std::string, server_cpus, "",
@@ -153,80 +149,9 @@ absl::StatusOr<std::vector<int>> ConcurrencyLevels() {
   return levels;
 }
 
-// One level against the server under test and each peer that runs (null: not run).
-struct LevelRuns {
-  lt::LevelReport server;
-  std::vector<std::optional<lt::LevelReport>> peers;
-};
-
-// Runs the level --rounds times against the server and each peer in turn (the order
-// reversed every round), each run duration_s / rounds, and merges each one's runs.
-absl::StatusOr<LevelRuns> RunInterleaved(const std::string& server, const std::vector<lt::EchoProcess*>& peers,
-                                         const lt::StreamPlan& plan, const lt::LevelConfig& config) {
-  // Slot 0 is the server under test, 1.. the peers; peers listen in plaintext and do not
-  // print progress.
-  std::vector<std::vector<lt::LevelReport>> runs(peers.size() + 1);
-  std::vector<int> order;
-  for (int slot = 0; slot <= static_cast<int>(peers.size()); ++slot) {
-    if (slot == 0 || peers[slot - 1] != nullptr) order.push_back(slot);
-  }
-  // Without peers there is nothing to interleave: one run (its streams stay open throughout).
-  const int rounds = order.size() > 1 ? std::max(1, absl::GetFlag(FLAGS_rounds)) : 1;
-  lt::LevelConfig round_config = config;
-  round_config.duration_s = config.duration_s / rounds;
-  round_config.requests = (config.requests + rounds - 1) / rounds;
-  for (int round = 0; round < rounds; ++round) {
-    for (const int slot : order) {
-      lt::LevelConfig run_config = round_config;
-      if (slot > 0) {
-        run_config.progress = false;
-        run_config.security = {};
-      }
-      const std::string& target = slot == 0 ? server : peers[slot - 1]->target();
-      absl::StatusOr<lt::LevelReport> run = lt::RunLevel(target, plan, run_config);
-      if (!run.ok()) {
-        return absl::Status(run.status().code(),
-                            absl::StrCat(slot == 0 ? "server under test" : "peer", ": ", run.status().message()));
-      }
-      runs[slot].push_back(*std::move(run));
-    }
-    std::reverse(order.begin(), order.end());
-  }
-  LevelRuns merged{.server = lt::MergeRounds(runs[0]), .peers = {}};
-  for (std::size_t i = 1; i < runs.size(); ++i) {
-    merged.peers.push_back(runs[i].empty() ? std::nullopt : std::optional(lt::MergeRounds(runs[i])));
-  }
-  return merged;
-}
-
 bool ShowProgress() {
   const std::string p = absl::GetFlag(FLAGS_progress);
   return p == "on" || (p == "auto" && isatty(STDERR_FILENO));
-}
-
-// The child process of an echo peer: the real server's plan for the spec is its answer.
-int ServeEcho(const std::string& target, const nupmpc::ChannelSecurity& security, const nupmpc::v1::ProblemSpec& spec,
-              const std::string& busy_us) {
-  std::vector<std::chrono::nanoseconds> busy;
-  for (absl::string_view part : absl::StrSplit(busy_us, ',')) {
-    double us = 0.0;
-    if (!absl::SimpleAtod(part, &us) || !(us >= 0.0)) {
-      return Fail("--serve_echo_busy_us", absl::InvalidArgumentError(absl::StrCat("\"", part, "\" is not a duration")));
-    }
-    if (us > 0.0) {
-      busy.push_back(
-          std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double, std::micro>(us)));
-    }
-  }
-  absl::StatusOr<std::unique_ptr<nupmpc::Client>> connected =
-      nupmpc::Client::Connect(target, security, std::chrono::seconds(10));
-  if (!connected.ok()) return Fail("connection security", connected.status());
-  nupmpc::Client& client = **connected;
-  absl::StatusOr<nupmpc::v1::SolveResult> answer = client.SolveOnce(spec);
-  if (!answer.ok()) return Fail("SolveOnce for the echo server's answer", answer.status());
-  absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> echo = lt::EchoControlServer::Start(*std::move(answer), busy);
-  if (!echo.ok()) return Fail("echo server", echo.status());
-  return lt::ServeEchoUntilStdinCloses(**echo);
 }
 
 }  // namespace
@@ -246,95 +171,12 @@ absl::StatusOr<std::optional<cpu_set_t>> PinProcess() {
   return *set;
 }
 
-// Runs `measure` on `cpus` (when given), then back on this thread's CPUs.
-template <typename Measure>
-auto MeasuredOn(const std::optional<cpu_set_t>& cpus, Measure measure) -> decltype(measure()) {
-  cpu_set_t own;
-  CPU_ZERO(&own);
-  if (!cpus.has_value() || sched_getaffinity(0, sizeof(own), &own) != 0 ||
-      !nupmpc::server::PinCallingThread(*cpus).ok()) {
-    return measure();
-  }
-  auto result = measure();
-  (void)nupmpc::server::PinCallingThread(own);
-  return result;
-}
-
-// --fleet: the fleet calls, as many separate Control streams, and the core alone stepping
-// that many sessions in turn, --rounds times each, in turn (the order reversed every
-// round): calls and streams duration_s / rounds each; the core's rounds time consecutive
-// periods, together at least --baseline_rounds and one of each closed-loop state per
-// session (as the fleet's calls cycle through them all). This VM's speed moves by tens of
-// percent from one minute to the next; only figures taken in the same minutes compare.
-struct FleetRuns {
-  lt::FleetReport fleet;
-  lt::LevelReport separate;
-  lt::FleetCoreBaseline core;
-};
-absl::StatusOr<FleetRuns> RunFleetInterleaved(const std::string& target, const nupmpc::ChannelSecurity& security,
-                                              const lt::StreamPlan& plan, const nupmpc::ProblemFile& file, int sessions,
-                                              const std::optional<cpu_set_t>& server_cpus) {
-  const int rounds = std::max(1, absl::GetFlag(FLAGS_rounds));
-  const double duration_s = absl::GetFlag(FLAGS_duration_s) / rounds;
-  const int all_periods =
-      std::max(absl::GetFlag(FLAGS_baseline_rounds), static_cast<int>(file.closed_loop_states.size()));
-  const int periods = std::max(1, (all_periods + rounds - 1) / rounds);
-  std::vector<lt::FleetReport> fleet;
-  std::vector<lt::LevelReport> separate;
-  std::vector<lt::FleetCoreBaseline> core;
-  std::vector<int> order = {0, 1, 2};
-  for (int round = 0; round < rounds; ++round) {
-    for (const int run : order) {
-      if (run == 0) {
-        absl::StatusOr<lt::FleetReport> stepped =
-            lt::RunFleetLevel(target, security, plan, sessions, absl::GetFlag(FLAGS_fleet_calls_in_flight), duration_s,
-                              absl::GetFlag(FLAGS_warmup_s));
-        if (!stepped.ok())
-          return absl::Status(stepped.status().code(), absl::StrCat("fleet: ", stepped.status().message()));
-        fleet.push_back(*std::move(stepped));
-      } else if (run == 1) {
-        lt::LevelConfig config;
-        config.concurrency = sessions;
-        config.duration_s = duration_s;
-        config.warmup_s = absl::GetFlag(FLAGS_warmup_s);
-        config.security = security;
-        absl::StatusOr<lt::LevelReport> streams = lt::RunLevel(target, plan, config);
-        if (!streams.ok()) {
-          return absl::Status(streams.status().code(), absl::StrCat("separate streams: ", streams.status().message()));
-        }
-        separate.push_back(*std::move(streams));
-      } else {
-        absl::StatusOr<lt::FleetCoreBaseline> in_turn = MeasuredOn(server_cpus, [&] {
-          return lt::MeasureFleetCore(file.spec, file.closed_loop_states, sessions, periods, 1 + round * periods);
-        });
-        if (!in_turn.ok()) {
-          return absl::Status(in_turn.status().code(),
-                              absl::StrCat("fleet core baseline: ", in_turn.status().message()));
-        }
-        core.push_back(*in_turn);
-      }
-    }
-    std::reverse(order.begin(), order.end());
-  }
-  FleetRuns merged{.fleet = lt::MergeFleetRounds(fleet), .separate = lt::MergeRounds(separate), .core = {}};
-  for (const lt::FleetCoreBaseline& c : core) {  // the same number of periods each
-    merged.core.mean_ms += c.mean_ms / static_cast<double>(core.size());
-    merged.core.mean_iterations += c.mean_iterations / static_cast<double>(core.size());
-  }
-  return merged;
-}
-
 int main(int argc, char** argv) {
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
   nupmpc::cli::ParseProgramFlags(kProgram, argc, argv);
   // As nupmpc-server does (see its main): the generator and the peers do not pay Abseil's
   // lock-order debugging per request either, so the comparison stays fair.
   absl::SetMutexDeadlockDetectionMode(absl::OnDeadlockCycle::kIgnore);
-  if (absl::GetFlag(FLAGS_serve_bare)) {  // needs no instance: its streams bring their specs
-    absl::StatusOr<std::unique_ptr<lt::EchoControlServer>> bare = lt::EchoControlServer::StartSolving();
-    if (!bare.ok()) return Fail("bare server", bare.status());
-    return lt::ServeEchoUntilStdinCloses(**bare);
-  }
   const absl::StatusOr<std::optional<cpu_set_t>> server_cpus = PinProcess();
   if (!server_cpus.ok()) return Fail("--server_cpus/--client_cpus", server_cpus.status());
   const std::string generator_cpus = nupmpc::server::CallingThreadCpuList();
@@ -349,9 +191,6 @@ int main(int argc, char** argv) {
   const std::string name = std::filesystem::path(instance_path).stem().string();
   absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
   if (!security.ok()) return Fail("connection security", security.status());
-  if (const std::string busy_us = absl::GetFlag(FLAGS_serve_echo_busy_us); !busy_us.empty()) {
-    return ServeEcho(target, *security, file->spec, busy_us);
-  }
   const bool json = absl::GetFlag(FLAGS_json);
 
   if (const int idle = absl::GetFlag(FLAGS_idle_sessions); idle > 0) {
@@ -381,7 +220,7 @@ int main(int argc, char** argv) {
   absl::StatusOr<nupmpc::v1::GetServerInfoResponse> info = (*client)->GetServerInfo();
   if (!info.ok()) return Fail(absl::StrCat("server ", target), info.status());
 
-  absl::StatusOr<lt::CoreBaseline> baseline = MeasuredOn(*server_cpus, [&] {
+  absl::StatusOr<lt::CoreBaseline> baseline = lt::MeasuredOn(*server_cpus, [&] {
     return lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, absl::GetFlag(FLAGS_baseline_rounds),
                                    absl::GetFlag(FLAGS_new_references));
   });
@@ -397,13 +236,15 @@ int main(int argc, char** argv) {
       lt::MeasureTransportFloor(target, absl::GetFlag(FLAGS_transport_calls), *security);
   if (!transport.ok()) return Fail("transport floor", transport.status());
 
-  // The peers are echo servers in child processes (this program with --serve_echo_busy_us),
-  // answering with the real server's plan for the instance: real message sizes.
+  // The peers are nupmpc-loadtest-peer child processes (installed beside this program): echo
+  // servers answering with the real server's plan for the instance (real message sizes), or
+  // a bare solving server.
+  const std::string peer_program =
+      (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "nupmpc-loadtest-peer").string();
   std::unique_ptr<lt::EchoProcess> echo;
   const auto spawn_echo = [&](const std::string& busy_us) {
-    const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
-    std::vector<std::string> args = {self, "--server=" + target, "--instance=" + instance_path,
-                                     "--serve_echo_busy_us=" + busy_us};
+    std::vector<std::string> args = {peer_program, "--server=" + target, "--instance=" + instance_path,
+                                     "--echo_busy_us=" + busy_us};
     for (std::string& a : nupmpc::SecurityFlagArguments()) args.push_back(std::move(a));
     return lt::EchoProcess::Spawn(args, server_cpus->has_value() ? &**server_cpus : nullptr);
   };
@@ -415,8 +256,7 @@ int main(int argc, char** argv) {
   std::unique_ptr<lt::EchoProcess> bare;
   if (absl::GetFlag(FLAGS_bare_solve)) {
     absl::StatusOr<std::unique_ptr<lt::EchoProcess>> started =
-        lt::EchoProcess::Spawn({std::filesystem::read_symlink("/proc/self/exe").string(), "--serve_bare"},
-                               server_cpus->has_value() ? &**server_cpus : nullptr);
+        lt::EchoProcess::Spawn({peer_program, "--bare"}, server_cpus->has_value() ? &**server_cpus : nullptr);
     if (!started.ok()) return Fail("bare server", started.status());
     bare = *std::move(started);
   }
@@ -431,7 +271,7 @@ int main(int argc, char** argv) {
     InlinePeer peer{.core = *baseline, .process = nullptr};
     if (streams > 1) {
       const int rounds = std::max(1, (absl::GetFlag(FLAGS_baseline_rounds) + streams - 1) / streams);
-      absl::StatusOr<lt::CoreBaseline> in_turn = MeasuredOn(*server_cpus, [&] {
+      absl::StatusOr<lt::CoreBaseline> in_turn = lt::MeasuredOn(*server_cpus, [&] {
         return lt::MeasureCoreBaseline(file->spec, file->closed_loop_states, rounds,
                                        absl::GetFlag(FLAGS_new_references), streams);
       });
@@ -463,7 +303,13 @@ int main(int argc, char** argv) {
   const lt::StreamPlan plan{&file->spec, &file->closed_loop_states, mode == "closed",
                             absl::GetFlag(FLAGS_new_references)};
   if (const int fleet = absl::GetFlag(FLAGS_fleet); fleet > 0) {
-    absl::StatusOr<FleetRuns> runs = RunFleetInterleaved(target, *security, plan, *file, fleet, *server_cpus);
+    const lt::FleetRunOptions options{.sessions = fleet,
+                                      .calls_in_flight = absl::GetFlag(FLAGS_fleet_calls_in_flight),
+                                      .rounds = absl::GetFlag(FLAGS_rounds),
+                                      .duration_s = absl::GetFlag(FLAGS_duration_s),
+                                      .warmup_s = absl::GetFlag(FLAGS_warmup_s),
+                                      .baseline_rounds = absl::GetFlag(FLAGS_baseline_rounds)};
+    absl::StatusOr<lt::FleetRuns> runs = lt::RunFleetInterleaved(target, *security, plan, *file, options, *server_cpus);
     if (!runs.ok()) return Fail("fleet level", runs.status());
     lt::PrintFleet(header, runs->fleet, runs->separate, runs->core, json);
     return ReportStarvedStreams({runs->separate});
@@ -487,9 +333,9 @@ int main(int argc, char** argv) {
       if (!started.ok()) return Fail(absl::StrCat("inline-solve echo server, concurrency ", c), started.status());
       inline_solve = *std::move(started);
     }
-    absl::StatusOr<LevelRuns> runs = RunInterleaved(
+    absl::StatusOr<lt::LevelRuns> runs = lt::RunInterleaved(
         target, {echo.get(), inline_solve.has_value() ? inline_solve->process.get() : nullptr, bare.get()}, plan,
-        config);
+        config, absl::GetFlag(FLAGS_rounds));
     if (!runs.ok()) return Fail(absl::StrCat("concurrency ", c), runs.status());
     lt::LevelReport& report = runs->server;
     if (inline_solve.has_value()) {

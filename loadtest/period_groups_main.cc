@@ -29,7 +29,7 @@ ABSL_FLAG(std::vector<std::string>, group, {},
 ABSL_FLAG(double, seconds, 5.0, "how long the groups run, counted");
 ABSL_FLAG(double, warmup_s, 1.0, "before the counted time: sessions warm, not counted");
 ABSL_FLAG(double, calibrate_s, 0.0,
-          "> 0: instead, step one stream of each group as fast as answers come for this long and print each group's "
+          "> 0: instead, step each group's streams as fast as answers come for this long and print each group's "
           "steps per second (the server's capacity for that instance)");
 
 namespace {

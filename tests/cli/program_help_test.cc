@@ -40,6 +40,7 @@ const Program kPrograms[] = {
     {"nupmpc-api-example-bicycle", "--server=<string>", "NUPMPC_SERVER"},
     {"nupmpc-api-example-race-track", "--server=<string>", "NUPMPC_SERVER"},
     {"nupmpc-scaleout-probe", "--streams=<int>", "NUPMPC_SERVER"},
+    {"nupmpc-loadtest-peer", "--echo_busy_us=<string>", ""},
     {"nupmpc-metrics-cost", "--sessions=<int>", ""},
     {"nupmpc-period-groups", "--seconds=<double>", "NUPMPC_SERVER"},
     {"nupmpc-gp-bench", "--sizes=<string>", ""},

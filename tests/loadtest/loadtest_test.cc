@@ -155,12 +155,12 @@ TEST_F(LoadTest, EchoServerAnswersEveryStepWithItsFixedPlanInBothModes) {
   EXPECT_GT(open->tally.sent, 60u);
 }
 
-TEST_F(LoadTest, EchoPeerRunsAsAChildProcessOfTheLoadTestBinary) {
-  // nupmpc-loadtest's own child mode: the echo answers with this server's plan, then the
-  // child exits when the parent lets go of it.
+TEST_F(LoadTest, EchoAndBarePeersRunAsChildProcesses) {
+  // nupmpc-loadtest-peer, as nupmpc-loadtest starts it: the echo answers with this server's
+  // plan, then the child exits when the parent lets go of it.
   const std::string instance = std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json";
   absl::StatusOr<std::unique_ptr<loadtest::EchoProcess>> echo = loadtest::EchoProcess::Spawn(
-      {NUPMPC_LOADTEST_BINARY, "--server=" + target_, "--instance=" + instance, "--serve_echo_busy_us=200"});
+      {NUPMPC_LOADTEST_PEER_BINARY, "--server=" + target_, "--instance=" + instance, "--echo_busy_us=200"});
   ASSERT_TRUE(echo.ok()) << echo.status();
   EXPECT_NE((*echo)->target(), target_);
   absl::StatusOr<loadtest::LevelReport> r = loadtest::RunLevel((*echo)->target(), Plan(true), ShortLevel(1));
@@ -172,9 +172,9 @@ TEST_F(LoadTest, EchoPeerRunsAsAChildProcessOfTheLoadTestBinary) {
   EXPECT_GT(r->tally.iterations, 0u);
   echo->reset();  // returns once the child has exited
 
-  // The bare peer's child mode: it solves, so its answers carry the solver's iterations.
+  // The bare peer: it solves, so its answers carry the solver's iterations.
   absl::StatusOr<std::unique_ptr<loadtest::EchoProcess>> bare =
-      loadtest::EchoProcess::Spawn({NUPMPC_LOADTEST_BINARY, "--serve_bare"});
+      loadtest::EchoProcess::Spawn({NUPMPC_LOADTEST_PEER_BINARY, "--bare"});
   ASSERT_TRUE(bare.ok()) << bare.status();
   absl::StatusOr<loadtest::LevelReport> solved = loadtest::RunLevel((*bare)->target(), Plan(true), ShortLevel(2));
   ASSERT_TRUE(solved.ok()) << solved.status();
