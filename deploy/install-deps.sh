@@ -21,6 +21,7 @@ packages=(
   haproxy python3-yaml python3-kubernetes yamllint libcpp-httplib-dev
   nftables iproute2  # nft, ip: the quiet faults' partitions in namespaces (tests/soak/quiet_faults.py)
   python3-grpcio python3-protobuf python3-numpy python3-matplotlib python3-pytest
+  mypy          # the Python client's type check (PythonClient.MypyStrictIsClean)
 )
 # Programs the build, the tests and their scripts call (beyond a minimal Debian's own), and
 # the package each comes from: checked after every run, so a package that no longer brings
@@ -31,6 +32,7 @@ programs=(
   clang++:clang llvm-symbolizer-14:llvm-14 nm:binutils c++filt:binutils
   clang-format-14:clang-format clang-tidy-14:clang-tidy
   openssl:openssl promtool:prometheus haproxy:haproxy yamllint:yamllint nft:nftables ip:iproute2
+  mypy:mypy
 )
 
 check_programs() {

@@ -1,5 +1,5 @@
-"""Generates nupmpc/v1 (the nupmpc.v1 stubs) into the build while pip builds the package;
-the metadata is in pyproject.toml."""
+"""Generates nupmpc/v1 (the nupmpc.v1 stubs, with the messages' types in nupmpc_pb2.pyi)
+into the build while pip builds the package; the metadata is in pyproject.toml."""
 
 import pathlib
 import shutil
@@ -22,7 +22,8 @@ def generate(out_dir):
         command = ["protoc", f"--plugin=protoc-gen-grpc_python={plugin}"]
     else:
         command = [sys.executable, "-m", "grpc_tools.protoc"]  # grpcio-tools
-    subprocess.run(command + [f"--proto_path={PROTO_ROOT}", f"--python_out={out_dir}", f"--grpc_python_out={out_dir}",
+    subprocess.run(command + [f"--proto_path={PROTO_ROOT}", f"--python_out={out_dir}", f"--pyi_out={out_dir}",
+                              f"--grpc_python_out={out_dir}",
                               str(PROTO_ROOT / PROTO)], check=True)
 
 

@@ -23,7 +23,7 @@ from nupmpc.errors import (  # noqa: E402,F401
 from nupmpc.problem import Problem  # noqa: E402
 from nupmpc.gp_problem import GpProblem  # noqa: E402
 from nupmpc.regions import Ellipse, Rectangle  # noqa: E402
-from nupmpc.result import Plan  # noqa: E402
+from nupmpc.result import Plan, PlanStatus  # noqa: E402
 from nupmpc.reconnect import ReconnectOptions  # noqa: E402
 from nupmpc.client import Client, connect  # noqa: E402
 from nupmpc.session import Session  # noqa: E402
@@ -36,7 +36,7 @@ __all__ = [
     "NupmpcError", "ShapeError", "error_from_code", "InvalidArgument", "NotFound", "AlreadyExists",
     "ResourceExhausted", "Unavailable", "Unauthenticated", "PermissionDenied", "DeadlineExceeded",
     "Cancelled", "FailedPrecondition", "Internal", "Problem", "GpProblem", "Ellipse", "Rectangle",
-    "Plan", "ReconnectOptions", "Client", "connect", "Session", "Instance", "load_instance",
+    "Plan", "PlanStatus", "ReconnectOptions", "Client", "connect", "Session", "Instance", "load_instance",
     "simulate", "Trajectory", "aio", "ModelUpdate", "NonlinearModel", "NonlinearSession", "JacobianError",
     "Linearisation", "Period",
 ]

@@ -7,68 +7,80 @@
 Sessions re-create themselves after a server restart exactly as nupmpc.Session does (the
 same reconnect options, spec bookkeeping and step building)."""
 
+from __future__ import annotations
+
 import asyncio
 import time
+import weakref
+from types import TracebackType
+from typing import Any, Awaitable, Callable, TypeVar
 
 import grpc
 import grpc.aio
 
 from nupmpc._proto import pb, pb_grpc
-from nupmpc.client import _Connection, spec_of
+from nupmpc.arrays import ArrayLike
+from nupmpc.client import ProblemLike, _Connection, spec_of
 from nupmpc.errors import NupmpcError, Unavailable, error_from_code, error_from_rpc
 from nupmpc.reconnect import ReconnectOptions, ReconnectStats, is_retryable, ride_out_outage_async
 from nupmpc.result import Plan
 from nupmpc.control_call import broken_stream_error
 from nupmpc.spec_update import apply_step_to_spec
-from nupmpc.step import build_step, dims_of
+from nupmpc.step import Bounds, Dims, StepModel, WarmStart, build_step, dims_of
+
+_Reply = TypeVar("_Reply")
 
 
 class AsyncClient(_Connection):
     _insecure_channel = staticmethod(grpc.aio.insecure_channel)
     _secure_channel = staticmethod(grpc.aio.secure_channel)
 
-    async def _call(self, method, request):
+    _sessions: weakref.WeakSet[AsyncSession]
+
+    async def _call(self, method: Callable[..., Awaitable[_Reply]], request: object) -> _Reply:
         try:
             return await method(request, timeout=self.deadline_s)
         except grpc.RpcError as error:
             raise error_from_rpc(error) from None
 
-    async def solve_once(self, problem):
+    async def solve_once(self, problem: ProblemLike) -> Plan:
         spec = spec_of(problem)
         start = time.perf_counter()
-        response = await self._call(self._stub.SolveOnce, pb.SolveOnceRequest(spec=spec))
-        return Plan(response.result, dims_of(spec), (time.perf_counter() - start) * 1e3)
+        response: pb.SolveOnceResponse = await self._call(self._stub.SolveOnce, pb.SolveOnceRequest(spec=spec))
+        return Plan.from_result(response.result, dims_of(spec), (time.perf_counter() - start) * 1e3)
 
-    async def server_info(self):
-        return await self._call(self._stub.GetServerInfo, pb.GetServerInfoRequest())
+    async def server_info(self) -> pb.GetServerInfoResponse:
+        info: pb.GetServerInfoResponse = await self._call(self._stub.GetServerInfo, pb.GetServerInfoRequest())
+        return info
 
-    async def session(self, problem, reconnect=None):
+    async def session(self, problem: ProblemLike, reconnect: ReconnectOptions | None = None) -> AsyncSession:
         session = AsyncSession(self, spec_of(problem), reconnect)
         async with session._lock:
             await session._connect(session._options.attempt_timeout_s)
         self._sessions.add(session)
         return session
 
-    async def close(self):
+    async def close(self) -> None:
         for session in list(self._sessions):
             await session.close()
         self._sessions.clear()
         await self._channel.close()
 
-    async def __aenter__(self):
+    async def __aenter__(self) -> AsyncClient:
         return self
 
-    async def __aexit__(self, *exc):
+    async def __aexit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                        traceback: TracebackType | None) -> None:
         await self.close()
 
 
-def connect(target, **security):
+def connect(target: str, **security: Any) -> AsyncClient:
     """An AsyncClient (use with `async with`); the arguments of nupmpc.connect."""
     return AsyncClient(target, **security)
 
 
 class AsyncSession:
-    def __init__(self, client, spec, reconnect=None):
+    def __init__(self, client: AsyncClient, spec: pb.ProblemSpec, reconnect: ReconnectOptions | None = None) -> None:
         self._client = client
         self._spec = spec
         self._dims = dims_of(spec)
@@ -76,21 +88,32 @@ class AsyncSession:
         self._lock = asyncio.Lock()
         self._channel = client._channel
         self._own_channel = False
-        self._call = None
+        self._call: grpc.aio.StreamStreamCall | None = None
         self._sequence = 1
-        self.id = None
+        self.id: str | None = None
         self.stats = ReconnectStats()
 
-    spec = property(lambda self: pb.ProblemSpec.FromString(self._spec.SerializeToString()))
-    dims = property(lambda self: self._dims)
-    reconnects = property(lambda self: self.stats.reconnects)
+    @property
+    def spec(self) -> pb.ProblemSpec:
+        copy = pb.ProblemSpec()
+        copy.CopyFrom(self._spec)
+        return copy
 
-    def _next_sequence(self):
+    @property
+    def dims(self) -> Dims:
+        return self._dims
+
+    @property
+    def reconnects(self) -> int:
+        return self.stats.reconnects
+
+    def _next_sequence(self) -> int:
         sequence = self._sequence
         self._sequence += 1
         return sequence
 
-    async def _exchange(self, call, request, what):
+    async def _exchange(self, call: grpc.aio.StreamStreamCall, request: pb.ControlRequest | None,
+                        what: str) -> pb.ControlResponse:
         """Writes `request` (None: nothing) and reads the next response; typed errors."""
         try:
             if request is not None:
@@ -105,9 +128,10 @@ class AsyncSession:
             if code != grpc.StatusCode.OK:
                 raise broken_stream_error(_Finished(code, await call.details()), what)
             raise broken_stream_error(None, what)
-        return response
+        reply: pb.ControlResponse = response
+        return reply
 
-    async def _connect(self, timeout_s):
+    async def _connect(self, timeout_s: float) -> None:
         call = pb_grpc.MpcServiceStub(self._channel).Control()
         hello = pb.ControlRequest(spec=self._spec, sequence=self._next_sequence())
         try:
@@ -124,16 +148,16 @@ class AsyncSession:
         self._call = call
         self.id = response.session_id
 
-    def _tear_down(self):
+    def _tear_down(self) -> None:
         if self._call is not None:
             self._call.cancel()
             self._call = None
 
-    async def _step_once(self, step):
+    async def _step_once(self, step: pb.Step) -> pb.SolveResult:
         if self._call is None:
             raise Unavailable("not connected")
         sequence = self._next_sequence()
-        request = pb.ControlRequest(sequence=sequence, step=step)
+        request: pb.ControlRequest | None = pb.ControlRequest(sequence=sequence, step=step)
         while True:
             try:
                 response = await self._exchange(self._call, request, "read")
@@ -148,11 +172,16 @@ class AsyncSession:
                 raise error_from_code(response.error_code, response.error_message)
             return response.result
 
-    async def step(self, x=None, references=None, bounds=None, input_references=None, input_bounds=None,
-                   shift=False, warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None):
+    async def step(self, x: ArrayLike | None = None, *, references: ArrayLike | None = None,
+                   bounds: Bounds | None = None, input_references: ArrayLike | None = None,
+                   input_bounds: Bounds | None = None, shift: bool = False, warm_start: WarmStart = None,
+                   max_iterations: int = 0, time_limit_ms: float = 0.0, previous_input: ArrayLike | None = None,
+                   model: StepModel | None = None) -> Plan:
         """nupmpc.Session.step, awaited."""
-        step = build_step(self._spec, x, references, bounds, input_references, input_bounds, shift, warm_start,
-                          max_iterations, time_limit_ms, previous_input, model)
+        step = build_step(self._spec, x, references=references, bounds=bounds, input_references=input_references,
+                          input_bounds=input_bounds, shift=shift, warm_start=warm_start,
+                          max_iterations=max_iterations, time_limit_ms=time_limit_ms,
+                          previous_input=previous_input, model=model)
         async with self._lock:
             start = time.perf_counter()
             try:
@@ -162,7 +191,7 @@ class AsyncSession:
                     raise
                 self._tear_down()
 
-                async def attempt(timeout_s):
+                async def attempt(timeout_s: float) -> pb.SolveResult:
                     if self._own_channel:
                         await self._channel.close()
                     self._channel = self._client.new_channel(own_subchannel=True)
@@ -173,9 +202,9 @@ class AsyncSession:
                 result = await ride_out_outage_async(self._options, error, attempt, self.stats)
             round_trip_ms = (time.perf_counter() - start) * 1e3
             apply_step_to_spec(step, result, self._spec)
-        return Plan(result, self._dims, round_trip_ms)
+        return Plan.from_result(result, self._dims, round_trip_ms)
 
-    async def close(self):
+    async def close(self) -> None:
         async with self._lock:
             if self._call is not None:
                 try:
@@ -190,14 +219,14 @@ class AsyncSession:
                 self._own_channel = False
 
 
-class _Finished(grpc.RpcError):
+class _Finished:
     """A finished call's status in the shape broken_stream_error reads."""
 
-    def __init__(self, code, details):
+    def __init__(self, code: grpc.StatusCode, details: str | None) -> None:
         self._code, self._details = code, details
 
-    def code(self):
+    def code(self) -> grpc.StatusCode:
         return self._code
 
-    def details(self):
+    def details(self) -> str | None:
         return self._details

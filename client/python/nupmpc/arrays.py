@@ -1,13 +1,23 @@
 """numpy arguments → the proto's flat arrays, checking shapes and naming the argument on
 every refusal (ShapeError), so a wrong shape never reaches the server."""
 
+from __future__ import annotations
+
+from typing import Iterable
+
 import numpy as np
+import numpy.typing as npt
+
 
 from nupmpc._proto import pb
 from nupmpc.errors import ShapeError
 
+# What the client takes (anything numpy reads as numbers) and what it returns.
+ArrayLike = npt.ArrayLike
+FloatArray = npt.NDArray[np.float64]
 
-def as_array(value, name, ndim_max=3):
+
+def as_array(value: ArrayLike, name: str, ndim_max: int = 3) -> FloatArray:
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as error:
@@ -19,13 +29,13 @@ def as_array(value, name, ndim_max=3):
     return array
 
 
-def finite(array, name):
+def finite(array: FloatArray, name: str) -> FloatArray:
     if not np.isfinite(array).all():
         raise ShapeError(name, "must be finite")
     return array
 
 
-def vector(value, name, size):
+def vector(value: ArrayLike, name: str, size: int) -> FloatArray:
     """A length-`size` vector (a scalar is repeated)."""
     array = as_array(value, name, ndim_max=1)
     if array.ndim == 0:
@@ -35,7 +45,7 @@ def vector(value, name, size):
     return array
 
 
-def matrix(value, name, rows, cols):
+def matrix(value: ArrayLike, name: str, rows: int, cols: int) -> pb.Matrix:
     """A pb.Matrix of shape rows×cols (finite)."""
     array = finite(as_array(value, name, ndim_max=2), name)
     if array.ndim == 1 and rows == 1:
@@ -47,7 +57,7 @@ def matrix(value, name, rows, cols):
     return pb.Matrix(rows=rows, cols=cols, data=array.ravel().tolist())
 
 
-def matrices(value, name, rows, cols, steps):
+def matrices(value: ArrayLike, name: str, rows: int, cols: int, steps: int) -> list[pb.Matrix]:
     """One matrix (time-invariant) or `steps` of them (a 3-D array), as a list of pb.Matrix."""
     array = as_array(value, name)
     if array.ndim == 3:
@@ -57,7 +67,7 @@ def matrices(value, name, rows, cols, steps):
     return [matrix(array, name, rows, cols)]
 
 
-def per_step(value, name, steps, width):
+def per_step(value: ArrayLike, name: str, steps: int, width: int) -> list[list[float]]:
     """Per-component, per-step values: a scalar (everything), shape (width,) (one value per
     component at every step) or (steps, width). Returns `width` lists, each of length 1 (the
     same at every step, the proto's short form) or `steps`."""
@@ -75,11 +85,11 @@ def per_step(value, name, steps, width):
     return [array[:, i].tolist() for i in range(width)]
 
 
-def expand(values, steps):
+def expand(values: Iterable[float], steps: int) -> FloatArray:
     """A proto per-step array (length 0, 1 or `steps`) as `steps` values (NaN when empty)."""
-    values = list(values)
-    if not values:
+    given = list(values)
+    if not given:
         return np.full(steps, np.nan)
-    if len(values) == 1:
-        return np.full(steps, values[0])
-    return np.asarray(values[:steps], dtype=float)
+    if len(given) == 1:
+        return np.full(steps, given[0])
+    return np.asarray(given[:steps], dtype=float)

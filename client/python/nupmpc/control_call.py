@@ -4,19 +4,24 @@ blocks a step and a newer request replaces one still waiting (the server's "newe
 wins"); responses are read by a thread of the call's own into an inbox, so a step can stop
 waiting at its deadline."""
 
+from __future__ import annotations
+
 import queue
 import threading
 import time
+from typing import Optional, Union
 
 import grpc
 
 from nupmpc._proto import pb, pb_grpc
-from nupmpc.errors import NupmpcError, Unavailable, error_from_code, error_from_rpc
+from nupmpc.errors import CallStatus, NupmpcError, Unavailable, error_from_code, error_from_rpc
 
 _END = object()
+# What the reader thread puts in the inbox: a response, or (_END, the call's error or None).
+_Item = Union[pb.ControlResponse, tuple[object, Optional[grpc.RpcError]]]
 
 
-def broken_stream_error(error, what):
+def broken_stream_error(error: CallStatus | None, what: str) -> NupmpcError:
     """The error of a stream that broke: retryable (Unavailable) when the server or the
     connection went away, else the server's typed error."""
     if error is None:
@@ -37,30 +42,30 @@ class _NewestRequest:
     network stalls): the replaced one never reaches the server, as the server's own "newest
     state wins" would have treated it, and its report of held periods goes with the new one."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._cond = threading.Condition()
-        self._waiting = None
+        self._waiting: pb.ControlRequest | None = None
         self._ended = False
 
-    def put(self, request):
+    def put(self, request: pb.ControlRequest) -> int | None:
         """Queues `request`; returns the sequence of the request it replaced, if any."""
         with self._cond:
             dropped = self._waiting
-            if dropped is not None and dropped is not _END:
+            if dropped is not None:
                 request.held_periods += dropped.held_periods
             self._waiting = request
             self._cond.notify()
-        return None if dropped is None or dropped is _END else dropped.sequence
+        return None if dropped is None else dropped.sequence
 
-    def end(self):
+    def end(self) -> None:
         with self._cond:
             self._ended = True
             self._cond.notify()
 
-    def __iter__(self):
+    def __iter__(self) -> _NewestRequest:
         return self
 
-    def __next__(self):
+    def __next__(self) -> pb.ControlRequest:
         with self._cond:
             self._cond.wait_for(lambda: self._waiting is not None or self._ended)
             if self._waiting is None:
@@ -74,14 +79,14 @@ class _Stream:
     so a stalled network never blocks a step), responses read by a thread of its own into
     an inbox, so that a step can stop waiting at its deadline."""
 
-    def __init__(self, channel):
+    def __init__(self, channel: grpc.Channel) -> None:
         self._requests = _NewestRequest()
-        self._inbox = queue.Queue()
+        self._inbox: queue.Queue[_Item] = queue.Queue()
         self.ended = False
         self.call = pb_grpc.MpcServiceStub(channel).Control(self._requests)
         threading.Thread(target=self._read, daemon=True).start()
 
-    def _read(self):
+    def _read(self) -> None:
         error = None
         try:
             for response in self.call:
@@ -91,11 +96,11 @@ class _Stream:
         self.ended = True
         self._inbox.put((_END, error))
 
-    def send(self, request):
+    def send(self, request: pb.ControlRequest) -> int | None:
         """Sends `request`; returns the sequence of an unsent one it replaced, if any."""
         return self._requests.put(request)
 
-    def receive(self, what, deadline=None):
+    def receive(self, what: str, deadline: float | None = None) -> pb.ControlResponse | None:
         """The next response; None once `deadline` (time.monotonic) has passed; raises the
         stream's error once it ended."""
         timeout = None if deadline is None else max(deadline - time.monotonic(), 0.0)
@@ -103,12 +108,12 @@ class _Stream:
             item = self._inbox.get(timeout=timeout)
         except queue.Empty:
             return None
-        if isinstance(item, tuple) and item[0] is _END:
+        if isinstance(item, tuple):  # (_END, error): responses are messages
             self._inbox.put(item)  # every later receive sees the end too
             raise broken_stream_error(item[1], what)
         return item
 
-    def close(self, timeout_s=None):
+    def close(self, timeout_s: float | None = None) -> None:
         """Half-closes and waits (at most timeout_s) for the server to end the call."""
         self._requests.end()
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
@@ -119,12 +124,12 @@ class _Stream:
             return
         self.call.cancel()
 
-    def cancel(self):
+    def cancel(self) -> None:
         self._requests.end()
         self.call.cancel()
 
 
-def attach(channel, spec, sequence, timeout_s):
+def attach(channel: grpc.Channel, spec: pb.ProblemSpec, sequence: int, timeout_s: float) -> tuple[_Stream, str]:
     """A stream on `channel` that created the session from `spec`, and the session's id;
     cancelled and Unavailable when the server has not answered within timeout_s."""
     stream = _Stream(channel)

@@ -1,7 +1,10 @@
 """Typed errors: one exception class per gRPC status code, carrying the code and the field
 the server named, and ShapeError for arguments refused before anything is sent."""
 
+from __future__ import annotations
+
 import re
+from typing import Protocol
 
 import grpc
 
@@ -12,7 +15,7 @@ _FIELD = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])*(?:\.[A-Za-z_][A-Za
                     r"(?=:|\s+at\s|\s*=\s|\s+\()")
 
 
-def field_of(message):
+def field_of(message: str | None) -> str | None:
     """The field a server message names at its start ("spec.model.a[0]: ..."), or None."""
     match = _FIELD.match(message or "")
     return match.group(1) if match else None
@@ -22,9 +25,9 @@ class NupmpcError(Exception):
     """An error from the server (or the transport): `code` is the grpc.StatusCode, `field`
     the field the message names (None when it names none), `details` the server's text."""
 
-    code = grpc.StatusCode.UNKNOWN
+    code: grpc.StatusCode = grpc.StatusCode.UNKNOWN
 
-    def __init__(self, details, code=None, field=None):
+    def __init__(self, details: str, code: grpc.StatusCode | None = None, field: str | None = None) -> None:
         if code is not None:
             self.code = code
         self.details = details
@@ -76,14 +79,14 @@ class Internal(NupmpcError):
     code = grpc.StatusCode.INTERNAL
 
 
-_BY_CODE = {cls.code: cls for cls in (
+_BY_CODE: dict[grpc.StatusCode, type[NupmpcError]] = {cls.code: cls for cls in (
     InvalidArgument, NotFound, AlreadyExists, ResourceExhausted, FailedPrecondition, Unavailable,
     Unauthenticated, PermissionDenied, DeadlineExceeded, Cancelled, Internal)}
 # ControlResponse.error_code is a google.rpc.Code number; grpc.StatusCode values are (number, name).
-_BY_NUMBER = {code.value[0]: code for code in grpc.StatusCode}
+_BY_NUMBER: dict[int, grpc.StatusCode] = {code.value[0]: code for code in grpc.StatusCode}
 
 
-def error_from_code(code, details):
+def error_from_code(code: grpc.StatusCode | int, details: str) -> NupmpcError:
     """The typed exception for `code` (a grpc.StatusCode or its number) and `details`."""
     if isinstance(code, int):
         code = _BY_NUMBER.get(code, grpc.StatusCode.UNKNOWN)
@@ -91,7 +94,15 @@ def error_from_code(code, details):
     return cls(details, code=code)
 
 
-def error_from_rpc(error):
+class CallStatus(Protocol):
+    """How a finished call reports its status (a grpc.RpcError, a grpc.aio call)."""
+
+    def code(self) -> grpc.StatusCode: ...
+
+    def details(self) -> str | None: ...
+
+
+def error_from_rpc(error: CallStatus) -> NupmpcError:
     """The typed exception for a grpc.RpcError (a failed call)."""
     return error_from_code(error.code(), error.details() or "")
 
@@ -100,6 +111,6 @@ class ShapeError(ValueError):
     """An argument of the wrong shape or value, refused before anything is sent;
     `argument` names it (e.g. "A", "references", "input_box.lower")."""
 
-    def __init__(self, argument, message):
+    def __init__(self, argument: str, message: str) -> None:
         self.argument = argument
         super().__init__(f"{argument}: {message}")

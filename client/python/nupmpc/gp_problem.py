@@ -1,15 +1,23 @@
 """GP-MPC specs from logged data (proto GpMpc)."""
 
+from __future__ import annotations
+
 import math
 
 import numpy as np
 
 from nupmpc._proto import pb
-from nupmpc.arrays import as_array, expand, finite, vector
+from nupmpc.arrays import ArrayLike, FloatArray, as_array, expand, finite, vector
 from nupmpc.errors import ShapeError
 from nupmpc.spec_builder import _Spec
 
 INF = math.inf
+
+
+def _required_bounds(name: str, bounds: tuple[float, float] | None) -> tuple[float, float]:
+    if bounds is None or len(bounds) != 2 or not (np.isfinite(bounds).all() and bounds[0] < bounds[1]):
+        raise ShapeError(name, "required: finite (min, max) with min < max")
+    return bounds
 
 
 class GpProblem(_Spec):
@@ -18,18 +26,20 @@ class GpProblem(_Spec):
     `outputs`, `inputs`: a logged experiment y[0..T-1], u[0..T-1]. The session's state is
     the past window [y[t-l..t-1], u[t-m-1..t-1]] (M = l + m + 1); Step.reference replaces r."""
 
-    def __init__(self, outputs, inputs, output_lags=1, input_lags=0, horizon=None, output_weight=1.0,
-                 input_change_weight=1.0, input_bounds=None, rate_bounds=None, output_bounds=(-INF, INF),
-                 sigma_multiple=0.0, terminal_tolerance=0.0, reference=0.0, kernel=None, window=None):
+    def __init__(self, outputs: ArrayLike, inputs: ArrayLike, output_lags: int = 1, input_lags: int = 0,
+                 horizon: int | None = None, output_weight: float = 1.0, input_change_weight: float = 1.0,
+                 input_bounds: tuple[float, float] | None = None, rate_bounds: tuple[float, float] | None = None,
+                 output_bounds: tuple[float, float] = (-INF, INF), sigma_multiple: float = 0.0,
+                 terminal_tolerance: float = 0.0, reference: ArrayLike = 0.0, kernel: pb.GpKernel | None = None,
+                 window: ArrayLike | None = None) -> None:
         if horizon is None or int(horizon) != horizon or horizon < 1:
             raise ShapeError("horizon", f"must be an integer ≥ 1, got {horizon!r}")
         y = finite(as_array(outputs, "outputs", ndim_max=1), "outputs")
         u = finite(as_array(inputs, "inputs", ndim_max=1), "inputs")
         if y.ndim != 1 or u.shape != y.shape:
             raise ShapeError("inputs", f"expected the same length as outputs {y.shape}, got {u.shape}")
-        for name, bounds in (("input_bounds", input_bounds), ("rate_bounds", rate_bounds)):
-            if bounds is None or len(bounds) != 2 or not (np.isfinite(bounds).all() and bounds[0] < bounds[1]):
-                raise ShapeError(name, "required: finite (min, max) with min < max")
+        input_bounds = _required_bounds("input_bounds", input_bounds)
+        rate_bounds = _required_bounds("rate_bounds", rate_bounds)
         if not output_bounds[0] < output_bounds[1]:
             raise ShapeError("output_bounds", "min must be < max")
         model = pb.GpModel(output_lags=output_lags, input_lags=input_lags, logged_outputs=y.tolist(),
@@ -49,23 +59,28 @@ class GpProblem(_Spec):
             spec.initial_state.mean.extend(vector(window, "window", output_lags + input_lags + 1).tolist())
         super().__init__(spec)
 
-    @classmethod
-    def _wrap(cls, spec):
-        self = cls.__new__(cls)
-        _Spec.__init__(self, spec)
-        return self
+    @property
+    def M(self) -> int:
+        return max(self._spec.gp.model.output_lags, 1) + self._spec.gp.model.input_lags + 1
 
-    M = property(lambda self: max(self._spec.gp.model.output_lags, 1) + self._spec.gp.model.input_lags + 1)
-    L = property(lambda self: 1)
-    K = property(lambda self: 1)
-    N = property(lambda self: self._spec.gp.horizon)
+    @property
+    def L(self) -> int:
+        return 1
 
-    def bounds(self, which):
+    @property
+    def K(self) -> int:
+        return 1
+
+    @property
+    def N(self) -> int:
+        return self._spec.gp.horizon
+
+    def bounds(self, which: str) -> tuple[FloatArray, FloatArray]:
         gp, steps = self._spec.gp, self.N + (which != "input")
         lo, hi = (gp.input_min, gp.input_max) if which == "input" else (gp.output_min, gp.output_max)
         return np.full((steps, 1), lo), np.full((steps, 1), hi)
 
-    def output_references(self):
+    def output_references(self) -> FloatArray:
         ref = np.full((self.N + 1, 1), np.nan)
         ref[1:, 0] = expand(self._spec.gp.reference, self.N) if self._spec.gp.reference else 0.0
         return ref

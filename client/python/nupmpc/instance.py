@@ -6,15 +6,30 @@ reader the CLI uses), so a spec loaded here is the spec `nupmpc solve FILE` send
 one, change the other (the pytest suite compares their objectives on every instance).
 """
 
+from __future__ import annotations
+
 import json
 import math
+import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import numpy as np
 from google.protobuf import json_format
 
 from nupmpc._proto import pb
+from nupmpc.arrays import FloatArray
 from nupmpc.spec_builder import from_spec
+
+if TYPE_CHECKING:
+    from nupmpc.gp_problem import GpProblem
+    from nupmpc.problem import Problem
+
+# A parsed JSON object, and a table of optional numbers by (step, component).
+_Json = dict[str, Any]
+_Table = Callable[[int, int], Optional[float]]
+# One step of a component: (lower, upper, weight, target), None for an absent bound.
+_StepPrior = tuple[Optional[float], Optional[float], float, float]
 
 INF = math.inf
 
@@ -22,7 +37,7 @@ INF = math.inf
 class InstanceError(ValueError):
     """A malformed instance file; `field` names the offending field."""
 
-    def __init__(self, field, what):
+    def __init__(self, field: str, what: str) -> None:
         self.field = field
         super().__init__(f"{field}: {what}")
 
@@ -32,45 +47,45 @@ class Instance:
     name: str
     family: str
     _spec: pb.ProblemSpec
-    closed_loop_states: np.ndarray = field(default=None)  # (T, M) recorded x1 per step, or None
+    closed_loop_states: FloatArray | None = field(default=None)  # (T, M) recorded x1 per step, or None
 
     @property
-    def spec(self):
+    def spec(self) -> pb.ProblemSpec:
         """A copy of the instance's ProblemSpec (yours to change)."""
         copy = pb.ProblemSpec()
         copy.CopyFrom(self._spec)
         return copy
 
     @property
-    def problem(self):
+    def problem(self) -> Problem | GpProblem:
         """The spec as a builder (Problem or GpProblem)."""
         return from_spec(self._spec)
 
 
-def _member(obj, name):
+def _member(obj: _Json, name: str) -> Any:
     return obj.get(name)  # absent and null alike: None
 
 
-def _required(obj, name):
+def _required(obj: _Json, name: str) -> Any:
     value = _member(obj, name)
     if value is None:
         raise InstanceError(name, "required")
     return value
 
 
-def _list(value, field_name):
+def _list(value: Any, field_name: str) -> list[Any]:
     if not isinstance(value, list):
         raise InstanceError(field_name, "expected a list")
     return value
 
 
-def _number(value, field_name):
+def _number(value: Any, field_name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InstanceError(field_name, "expected a number")
     return float(value)
 
 
-def _count(obj, name, field_name):
+def _count(obj: _Json, name: str, field_name: str) -> int:
     if _member(obj, name) is None:
         raise InstanceError(field_name, "required")
     x = _number(obj[name], field_name)
@@ -79,11 +94,11 @@ def _count(obj, name, field_name):
     return int(x)
 
 
-def _numbers(value, field_name):
+def _numbers(value: Any, field_name: str) -> list[float]:
     return [_number(v, f"{field_name}[{i}]") for i, v in enumerate(_list(value, field_name))]
 
 
-def _matrix(value, field_name):
+def _matrix(value: Any, field_name: str) -> pb.Matrix:
     """A row-major nested list as a pb.Matrix of its own shape (the server checks it)."""
     rows = _list(value, field_name)
     out = pb.Matrix(rows=len(rows), cols=0)
@@ -97,7 +112,7 @@ def _matrix(value, field_name):
     return out
 
 
-def _diagonal(value, field_name, size):
+def _diagonal(value: Any, field_name: str, size: int) -> list[float]:
     m = _matrix(value, field_name)
     if m.rows != size or m.cols != size:
         raise InstanceError(field_name, f"expected {size}x{size}")
@@ -112,7 +127,7 @@ def _diagonal(value, field_name, size):
     return diagonal
 
 
-def _bound_table(doc, name, steps, dim):
+def _bound_table(doc: _Json, name: str, steps: int, dim: int) -> _Table:
     """An optional steps×dim table of numbers or nulls; a function (n, i) → value or None."""
     value = _member(doc, name)
     if value is None:
@@ -120,7 +135,7 @@ def _bound_table(doc, name, steps, dim):
     rows = _list(value, name)
     if len(rows) < steps:
         raise InstanceError(name, f"expected {steps} rows")
-    entries = {}
+    entries: dict[tuple[int, int], float] = {}
     for n in range(steps):
         row_field = f"{name}[{n}]"
         row = _list(rows[n], row_field)
@@ -132,12 +147,12 @@ def _bound_table(doc, name, steps, dim):
     return lambda n, i: entries.get((n, i))
 
 
-def _compress(values):
+def _compress(values: list[float]) -> list[float]:
     """Per-step values that are all equal become one (the proto's constant form)."""
     return values[:1] if all(v == values[0] for v in values[1:]) else values
 
 
-def _component(steps):
+def _component(steps: list[_StepPrior]) -> pb.ComponentPrior:
     """One component's ComponentPrior from its per-step (lower, upper, weight, target)."""
     any_lower = any(lo is not None and hi is None for lo, hi, _, _ in steps)
     any_upper = any(hi is not None and lo is None for lo, hi, _, _ in steps)
@@ -162,7 +177,7 @@ def _component(steps):
     return out
 
 
-def _read_instance(doc):
+def _read_instance(doc: _Json) -> tuple[pb.ProblemSpec, FloatArray | None]:
     dims = _required(doc, "dims")
     if not isinstance(dims, dict):
         raise InstanceError("dims", "expected an object")
@@ -219,7 +234,7 @@ def _read_instance(doc):
             terminal.target.extend([0.0] * M)
         terminal.weight.CopyFrom(_matrix(doc["Qf"], "Qf"))
 
-    states = None
+    states: FloatArray | None = None
     closed_loop = _member(doc, "closed_loop")
     if closed_loop is not None:
         if not isinstance(closed_loop, dict):
@@ -231,7 +246,7 @@ def _read_instance(doc):
     return spec, states
 
 
-def load_instance(path):
+def load_instance(path: str | os.PathLike[str]) -> Instance:
     """An Instance from a benchmark instance file or a ProblemSpec JSON file.
     ValueError naming the file and the field when malformed, OSError when unreadable."""
     with open(path, encoding="utf-8") as f:
@@ -248,9 +263,8 @@ def load_instance(path):
         except InstanceError as error:
             error.args = (f"{path}: malformed instance: {error}",)
             raise
-        name = doc.get("name") if isinstance(doc.get("name"), str) else ""
-        family = doc.get("family") if isinstance(doc.get("family"), str) else ""
-        return Instance(name, family, spec, states)
+        name, family = doc.get("name"), doc.get("family")
+        return Instance(name if isinstance(name, str) else "", family if isinstance(family, str) else "", spec, states)
     spec = pb.ProblemSpec()
     try:
         json_format.Parse(text, spec)

@@ -14,13 +14,22 @@ session as it was. A time-invariant matrix given for some steps becomes per-step
 steps keep its value), which restarts the warm start once; sessions whose model is stored
 per step (created with N matrices) keep it."""
 
+from __future__ import annotations
+
 import numbers
+from typing import TYPE_CHECKING, Iterable, Union
 
 import numpy as np
 
 from nupmpc._proto import pb
-from nupmpc.arrays import as_array, finite, matrix, vector
+from nupmpc.arrays import ArrayLike, FloatArray, as_array, finite, matrix, vector
 from nupmpc.errors import ShapeError
+
+if TYPE_CHECKING:
+    from nupmpc._proto import RepeatedMessages, RepeatedScalars
+
+# A model term: one value for every step, one per step, or a dict {step: value} (those steps).
+StepTerms = Union[ArrayLike, dict[int, ArrayLike]]
 
 
 class ModelUpdate:
@@ -36,16 +45,18 @@ class ModelUpdate:
       repeated), as the horizon moves; time-invariant terms stay.
     """
 
-    def __init__(self, A=None, B=None, C=None, state_offset=None, output_offset=None, shift=False):
+    def __init__(self, A: StepTerms | None = None, B: StepTerms | None = None, C: StepTerms | None = None,
+                 state_offset: StepTerms | None = None, output_offset: StepTerms | None = None,
+                 shift: bool = False) -> None:
         self.A, self.B, self.C = A, B, C
         self.state_offset, self.output_offset = state_offset, output_offset
         self.shift = bool(shift)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         given = [name for name in ("A", "B", "C", "state_offset", "output_offset") if getattr(self, name) is not None]
         return f"ModelUpdate({', '.join(given)}{', shift' if self.shift else ''})"
 
-    def to_proto(self, spec):
+    def to_proto(self, spec: pb.ProblemSpec) -> pb.ModelUpdate:
         """The pb.ModelUpdate for a session created from `spec` (checked against its
         dimensions and the kind of session; ShapeError naming the argument)."""
         refuse_model_update(spec)
@@ -71,7 +82,7 @@ class ModelUpdate:
         return update
 
 
-def refuse_model_update(spec):
+def refuse_model_update(spec: pb.ProblemSpec) -> None:
     """ShapeError("model") for sessions that take no model update (GP, multi-level inputs, Δu)."""
     if spec.HasField("gp"):
         raise ShapeError("model", "a GP session takes no model update")
@@ -81,7 +92,7 @@ def refuse_model_update(spec):
         raise ShapeError("model", "a session with input_rate (input differences) takes no model update")
 
 
-def _step_index(key, name, steps, steps_name):
+def _step_index(key: object, name: str, steps: int, steps_name: str) -> int:
     if isinstance(key, bool) or not isinstance(key, numbers.Integral):
         raise ShapeError(name, f"steps are integers, got {key!r}")
     if not 0 <= int(key) < steps:
@@ -89,13 +100,14 @@ def _step_index(key, name, steps, steps_name):
     return int(key)
 
 
-def _by_step(value, name, steps, steps_name):
+def _by_step(value: dict[int, ArrayLike], name: str, steps: int, steps_name: str) -> list[tuple[int, ArrayLike]]:
     """The entries of a dict {step: value}, checked and in step order."""
     return sorted(((_step_index(key, name, steps, steps_name), given) for key, given in value.items()),
                   key=lambda entry: entry[0])
 
 
-def _matrices(value, name, steps, steps_name, rows, cols, out):
+def _matrices(value: StepTerms | None, name: str, steps: int, steps_name: str, rows: int, cols: int,
+              out: RepeatedMessages[pb.ModelUpdate.MatrixAt]) -> None:
     if value is None:
         return
     if isinstance(value, dict):
@@ -120,7 +132,8 @@ def _matrices(value, name, steps, steps_name, rows, cols, out):
         out.add(step=n, matrix=one)
 
 
-def _offsets(value, name, steps, steps_name, width, all_steps, entries):
+def _offsets(value: StepTerms | None, name: str, steps: int, steps_name: str, width: int,
+             all_steps: RepeatedScalars[float], entries: RepeatedMessages[pb.ModelUpdate.VectorAt]) -> None:
     if value is None:
         return
     if isinstance(value, dict):
@@ -140,23 +153,23 @@ def _offsets(value, name, steps, steps_name, width, all_steps, entries):
     all_steps.extend(finite(vector(array, name, width), name).tolist())
 
 
-def model_terms(spec):
+def model_terms(spec: pb.ProblemSpec) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """The model terms of `spec` per step: A (N, M, M), B (N, M, L), C (N+1, K, M),
     c (N, M), d (N+1, K) (time-invariant terms repeated, absent offsets zero)."""
     m = spec.model
     M, L, K, N = m.num_states, m.num_inputs, m.num_outputs, m.horizon
 
-    def stack(matrices, steps, rows, cols):
+    def stack(matrices: Iterable[pb.Matrix], steps: int, rows: int, cols: int) -> FloatArray:
         arrays = [np.asarray(a.data, dtype=float).reshape(rows, cols) for a in matrices]
         if not arrays:
             return np.zeros((steps, rows, cols))
         return np.stack(arrays if len(arrays) == steps else [arrays[0]] * steps)
 
-    def rows(values, steps, width):
-        values = np.asarray(values, dtype=float)
-        if values.size == 0:
+    def rows(values: Iterable[float], steps: int, width: int) -> FloatArray:
+        array = np.asarray(values, dtype=float)
+        if array.size == 0:
             return np.zeros((steps, width))
-        return np.tile(values, (steps, 1)) if values.size == width else values.reshape(steps, width)
+        return np.tile(array, (steps, 1)) if array.size == width else array.reshape(steps, width)
 
     return (stack(m.a, N, M, M), stack(m.b, N, M, L), stack(m.c, N + 1, K, M), rows(m.state_offset, N, M),
             rows(m.output_offset, N + 1, K))

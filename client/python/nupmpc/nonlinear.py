@@ -21,18 +21,34 @@ linearisations from sending the plan back and forth between them.
         plan = session.step(x)       # plan.u0 to apply; session.periods[-1]: what it took
 """
 
+from __future__ import annotations
+
 import time
 from dataclasses import dataclass
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Optional
 
 import numpy as np
 
 from nupmpc._proto import pb
-from nupmpc.arrays import as_array, finite, vector
-from nupmpc.client import spec_of
+from nupmpc.arrays import ArrayLike, FloatArray, as_array, finite, vector
+from nupmpc.client import ProblemLike, spec_of
 from nupmpc.errors import ShapeError
 from nupmpc.model_update import ModelUpdate, refuse_model_update
+from nupmpc.result import Plan, PlanStatus
 from nupmpc.spec_builder import _set
-from nupmpc.step import dims_of
+from nupmpc.step import WarmStart, dims_of
+
+if TYPE_CHECKING:
+    from nupmpc._proto import RepeatedMessages
+    from nupmpc.client import Client
+    from nupmpc.problem import Problem
+    from nupmpc.reconnect import ReconnectOptions
+    from nupmpc.session import Session
+
+# The plant's functions, numpy in: f(x, u) → next x, h(x) → y, and their Jacobians.
+StateFunction = Callable[[FloatArray, FloatArray], ArrayLike]
+OutputFunction = Callable[[FloatArray], ArrayLike]
 
 # Central differences: truncation error ~ h², rounding ~ eps/h; balanced at h ~ eps^(1/3).
 FD_STEP = 6e-6
@@ -43,7 +59,8 @@ class JacobianError(ShapeError):
     ("f_x", "f_u" or "h_x"), `entry` is its (row, column), `given` and `estimated` the two
     values, `x` and `u` the point (u None for h_x)."""
 
-    def __init__(self, argument, entry, given, estimated, x, u=None):
+    def __init__(self, argument: str, entry: tuple[int, int], given: float, estimated: float, x: ArrayLike,
+                 u: ArrayLike | None = None) -> None:
         self.entry, self.given, self.estimated, self.x, self.u = entry, given, estimated, x, u
         at = f"x = {np.array2string(np.asarray(x), precision=4)}" + (
             "" if u is None else f", u = {np.array2string(np.asarray(u), precision=4)}")
@@ -55,13 +72,13 @@ class JacobianError(ShapeError):
 class Linearisation:
     """The time-varying model along a trajectory: A (N, M, M), B (N, M, L), c (N, M),
     C (N+1, K, M), d (N+1, K)."""
-    A: np.ndarray
-    B: np.ndarray
-    c: np.ndarray
-    C: np.ndarray
-    d: np.ndarray
+    A: FloatArray
+    B: FloatArray
+    c: FloatArray
+    C: FloatArray
+    d: FloatArray
 
-    def model_update(self):
+    def model_update(self) -> ModelUpdate:
         """The ModelUpdate replacing every model term of a session."""
         K = self.C.shape[1]
         return ModelUpdate(A=self.A, B=self.B, state_offset=self.c, C=self.C if K else None,
@@ -73,7 +90,9 @@ class NonlinearModel:
     f_x(x, u) (M, M), f_u(x, u) (M, L), h_x(x) (K, M) are callables or, when None, central
     finite differences with relative step `fd_step`."""
 
-    def __init__(self, f, h=None, f_x=None, f_u=None, h_x=None, fd_step=FD_STEP):
+    def __init__(self, f: StateFunction, h: Optional[OutputFunction] = None, f_x: Optional[StateFunction] = None,
+                 f_u: Optional[StateFunction] = None, h_x: Optional[OutputFunction] = None,
+                 fd_step: float = FD_STEP) -> None:
         for name, value in (("f", f), ("h", h), ("f_x", f_x), ("f_u", f_u), ("h_x", h_x)):
             if value is not None and not callable(value):
                 raise ShapeError(name, f"expected a callable, got {type(value).__name__}")
@@ -86,29 +105,30 @@ class NonlinearModel:
         self.f, self.h, self.f_x, self.f_u, self.h_x, self.fd_step = f, h, f_x, f_u, h_x, fd_step
 
     # Evaluations, checked.
-    def next_state(self, x, u):
+    def next_state(self, x: FloatArray, u: FloatArray) -> FloatArray:
         x_next = np.asarray(self.f(x, u), dtype=float)
         if x_next.shape != np.shape(x):
             raise ShapeError("f", f"returned shape {x_next.shape} for a state of shape {np.shape(x)}")
         return x_next
 
-    def output(self, x):
+    def output(self, x: FloatArray) -> FloatArray:
         if self.h is None:
             return np.zeros(0)
-        y = np.atleast_1d(np.asarray(self.h(x), dtype=float))
+        y: FloatArray = np.atleast_1d(np.asarray(self.h(x), dtype=float))
         if y.ndim != 1:
             raise ShapeError("h", f"returned shape {y.shape}, expected a vector")
         return y
 
-    def rollout(self, x0, u):
+    def rollout(self, x0: ArrayLike, u: FloatArray) -> FloatArray:
         """The states x[0..N] from x0 under the inputs u (N, L)."""
         xs = [np.asarray(x0, dtype=float)]
         for u_n in u:
             xs.append(self.next_state(xs[-1], u_n))
-        return np.array(xs)
+        states: FloatArray = np.array(xs)
+        return states
 
     # Jacobians.
-    def _differences(self, g, v, rows):
+    def _differences(self, g: Callable[[FloatArray], FloatArray], v: FloatArray, rows: int) -> FloatArray:
         J = np.empty((rows, len(v)))
         for j in range(len(v)):
             h = self.fd_step * max(1.0, abs(v[j]))
@@ -118,24 +138,24 @@ class NonlinearModel:
             J[:, j] = (g(plus) - g(minus)) / (plus[j] - minus[j])
         return J
 
-    def fd_jacobians(self, x, u):
+    def fd_jacobians(self, x: ArrayLike, u: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(∂f/∂x, ∂f/∂u, ∂h/∂x) at (x, u) by central differences."""
-        x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-        return (self._differences(lambda v: self.next_state(v, u), x, len(x)),
-                self._differences(lambda v: self.next_state(x, v), u, len(x)),
-                self._differences(self.output, x, len(self.output(x))))
+        at_x, at_u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
+        return (self._differences(lambda v: self.next_state(v, at_u), at_x, len(at_x)),
+                self._differences(lambda v: self.next_state(at_x, v), at_u, len(at_x)),
+                self._differences(self.output, at_x, len(self.output(at_x))))
 
-    def state_jacobians(self, x, u):
+    def state_jacobians(self, x: ArrayLike, u: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """(∂f/∂x, ∂f/∂u) at (x, u): the given callables, else central differences."""
-        x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-        M, L = len(x), len(u)
-        A = (self._differences(lambda v: self.next_state(v, u), x, M) if self.f_x is None else
-             self._given("f_x", self.f_x(x, u), M, M))
-        B = (self._differences(lambda v: self.next_state(x, v), u, M) if self.f_u is None else
-             self._given("f_u", self.f_u(x, u), M, L))
+        at_x, at_u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
+        M, L = len(at_x), len(at_u)
+        A = (self._differences(lambda v: self.next_state(v, at_u), at_x, M) if self.f_x is None else
+             self._given("f_x", self.f_x(at_x, at_u), M, M))
+        B = (self._differences(lambda v: self.next_state(at_x, v), at_u, M) if self.f_u is None else
+             self._given("f_u", self.f_u(at_x, at_u), M, L))
         return A, B
 
-    def output_jacobian(self, x):
+    def output_jacobian(self, x: ArrayLike) -> FloatArray:
         """∂h/∂x at x (K, M): the given callable, else central differences."""
         x = np.asarray(x, dtype=float)
         K = len(self.output(x))
@@ -143,12 +163,12 @@ class NonlinearModel:
             return np.zeros((0, len(x)))
         return self._differences(self.output, x, K) if self.h_x is None else self._given("h_x", self.h_x(x), K, len(x))
 
-    def jacobians(self, x, u):
+    def jacobians(self, x: ArrayLike, u: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(∂f/∂x, ∂f/∂u, ∂h/∂x) at (x, u): the given callables, else central differences."""
         return (*self.state_jacobians(x, u), self.output_jacobian(x))
 
     @staticmethod
-    def _given(name, value, rows, cols):
+    def _given(name: str, value: ArrayLike, rows: int, cols: int) -> FloatArray:
         array = as_array(value, name, ndim_max=2)
         if array.ndim < 2 and (rows == 1 or cols == 1):
             array = array.reshape(rows, cols)
@@ -156,12 +176,13 @@ class NonlinearModel:
             raise ShapeError(name, f"returned shape {array.shape}, expected ({rows}, {cols})")
         return array
 
-    def check_jacobians(self, points, tolerance=1e-5):
+    def check_jacobians(self, points: Iterable[tuple[ArrayLike, ArrayLike]], tolerance: float = 1e-5) -> None:
         """Compares the given Jacobians with central differences at each (x, u) of `points`;
         raises JacobianError for the first entry off by more than tolerance·(1 + the largest
         magnitude in its row of the estimate)."""
         for x, u in points:
-            x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
+            x = np.asarray(x, dtype=float)
+            u = np.asarray(u, dtype=float)
             A, B, C = self.jacobians(x, u)
             A_fd, B_fd, C_fd = self.fd_jacobians(x, u)
             for name, given, estimate, at_u in (("f_x", A, A_fd, u), ("f_u", B, B_fd, u), ("h_x", C, C_fd, None)):
@@ -173,7 +194,7 @@ class NonlinearModel:
                     i, j = bad[0]
                     raise JacobianError(name, (int(i), int(j)), float(given[i, j]), float(estimate[i, j]), x, at_u)
 
-    def linearise(self, x_bar, u_bar):
+    def linearise(self, x_bar: FloatArray, u_bar: FloatArray) -> Linearisation:
         """The Linearisation along states x̄ (N+1, M) and inputs ū (N, L)."""
         N = len(u_bar)
         A, B, c, C, d = [], [], [], [], []
@@ -190,7 +211,7 @@ class NonlinearModel:
                 c.append(self.next_state(x, u) - A_n @ x - B_n @ u)
         return Linearisation(np.array(A), np.array(B), np.array(c), np.array(C), np.array(d))
 
-    def problem(self, x0, u0, horizon):
+    def problem(self, x0: ArrayLike, u0: ArrayLike, horizon: int) -> Problem:
         """A nupmpc.Problem template with this model linearised at (x0, u0) (time-invariant),
         to chain priors, bounds and costs on; NonlinearSession fills in the model."""
         from nupmpc.problem import Problem
@@ -217,10 +238,10 @@ class Period:
     time_ms: float
     solve_ms: float
     moved: float
-    status: str
+    status: PlanStatus
 
 
-def _moved(x_new, u_new, x_old, u_old):
+def _moved(x_new: FloatArray, u_new: FloatArray, x_old: FloatArray, u_old: FloatArray) -> float:
     dx = np.abs(x_new - x_old).max() / max(1.0, np.abs(x_old).max())
     du = np.abs(u_new - u_old).max() / max(1.0, np.abs(u_old).max()) if u_old.size else 0.0
     return float(max(dx, du))
@@ -246,8 +267,10 @@ class NonlinearSession:
       of the last linearisation answered in time, or held (plan.held) when the first was not
       (nupmpc.Session)."""
 
-    def __init__(self, client, problem, model, u_guess=None, x_guess=None, iterations=1, tolerance=1e-6,
-                 check_jacobians=True, jacobian_tolerance=1e-5, reconnect=None, period=None):
+    def __init__(self, client: Client, problem: ProblemLike, model: NonlinearModel, u_guess: ArrayLike | None = None,
+                 x_guess: ArrayLike | None = None, iterations: int = 1, tolerance: float = 1e-6,
+                 check_jacobians: bool = True, jacobian_tolerance: float = 1e-5,
+                 reconnect: ReconnectOptions | None = None, period: float | None = None) -> None:
         if not isinstance(model, NonlinearModel):
             raise ShapeError("model", f"expected a nupmpc.NonlinearModel, got {type(model).__name__}")
         spec = pb.ProblemSpec()
@@ -279,11 +302,11 @@ class NonlinearSession:
                         u + 0.1 * (1 + np.abs(u)) * rng.standard_normal(L)) for x, u in points]
             model.check_jacobians(points, jacobian_tolerance)
         _fill_model(spec, model.linearise(x_bar, self._u_guess))
-        self.session = client.session(spec, reconnect, period=period)
-        self.periods = []
-        self._plan = None  # the last plan with has_plan: (states, inputs)
+        self.session: Session = client.session(spec, reconnect, period=period)
+        self.periods: list[Period] = []
+        self._plan: tuple[FloatArray, FloatArray] | None = None  # the last plan with has_plan: (states, inputs)
 
-    def _inputs(self, value, name):
+    def _inputs(self, value: ArrayLike | None, name: str) -> FloatArray:
         M, L, K, N = self.dims
         if value is None:
             return np.zeros((N, L))
@@ -294,7 +317,7 @@ class NonlinearSession:
             raise ShapeError(name, f"expected shape ({L},) or ({N}, {L}), got {array.shape}")
         return array.copy()
 
-    def _first_states(self, x):
+    def _first_states(self, x: FloatArray) -> FloatArray:
         if self._x_guess is not None:
             x_bar = self._x_guess.copy()
             x_bar[0] = x
@@ -302,15 +325,15 @@ class NonlinearSession:
         return self.model.rollout(x, self._u_guess)
 
     @property
-    def spec(self):
+    def spec(self) -> pb.ProblemSpec:
         """The spec the session would be re-created from (its model: the last one sent)."""
         return self.session.spec
 
     @property
-    def reconnects(self):
+    def reconnects(self) -> int:
         return self.session.reconnects
 
-    def _trajectory(self, x):
+    def _trajectory(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(x̄, ū) for this period: the previous plan one step on (its last input repeated,
         the last state extended by f), with x̄[0] the measured state; the guess at first."""
         if self._plan is None:
@@ -321,7 +344,8 @@ class NonlinearSession:
         x_bar[0] = x
         return x_bar, u_bar
 
-    def step(self, x, iterations=None, tolerance=None, warm_start=None, **step_args):
+    def step(self, x: ArrayLike, *, iterations: int | None = None, tolerance: float | None = None,
+             warm_start: WarmStart = None, **step_args: Any) -> Plan:
         """One period for the measured state x (M,): returns the Plan (apply plan.u0) and
         appends a Period to `periods`. step_args (references, bounds, shift, ...) go with
         the first solve of the period as in Session.step; iterations and tolerance
@@ -358,6 +382,8 @@ class NonlinearSession:
             elif moved < 0.5 * last:
                 step = min(1.0, 2.0 * step)
             x_bar, u_bar = x_bar + step * (plan.x - x_bar), u_bar + step * (plan.u - u_bar)
+        if plan is None:  # no linearisation ran
+            raise ShapeError("iterations", f"must be an integer ≥ 1, got {iterations!r}")
         if plan.has_plan:
             self._plan = (plan.x.copy(), plan.u.copy())
         elif self._plan is not None:
@@ -367,20 +393,23 @@ class NonlinearSession:
                                    solve_ms=solve_ms, moved=moved, status=plan.status))
         return plan
 
-    def close(self):
+    def close(self) -> None:
         self.session.close()
 
-    def __enter__(self):
+    def __enter__(self) -> NonlinearSession:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 traceback: TracebackType | None) -> None:
         self.close()
 
 
-def _fill_model(spec, lin):
+def _fill_model(spec: pb.ProblemSpec, lin: Linearisation) -> None:
     """Writes a Linearisation into spec.model, one matrix per step."""
     m = spec.model
-    for field, arrays in ((m.a, lin.A), (m.b, lin.B), (m.c, lin.C if m.num_outputs else [])):
+    terms: list[tuple[RepeatedMessages[pb.Matrix], Iterable[FloatArray]]] = [
+        (m.a, lin.A), (m.b, lin.B), (m.c, lin.C if m.num_outputs else lin.C[:0])]
+    for field, arrays in terms:
         del field[:]
         for a in arrays:
             field.add(rows=a.shape[0], cols=a.shape[1], data=a.ravel().tolist())

@@ -4,16 +4,30 @@ Panels, by axes title: "States", "Outputs" (with bounds and references), "Inputs
 limits), "Solve and round-trip time". Built on a Figure with the Agg canvas, not pyplot,
 so nothing depends on a display or on pyplot's global state."""
 
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from nupmpc.arrays import ArrayLike
 
-def _bound_lines(ax, values, steps, label, style):
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from nupmpc.simulate import Trajectory
+
+
+def _bound_lines(ax: Axes, values: ArrayLike, steps: int, label: str, style: str) -> None:
     """One horizontal line per distinct finite bound (a shared limit is drawn once)."""
     for v in sorted({float(v) for v in np.atleast_1d(values) if np.isfinite(v)}):
         ax.plot([0, steps], [v, v], style, color="0.3", linewidth=1.0, label=f"{label} {v:g}")
 
 
-def plot_trajectory(trajectory, path=None, title=None):
+def plot_trajectory(trajectory: Trajectory, path: str | os.PathLike[str] | None = None,
+                    title: str | None = None) -> Figure:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

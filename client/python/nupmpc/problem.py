@@ -7,14 +7,21 @@ the spec field. Per-step arguments take a scalar, one value per component, or on
 step (N rows for inputs, N+1 for outputs); the proto header explains the conventions.
 """
 
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from nupmpc._proto import pb
-from nupmpc.arrays import as_array, expand, finite, matrices, matrix, per_step, vector
+from nupmpc.arrays import ArrayLike, FloatArray, as_array, expand, finite, matrices, matrix, per_step, vector
 from nupmpc.errors import ShapeError
 from nupmpc.spec_builder import _Spec, _set
+
+if TYPE_CHECKING:
+    from nupmpc._proto import RepeatedMessages
+    from nupmpc.regions import Ellipse
 
 INF = math.inf
 
@@ -25,7 +32,9 @@ class Problem(_Spec):
     A (M, M), B (M, L), C (K, M) or None (no outputs); a 3-D array (N or N+1 matrices) makes
     the model time-varying. Methods return the problem, so they chain."""
 
-    def __init__(self, A, B, C=None, horizon=None, x0=None, state_offset=None, output_offset=None):
+    def __init__(self, A: ArrayLike, B: ArrayLike, C: ArrayLike | None = None, horizon: int | None = None,
+                 x0: ArrayLike | None = None, state_offset: ArrayLike | None = None,
+                 output_offset: ArrayLike | None = None) -> None:
         if horizon is None or int(horizon) != horizon or horizon < 1:
             raise ShapeError("horizon", f"must be an integer ≥ 1, got {horizon!r}")
         N = int(horizon)
@@ -56,25 +65,31 @@ class Problem(_Spec):
         self.initial_state(np.zeros(M) if x0 is None else x0)
 
     @staticmethod
-    def _offsets(value, name, steps, width):
+    def _offsets(value: ArrayLike, name: str, steps: int, width: int) -> list[float]:
         array = finite(as_array(value, name, ndim_max=2), name)
         if array.shape not in ((width,), (steps, width)):
             raise ShapeError(name, f"expected shape ({width},) or ({steps}, {width}), got {array.shape}")
-        return array.ravel().tolist()
-
-    @classmethod
-    def _wrap(cls, spec):
-        self = cls.__new__(cls)
-        _Spec.__init__(self, spec)
-        return self
+        values: list[float] = array.ravel().tolist()
+        return values
 
     # Dimensions.
-    M = property(lambda self: self._spec.model.num_states)
-    L = property(lambda self: self._spec.model.num_inputs)
-    K = property(lambda self: self._spec.model.num_outputs)
-    N = property(lambda self: self._spec.model.horizon)
+    @property
+    def M(self) -> int:
+        return self._spec.model.num_states
 
-    def initial_state(self, mean, covariance=None):
+    @property
+    def L(self) -> int:
+        return self._spec.model.num_inputs
+
+    @property
+    def K(self) -> int:
+        return self._spec.model.num_outputs
+
+    @property
+    def N(self) -> int:
+        return self._spec.model.horizon
+
+    def initial_state(self, mean: ArrayLike, covariance: ArrayLike | None = None) -> Problem:
         """x[0] (fixed), or a Gaussian prior of this mean and covariance (M, M)."""
         state = self._spec.initial_state
         _set(state.mean, finite(vector(mean, "x0", self.M), "x0").tolist())
@@ -84,14 +99,15 @@ class Problem(_Spec):
         return self
 
     # Priors of inputs and outputs.
-    def _components(self, which):
+    def _components(self, which: str) -> tuple[RepeatedMessages[pb.ComponentPrior], int, int]:
         if which == "input":
             return self._spec.input_priors, self.N, self.L
         if self.K == 0:
             raise ShapeError("C", "the model has no outputs (give C)")
         return self._spec.output_priors, self.N + 1, self.K
 
-    def _box(self, which, name, lower, upper, soft):
+    def _box(self, which: str, name: str, lower: ArrayLike | None, upper: ArrayLike | None,
+             soft: ArrayLike | None) -> Problem:
         components, steps, width = self._components(which)
         if lower is None and upper is None:
             raise ShapeError(name, "give lower, upper or both")
@@ -110,15 +126,18 @@ class Problem(_Spec):
             _set(prior.slope, [] if slopes is None else slopes[i])
         return self
 
-    def input_box(self, lower=None, upper=None, soft=None):
+    def input_box(self, lower: ArrayLike | None = None, upper: ArrayLike | None = None,
+                  soft: ArrayLike | None = None) -> Problem:
         """lower ≤ u ≤ upper (hard; `soft`: the penalty slope per unit outside it)."""
         return self._box("input", "input_box", lower, upper, soft)
 
-    def output_box(self, lower=None, upper=None, soft=None):
+    def output_box(self, lower: ArrayLike | None = None, upper: ArrayLike | None = None,
+                   soft: ArrayLike | None = None) -> Problem:
         """lower ≤ y ≤ upper at steps 0..N (hard; `soft`: penalty slope)."""
         return self._box("output", "output_box", lower, upper, soft)
 
-    def _quadratic(self, which, name, weight, target, target_name):
+    def _quadratic(self, which: str, name: str, weight: ArrayLike, target: ArrayLike,
+                   target_name: str) -> Problem:
         components, steps, width = self._components(which)
         weights = per_step(weight, f"{name}.weight", steps, width)
         targets = per_step(target, f"{name}.{target_name}", steps, width)
@@ -129,15 +148,15 @@ class Problem(_Spec):
             _set(prior.target, targets[i])
         return self
 
-    def input_weight(self, weight, target=0.0):
+    def input_weight(self, weight: ArrayLike, target: ArrayLike = 0.0) -> Problem:
         """½·weight·(u - target)² per input and step."""
         return self._quadratic("input", "input_weight", weight, target, "target")
 
-    def output_weight(self, weight, reference=0.0):
+    def output_weight(self, weight: ArrayLike, reference: ArrayLike = 0.0) -> Problem:
         """½·weight·(y - reference)² per output and step (reference: (K,) or (N+1, K))."""
         return self._quadratic("output", "output_weight", weight, reference, "reference")
 
-    def references(self, reference):
+    def references(self, reference: ArrayLike) -> Problem:
         """New output references, keeping the weights."""
         components, steps, width = self._components("output")
         targets = per_step(reference, "references", steps, width)
@@ -145,14 +164,16 @@ class Problem(_Spec):
             _set(prior.target, targets[i])
         return self
 
-    def terminal_cost(self, weight, target=None):
+    def terminal_cost(self, weight: ArrayLike, target: ArrayLike | None = None) -> Problem:
         """½ (x[N] - target)ᵀ weight (x[N] - target); weight (M, M)."""
         self._spec.terminal.weight.CopyFrom(matrix(weight, "terminal_cost.weight", self.M, self.M))
         _set(self._spec.terminal.target, finite(vector(0.0 if target is None else target,
                                                        "terminal_cost.target", self.M), "terminal_cost.target").tolist())
         return self
 
-    def input_rate(self, lower=None, upper=None, weight=None, soft=None, previous_input=None):
+    def input_rate(self, lower: ArrayLike | None = None, upper: ArrayLike | None = None,
+                   weight: ArrayLike | None = None, soft: ArrayLike | None = None,
+                   previous_input: ArrayLike | None = None) -> Problem:
         """Limits (and a quadratic penalty `weight`) on Δu[n] = u[n] - u[n-1]; u[-1] is
         `previous_input` (default zeros), then the u[0] of each plan."""
         differences = self._spec.input_differences
@@ -177,7 +198,7 @@ class Problem(_Spec):
             _set(differences.previous_input, vector(previous_input, "previous_input", L).tolist())
         return self
 
-    def input_levels(self, input, count, lowest, spacing):
+    def input_levels(self, input: int, count: int, lowest: float, spacing: float) -> Problem:
         """Input `input` takes only the levels lowest + spacing·{0, …, count-1}."""
         if not 0 <= input < self.L:
             raise ShapeError("input_levels.input", f"must be < {self.L}")
@@ -186,8 +207,8 @@ class Problem(_Spec):
         self._spec.input_levels.add(input=input, count=count, lowest=lowest, spacing=spacing)
         return self
 
-    def keep_out(self, first_output, second_output, regions, rectangle_order=0, max_linearisations=0,
-                 step_tolerance=0.0):
+    def keep_out(self, first_output: int, second_output: int, regions: Sequence[Ellipse], rectangle_order: int = 0,
+                 max_linearisations: int = 0, step_tolerance: float = 0.0) -> Problem:
         """The plan's point (y_first, y_second) stays outside every region (Ellipse, Rectangle)."""
         for name, k in (("first_output", first_output), ("second_output", second_output)):
             if not 0 <= k < self.K:
@@ -205,8 +226,9 @@ class Problem(_Spec):
         keep_out.step_tolerance = step_tolerance
         return self
 
-    def options(self, algorithm=None, max_iterations=0, objective_tolerance=0.0, violation_tolerance=0.0,
-                time_limit_ms=0.0, elastic_slope=0.0, elastic_after_iterations=0):
+    def options(self, algorithm: str | None = None, max_iterations: int = 0, objective_tolerance: float = 0.0,
+                violation_tolerance: float = 0.0, time_limit_ms: float = 0.0, elastic_slope: float = 0.0,
+                elastic_after_iterations: int = 0) -> Problem:
         """Solver options (0: the server's default); algorithm "IAKE", "IBFFD" or "IFFBDD"."""
         options = self._spec.options
         if algorithm is not None:
@@ -223,7 +245,7 @@ class Problem(_Spec):
         return self
 
     # What the plots draw.
-    def bounds(self, which):
+    def bounds(self, which: str) -> tuple[FloatArray, FloatArray]:
         """(lower, upper) per step, shape (steps, width), ±inf where absent."""
         components, steps, width = (self._spec.input_priors, self.N, self.L) if which == "input" else \
             (self._spec.output_priors, self.N + 1, self.K)
@@ -236,7 +258,7 @@ class Problem(_Spec):
                 upper[:, i] = expand(p.upper, steps)
         return lower, upper
 
-    def output_references(self):
+    def output_references(self) -> FloatArray:
         """The output targets per step (N+1, K); NaN for outputs without a weight."""
         out = np.full((self.N + 1, self.K), np.nan)
         for k, p in enumerate(self._spec.output_priors):

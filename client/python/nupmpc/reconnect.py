@@ -10,15 +10,19 @@ end at it), each attempt is cancelled after `attempt_timeout`, and then the step
 with Unavailable. Only UNAVAILABLE is retried; other errors are returned at once.
 """
 
+from __future__ import annotations
+
 import asyncio
 import random
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Awaitable, Callable, MutableSequence, Optional, TypeVar
 
 import grpc
 
 from nupmpc.errors import NupmpcError, Unavailable
+
+_Answer = TypeVar("_Answer")
 
 
 @dataclass
@@ -30,11 +34,11 @@ class ReconnectOptions:
     budget_s: float = 30.0  # per outage; 0: no reconnect at all
     attempt_timeout_s: float = 5.0
     seed: Optional[int] = None  # of the jitter; None: random
-    on_attempt: Optional[Callable] = None  # called with a ReconnectAttempt after every attempt
+    on_attempt: Optional[Callable[[ReconnectAttempt], object]] = None  # called after every attempt
     # Injectable for tests (a fake clock); None: time.monotonic and time.sleep (asyncio
     # sessions always sleep with asyncio.sleep).
-    now: Optional[Callable] = None
-    sleep: Optional[Callable] = None
+    now: Optional[Callable[[], float]] = None
+    sleep: Optional[Callable[[float], object]] = None
 
 
 @dataclass
@@ -54,24 +58,25 @@ class ReconnectStats:
     failed_outages: int = 0  # outages that spent the budget
     total_s: float = 0.0
     longest_s: float = 0.0
-    attempt_log: list = field(default_factory=list)
+    # The attempts (a list; with a period, a deque of the most recent).
+    attempt_log: MutableSequence[ReconnectAttempt] = field(default_factory=list)
 
 
-def is_retryable(error):
+def is_retryable(error: BaseException | None) -> bool:
     return isinstance(error, NupmpcError) and error.code == grpc.StatusCode.UNAVAILABLE
 
 
 class Backoff:
-    def __init__(self, options):
+    def __init__(self, options: ReconnectOptions) -> None:
         self.options = options
         self.attempt = 0
         self.rng = random.Random(options.seed)
 
-    def nominal_next(self):
+    def nominal_next(self) -> float:
         o = self.options
         return min(max(o.initial_backoff_s, 0.0) * max(o.multiplier, 1.0) ** self.attempt, max(o.max_backoff_s, 0.0))
 
-    def next(self):
+    def next(self) -> float:
         nominal = self.nominal_next()
         self.attempt += 1
         jitter = min(max(self.options.jitter, 0.0), 1.0)
@@ -81,20 +86,20 @@ class Backoff:
 class _Outage:
     """The bookkeeping of one outage, shared by the blocking and the asyncio loop."""
 
-    def __init__(self, options, cause, stats):
+    def __init__(self, options: ReconnectOptions, cause: Exception, stats: ReconnectStats) -> None:
         self.options, self.cause, self.stats = options, cause, stats
         self.now = options.now or time.monotonic
         self.start = self.now()
         self.backoff = Backoff(options)
         self.made = 0
 
-    def elapsed(self):
+    def elapsed(self) -> float:
         return self.now() - self.start
 
-    def next_wait(self):
+    def next_wait(self) -> float:
         return min(self.backoff.next(), max(self.options.budget_s - self.elapsed(), 0.0))
 
-    def record(self, wait, error):
+    def record(self, wait: float, error: NupmpcError | None) -> bool:
         """Books one attempt; returns True when the loop should stop."""
         self.made += 1
         elapsed = self.elapsed()
@@ -108,14 +113,21 @@ class _Outage:
             self.cause = error
         return error is None or not retryable
 
-    def finish(self, answered, error):
+    def _finish(self) -> float:
+        """Books the outage's attempts and duration; returns the duration."""
         took = self.elapsed()
         self.stats.attempts += self.made
         self.stats.total_s += took
         self.stats.longest_s = max(self.stats.longest_s, took)
-        if answered:
-            self.stats.reconnects += 1
-            return None
+        return took
+
+    def answered(self) -> None:
+        self._finish()
+        self.stats.reconnects += 1
+
+    def failed(self, error: NupmpcError | None) -> NupmpcError:
+        """The error to raise: `error` itself, or Unavailable once the budget is spent."""
+        took = self._finish()
         if error is None or is_retryable(error):
             self.stats.failed_outages += 1
             return Unavailable(f"gave up reconnecting after {self.made} attempt(s) in {took * 1000:.0f} ms "
@@ -123,7 +135,8 @@ class _Outage:
         return error
 
 
-def ride_out_outage(options, cause, recreate_and_resend, stats):
+def ride_out_outage(options: ReconnectOptions, cause: Exception, recreate_and_resend: Callable[[float], _Answer],
+                    stats: ReconnectStats) -> _Answer:
     """Retries `recreate_and_resend(timeout_s)` (re-create the session, resend the step;
     returns the answer or raises) with back-off; returns the answer, or raises the error
     that ended the outage (Unavailable once the budget is spent)."""
@@ -142,12 +155,14 @@ def ride_out_outage(options, cause, recreate_and_resend, stats):
                 break
             continue
         outage.record(wait, None)
-        outage.finish(True, None)
+        outage.answered()
         return answer
-    raise outage.finish(False, error)
+    raise outage.failed(error)
 
 
-async def ride_out_outage_async(options, cause, recreate_and_resend, stats):
+async def ride_out_outage_async(options: ReconnectOptions, cause: Exception,
+                                recreate_and_resend: Callable[[float], Awaitable[_Answer]],
+                                stats: ReconnectStats) -> _Answer:
     """ride_out_outage for asyncio: `recreate_and_resend` is a coroutine function."""
     outage = _Outage(options, cause, stats)
     error = None
@@ -163,6 +178,6 @@ async def ride_out_outage_async(options, cause, recreate_and_resend, stats):
                 break
             continue
         outage.record(wait, None)
-        outage.finish(True, None)
+        outage.answered()
         return answer
-    raise outage.finish(False, error)
+    raise outage.failed(error)

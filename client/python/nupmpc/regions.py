@@ -1,27 +1,32 @@
 """Keep-out regions in the plane of two outputs (proto KeepOutRegion)."""
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 
 from nupmpc._proto import pb
-from nupmpc.arrays import vector
+from nupmpc.arrays import ArrayLike, vector
 from nupmpc.errors import ShapeError
 
 
 @dataclass
 class Ellipse:
     """A keep-out ellipse (a circle when b is None) in the plane of two outputs."""
-    centre: tuple
+    centre: ArrayLike
     a: float
-    b: float = None
+    b: float | None = None
     rotation: float = 0.0
     margin: float = 0.0
     slope: float = 0.0  # 0: hard
 
-    def to_proto(self, shape=pb.KeepOutRegion.SHAPE_ELLIPSE):
+    def _shape(self) -> pb.KeepOutRegion.Shape:
+        return pb.KeepOutRegion.SHAPE_ELLIPSE
+
+    def to_proto(self) -> pb.KeepOutRegion:
         centre = vector(self.centre, "centre", 2)
         if not self.a > 0 or (self.b is not None and not self.b > 0):
             raise ShapeError("half_axis", "must be > 0")
-        return pb.KeepOutRegion(shape=shape, centre_x=centre[0], centre_y=centre[1], half_axis_a=self.a,
+        return pb.KeepOutRegion(shape=self._shape(), centre_x=centre[0], centre_y=centre[1], half_axis_a=self.a,
                                 half_axis_b=self.b or 0.0, rotation_rad=self.rotation, margin=self.margin,
                                 slope=self.slope)
 
@@ -30,5 +35,5 @@ class Ellipse:
 class Rectangle(Ellipse):
     """A keep-out rectangle of half-width a and half-height b (a square when b is None)."""
 
-    def to_proto(self):
-        return super().to_proto(pb.KeepOutRegion.SHAPE_RECTANGLE)
+    def _shape(self) -> pb.KeepOutRegion.Shape:
+        return pb.KeepOutRegion.SHAPE_RECTANGLE

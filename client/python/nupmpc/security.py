@@ -4,16 +4,23 @@
 and without TLS it is sent only to a loopback or Unix-socket target (gRPC's local
 credentials), never in clear text across a network."""
 
+from __future__ import annotations
+
+from typing import Union
+
 import grpc
+
+# A channel argument: (name, value).
+ChannelOption = tuple[str, Union[int, str]]
 
 _LOCAL_PREFIXES = ("localhost:", "127.", "[::1]:", "ipv4:127.", "ipv6:[::1]:", "dns:///localhost:")
 
 
-def is_local_target(target):
+def is_local_target(target: str) -> bool:
     return target.startswith(("unix:", "unix-abstract:")) or target.startswith(_LOCAL_PREFIXES)
 
 
-def _read(option, path):
+def _read(option: str, path: str) -> bytes:
     try:
         with open(path, "rb") as f:
             return f.read()
@@ -21,15 +28,17 @@ def _read(option, path):
         raise ValueError(f"{option} {path}: cannot be read ({error.strerror})") from None
 
 
-class _BearerToken(grpc.AuthMetadataPlugin):
-    def __init__(self, token):
+# grpc ships no type stubs, so its classes are Any to the type checker.
+class _BearerToken(grpc.AuthMetadataPlugin):  # type: ignore[misc]
+    def __init__(self, token: str) -> None:
         self._metadata = (("authorization", f"Bearer {token}"),)
 
-    def __call__(self, context, callback):
+    def __call__(self, context: grpc.AuthMetadataContext, callback: grpc.AuthMetadataPluginCallback) -> None:
         callback(self._metadata, None)
 
 
-def channel_credentials(target, tls=False, ca_file=None, cert_file=None, key_file=None, token=None):
+def channel_credentials(target: str, tls: bool = False, ca_file: str | None = None, cert_file: str | None = None,
+                        key_file: str | None = None, token: str | None = None) -> grpc.ChannelCredentials | None:
     """grpc.ChannelCredentials for `target`, or None for a plaintext channel. Errors
     (ValueError) name the option: unreadable files, a token without TLS to a remote target."""
     uses_tls = tls or ca_file or cert_file
@@ -58,9 +67,9 @@ KEEPALIVE_TIME_MS = 2000
 KEEPALIVE_TIMEOUT_MS = 2000
 
 
-def channel_options(server_name=None, own_subchannel=False):
+def channel_options(server_name: str | None = None, own_subchannel: bool = False) -> list[ChannelOption]:
     # Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
-    options = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+    options: list[ChannelOption] = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
     # HTTP/2 keepalive: a ping every KEEPALIVE_TIME_MS, also without calls in flight, and a
     # connection whose ping is not answered within KEEPALIVE_TIMEOUT_MS is closed, so a
     # partition or a frozen server is found in seconds, not by TCP's timers (minutes). The

@@ -18,21 +18,29 @@ the session for as long as the caller keeps stepping: no overall budget, back-of
 step returns within P plus the time to wake its thread (tests allow 100 ms and more).
 """
 
+from __future__ import annotations
+
 import math
 import threading
 import time
 from collections import deque
+from types import TracebackType
+from typing import TYPE_CHECKING, overload
 
 import grpc
 
 from nupmpc._proto import pb
-from nupmpc.control_call import attach
+from nupmpc.arrays import ArrayLike
+from nupmpc.control_call import _Stream, attach
 from nupmpc.errors import NupmpcError, Unavailable, error_from_code
 from nupmpc.reconnect import Backoff, ReconnectAttempt, ReconnectOptions, ReconnectStats, is_retryable, \
     ride_out_outage
 from nupmpc.result import Plan, held_result
 from nupmpc.spec_update import apply_step_to_spec
-from nupmpc.step import build_step, dims_of
+from nupmpc.step import Bounds, Dims, StepModel, WarmStart, build_step, dims_of
+
+if TYPE_CHECKING:
+    from nupmpc.client import Client
 
 # With a period: the caps on the reconnect options, and how recent the last step must be
 # for the reconnect thread to keep trying.
@@ -47,7 +55,7 @@ MAX_UNANSWERED = 256
 ATTEMPT_LOG_LENGTH = 100
 
 
-def held_periods_to_reconnect(period_s, given=None):
+def held_periods_to_reconnect(period_s: float, given: int | None = None) -> int:
     """K: held steps in a row after which the stream counts as broken."""
     if given is not None:
         if int(given) != given or given < 1:
@@ -62,7 +70,8 @@ class Session:
     period: the control period in seconds (None: a step waits for its answer); see the
     module text. held_periods: K (None: max(3, ceil(1 s / period)))."""
 
-    def __init__(self, client, spec, reconnect=None, period=None, held_periods=None):
+    def __init__(self, client: Client, spec: pb.ProblemSpec, reconnect: ReconnectOptions | None = None,
+                 period: float | None = None, held_periods: int | None = None) -> None:
         if period is not None and not period > 0:
             raise ValueError(f"period: must be > 0 seconds, got {period!r}")
         self._client = client
@@ -75,15 +84,15 @@ class Session:
         self._dims = dims_of(spec)
         self._options = reconnect or ReconnectOptions()
         self._period = period
-        self._held_periods = held_periods_to_reconnect(period, held_periods) if period else None
+        self._held_periods = held_periods_to_reconnect(period, held_periods) if period else 0  # K; 0: no period
         self._step_lock = threading.Lock()  # one step (or close) at a time
         self._cond = threading.Condition()  # everything below
         self._channel = client._channel
         self._own_channel = False
-        self._stream = None
+        self._stream: _Stream | None = None
         self._sequence = 1
-        self._unanswered = {}  # sequence → step sent and not answered yet
-        self.id = None
+        self._unanswered: dict[int, pb.Step] = {}  # sequence → step sent and not answered yet
+        self.id: str | None = None
         self.stats = ReconnectStats()
         self.held_steps = 0
         self.consecutive_held = 0
@@ -91,19 +100,20 @@ class Session:
         self._unreported_held = 0
         self._silent_periods = 0  # held periods in a row without any answer (the K rule)
         self._closing = False
-        self._break_cause = None
+        # Why the stream counts as broken (the reconnect attempts report it); set by every break.
+        self._break_cause: NupmpcError = Unavailable("the Control stream broke")
         self._broken_at = self._last_step_at = time.monotonic()
         with self._cond:
             self._stream, self.id = attach(self._channel, self._spec, self._next_sequence(),
                                             self._options.attempt_timeout_s)
-        self._reconnector = None
+        self._reconnector: threading.Thread | None = None
         if period:
             self.stats.attempt_log = deque(maxlen=ATTEMPT_LOG_LENGTH)
-            self._reconnector = threading.Thread(target=self._reconnect_loop, daemon=True)
+            self._reconnector = threading.Thread(target=self._reconnect_loop, args=(period,), daemon=True)
             self._reconnector.start()
 
     @property
-    def spec(self):
+    def spec(self) -> pb.ProblemSpec:
         """The spec the session would be re-created from (kept current with every step)."""
         with self._cond:
             copy = pb.ProblemSpec()
@@ -111,24 +121,24 @@ class Session:
         return copy
 
     @property
-    def dims(self):
+    def dims(self) -> Dims:
         """(M, L, K, N)."""
         return self._dims
 
     @property
-    def period(self):
+    def period(self) -> float | None:
         return self._period
 
     @property
-    def reconnects(self):
+    def reconnects(self) -> int:
         return self.stats.reconnects
 
-    def _next_sequence(self):
+    def _next_sequence(self) -> int:
         sequence = self._sequence
         self._sequence += 1
         return sequence
 
-    def _renew_channel(self):
+    def _renew_channel(self) -> None:
         # A channel whose connection attempts were refused while the server was down keeps
         # failing calls at once until its own back-off (1 s growing ×1.6) lets it retry:
         # every attempt gets a new channel with a connection of its own. Under _cond.
@@ -137,7 +147,7 @@ class Session:
         self._channel = self._client.new_channel(own_subchannel=True)
         self._own_channel = True
 
-    def _take_late_answer(self, response):
+    def _take_late_answer(self, response: pb.ControlResponse) -> None:
         with self._cond:
             self._silent_periods = 0  # the stream is alive, only slower than the period
             step = self._unanswered.get(response.sequence)
@@ -155,7 +165,13 @@ class Session:
             for sequence in [s for s in self._unanswered if s <= response.sequence]:
                 del self._unanswered[sequence]
 
-    def _exchange(self, step, deadline):
+    @overload
+    def _exchange(self, step: pb.Step, deadline: None) -> pb.SolveResult: ...
+
+    @overload
+    def _exchange(self, step: pb.Step, deadline: float) -> pb.SolveResult | None: ...
+
+    def _exchange(self, step: pb.Step, deadline: float | None) -> pb.SolveResult | None:
         """Sends `step` and waits for its answer until `deadline` (None: no deadline):
         the result, None (held), or raises the step's or the stream's error."""
         with self._cond:
@@ -164,7 +180,7 @@ class Session:
                 raise Unavailable("not connected")
             sequence = self._next_sequence()
             self._unanswered[sequence] = step
-            if len(self._unanswered) > max(MAX_UNANSWERED, 2 * (self._held_periods or 0)):
+            if len(self._unanswered) > max(MAX_UNANSWERED, 2 * self._held_periods):
                 del self._unanswered[min(self._unanswered)]
             dropped = stream.send(pb.ControlRequest(sequence=sequence, step=step,
                                                     held_periods=self._unreported_held))
@@ -191,7 +207,7 @@ class Session:
                 apply_step_to_spec(step, response.result, self._spec)
             return response.result
 
-    def _step_waiting(self, step):
+    def _step_waiting(self, step: pb.Step) -> pb.SolveResult:
         try:
             return self._exchange(step, None)
         except NupmpcError as error:
@@ -201,7 +217,7 @@ class Session:
         with self._cond:
             self._drop_stream()
 
-        def recreate_and_resend(timeout_s):
+        def recreate_and_resend(timeout_s: float) -> pb.SolveResult:
             with self._cond:
                 self._renew_channel()
                 self._stream, self.id = attach(self._channel, self._spec, self._next_sequence(), timeout_s)
@@ -214,12 +230,12 @@ class Session:
                 raise
         return ride_out_outage(self._options, cause, recreate_and_resend, self.stats)
 
-    def _drop_stream(self):
+    def _drop_stream(self) -> None:
         if self._stream is not None:
             self._stream.cancel()
             self._stream = None
 
-    def _break(self, stream, cause):
+    def _break(self, stream: _Stream, cause: NupmpcError) -> None:
         """The stream `stream` counts as broken: dropped, and the reconnect thread woken. Under _cond."""
         if self._stream is None or self._stream is not stream:
             return  # already broken (and maybe replaced)
@@ -228,7 +244,7 @@ class Session:
         self._break_cause, self._broken_at = cause, time.monotonic()
         self._cond.notify_all()
 
-    def _step_in_period(self, step, deadline):
+    def _step_in_period(self, step: pb.Step, deadline: float) -> pb.SolveResult:
         with self._cond:
             self._last_step_at = time.monotonic()
             if self._stream is not None and self._stream.ended:
@@ -263,12 +279,12 @@ class Session:
                     self._break(stream, Unavailable(f"no answer in {self._silent_periods} periods in a row"))
         return held_result()
 
-    def _reconnect_loop(self):
+    def _reconnect_loop(self, period: float) -> None:
         o = self._options
         options = ReconnectOptions(initial_backoff_s=o.initial_backoff_s, multiplier=o.multiplier,
                                    max_backoff_s=min(o.max_backoff_s, MAX_BACKOFF_S), jitter=o.jitter,
                                    attempt_timeout_s=min(o.attempt_timeout_s, MAX_ATTEMPT_TIMEOUT_S), seed=o.seed)
-        stepping_s = max(STEPPING_S, 2 * self._period)
+        stepping_s = max(STEPPING_S, 2 * period)
         backoff, attempt = Backoff(options), 0
         with self._cond:
             while True:
@@ -320,9 +336,13 @@ class Session:
                     finally:
                         self._cond.acquire()
 
-    def step(self, x=None, references=None, bounds=None, input_references=None, input_bounds=None, shift=False,
-             warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None, deadline=None):
-        """Solves one period for the measured state `x` (M,) and returns its Plan.
+    def step(self, x: ArrayLike | None = None, *, references: ArrayLike | None = None, bounds: Bounds | None = None,
+             input_references: ArrayLike | None = None, input_bounds: Bounds | None = None, shift: bool = False,
+             warm_start: WarmStart = None, max_iterations: int = 0, time_limit_ms: float = 0.0,
+             previous_input: ArrayLike | None = None, model: StepModel | None = None,
+             deadline: float | None = None) -> Plan:
+        """Solves one period for the measured state `x` (M,) and returns its Plan; everything
+        after `x` is given by keyword.
 
         references: output references, (K,) or (N+1, K) (GP sessions: r, 1 or N values);
         bounds: (lower, upper) of the outputs, each (K,) or (N+1, K), None for a side kept;
@@ -334,8 +354,10 @@ class Session:
         deadline: with a period, the time.monotonic() by which to return instead of one
         period from now (a caller that makes several steps within one period).
         Raises ShapeError (before sending) or a typed NupmpcError from the server."""
-        step = build_step(self._spec, x, references, bounds, input_references, input_bounds, shift, warm_start,
-                          max_iterations, time_limit_ms, previous_input, model)
+        step = build_step(self._spec, x, references=references, bounds=bounds, input_references=input_references,
+                          input_bounds=input_bounds, shift=shift, warm_start=warm_start,
+                          max_iterations=max_iterations, time_limit_ms=time_limit_ms,
+                          previous_input=previous_input, model=model)
         if self._period and deadline is not None:
             # The server's deadline for it too (Step.budget_ms), instead of the session's period.
             step.budget_ms = max((deadline - time.monotonic()) * 1e3, 1e-3)
@@ -348,9 +370,9 @@ class Session:
             else:
                 result = self._step_waiting(step)
             round_trip_ms = (time.perf_counter() - start) * 1e3
-        return Plan(result, self._dims, round_trip_ms)
+        return Plan.from_result(result, self._dims, round_trip_ms)
 
-    def close(self):
+    def close(self) -> None:
         """Ends the stream (the server closes the session); later steps raise. With a
         period, returns within about two seconds (a reconnect attempt in flight ends first,
         then the server's goodbye is awaited for a second)."""
@@ -368,8 +390,9 @@ class Session:
                 self._channel.close()
                 self._own_channel = False
 
-    def __enter__(self):
+    def __enter__(self) -> Session:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 traceback: TracebackType | None) -> None:
         self.close()

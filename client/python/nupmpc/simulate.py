@@ -1,14 +1,32 @@
 """Closed loop against a Python plant: nupmpc.simulate(session, plant, x0, steps) runs
 the session on the plant's states and collects a Trajectory (plot it with .plot())."""
 
+from __future__ import annotations
+
+import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Union
 
 import numpy as np
+import numpy.typing as npt
 
+from nupmpc._proto import pb
+from nupmpc.arrays import ArrayLike, FloatArray
+from nupmpc.result import Plan, PlanStatus
 from nupmpc.spec_builder import from_spec
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
-def linear_plant(spec):
+    from nupmpc.nonlinear import NonlinearSession
+    from nupmpc.session import Session
+
+# A plant: (x, u) → next x; a disturbance: an array (steps, M) or a callable t → w.
+Plant = Callable[[FloatArray, FloatArray], ArrayLike]
+Disturbance = Union[ArrayLike, Callable[[int], ArrayLike]]
+
+
+def linear_plant(spec: pb.ProblemSpec) -> Plant:
     """x[t+1] = A x[t] + B u[t] + c from the spec's model (its first matrices)."""
     if spec.HasField("gp"):
         raise ValueError("plant: a GP session has no model to simulate; pass plant=callable(x, u)")
@@ -17,19 +35,28 @@ def linear_plant(spec):
     A = np.asarray(m.a[0].data).reshape(M, M)
     B = np.asarray(m.b[0].data).reshape(M, L)
     c = np.asarray(m.state_offset[:M]) if len(m.state_offset) else np.zeros(M)
-    return lambda x, u: A @ x + B @ u + c
+
+    def plant(x: FloatArray, u: FloatArray) -> FloatArray:
+        x_next: FloatArray = A @ x + B @ u + c
+        return x_next
+    return plant
 
 
-def _disturbance(disturbance, steps, M):
+def _disturbance(disturbance: Disturbance | None, steps: int, M: int) -> Callable[[int], FloatArray]:
     if disturbance is None:
         return lambda t: np.zeros(M)
     if callable(disturbance):
-        return lambda t: np.asarray(disturbance(t), dtype=float)
+        given = disturbance  # narrowed here, not in the closure
+        return lambda t: np.asarray(given(t), dtype=float)
     w = np.asarray(disturbance, dtype=float)
     if w.shape != (steps, M):
         from nupmpc.errors import ShapeError
         raise ShapeError("disturbance", f"expected shape ({steps}, {M}) or a callable t → w, got {w.shape}")
-    return lambda t: w[t]
+
+    def row(t: int) -> FloatArray:
+        w_t: FloatArray = w[t]
+        return w_t
+    return row
 
 
 @dataclass
@@ -38,32 +65,34 @@ class Trajectory:
     the outputs of each step's plan at its own state (y[0]), references (T, K) the output
     references in force (NaN: none), per-step status, objective, iterations, solve_ms and
     round_trip_ms, and the plans themselves. input_bounds/output_bounds: (lower, upper)."""
-    x: np.ndarray
-    u: np.ndarray
-    y: np.ndarray
-    references: np.ndarray
-    status: list
-    objective: np.ndarray
-    iterations: np.ndarray
-    solve_ms: np.ndarray
-    round_trip_ms: np.ndarray
-    has_plan: np.ndarray
-    input_bounds: tuple
-    output_bounds: tuple
-    plans: list = field(repr=False, default_factory=list)
+    x: FloatArray
+    u: FloatArray
+    y: FloatArray
+    references: FloatArray
+    status: list[PlanStatus]
+    objective: FloatArray
+    iterations: npt.NDArray[np.int_]
+    solve_ms: FloatArray
+    round_trip_ms: FloatArray
+    has_plan: npt.NDArray[np.bool_]
+    input_bounds: tuple[FloatArray, FloatArray]
+    output_bounds: tuple[FloatArray, FloatArray]
+    plans: list[Plan] = field(repr=False, default_factory=list)
 
     @property
-    def steps(self):
+    def steps(self) -> int:
         return len(self.u)
 
-    def plot(self, path=None, title=None):
+    def plot(self, path: str | os.PathLike[str] | None = None, title: str | None = None) -> Figure:
         """A matplotlib Figure: states, outputs with bounds and references, inputs with
         limits, solve and round-trip times per step; written to `path` (PNG) if given."""
         from nupmpc.plot import plot_trajectory
         return plot_trajectory(self, path, title)
 
 
-def simulate(session, plant=None, x0=None, steps=50, disturbance=None, step_args=None):
+def simulate(session: Session | NonlinearSession, plant: Plant | None = None, x0: ArrayLike | None = None,
+             steps: int = 50, disturbance: Disturbance | None = None,
+             step_args: Callable[[int, FloatArray], Mapping[str, Any]] | None = None) -> Trajectory:
     """Runs `steps` control periods: each sends the plant's state to the session, applies
     the plan's u0 (holding the last input when a result has no plan), and advances the
     plant, x ← plant(x, u) + w[t]. plant: None (the session's linear model) or a callable
@@ -85,7 +114,7 @@ def simulate(session, plant=None, x0=None, steps=50, disturbance=None, step_args
         # has none; their first reference is at step 1).
         in_force = from_spec(session.spec).output_references()
         refs.append(in_force[0] if np.isfinite(in_force[0]).any() or len(in_force) == 1 else in_force[1])
-        if plan.has_plan:
+        if plan.u0 is not None:  # has_plan
             u = plan.u0
             ys.append(plan.y[0])
         else:

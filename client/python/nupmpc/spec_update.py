@@ -9,12 +9,19 @@ the mirror of the server's step semantics: change one, change all. The model upd
 given for some steps becomes N (C: N + 1) matrices in the spec, as in the session.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Iterable
+
 from nupmpc._proto import pb
+
+if TYPE_CHECKING:
+    from nupmpc._proto import RepeatedMessages, RepeatedScalars
 
 _PER_STEP = ("weight", "target", "lower", "upper", "slope", "radius", "exponent")
 
 
-def shift_components(components):
+def shift_components(components: Iterable[pb.ComponentPrior]) -> None:
     """Every per-step array one step earlier (n+1 → n, the last kept; length 1: constant)."""
     for prior in components:
         for name in _PER_STEP:
@@ -23,36 +30,37 @@ def shift_components(components):
                 values[n] = values[n + 1]
 
 
-def _replace(entries, components):
+def _replace(entries: Iterable[pb.PriorUpdate.Entry], components: RepeatedMessages[pb.ComponentPrior]) -> None:
     for entry in entries:
         # The server refuses a step with an index out of range, so an accepted one has none.
         if entry.index < len(components):
             components[entry.index].CopyFrom(entry.prior)
 
 
-def _shift_steps(items):
+def _shift_steps(items: RepeatedMessages[pb.Matrix]) -> None:
     """Step n+1 becomes step n, the last step repeated (a no-op on one item)."""
     for n in range(len(items) - 1):
         items[n].CopyFrom(items[n + 1])
 
 
-def _shift_rows(values, width):
+def _shift_rows(values: RepeatedScalars[float], width: int) -> None:
     """The same on a flat step-major array of `width` values per step."""
     for i in range(len(values) - width):
         values[i] = values[i + width]
 
 
-def _write_all_steps(values, field, width, steps):
+def _write_all_steps(values: Iterable[float], field: RepeatedScalars[float], width: int, steps: int) -> None:
     """An all-step offset: `width` values keep per-step storage per step (the same at every
     step), else replace; steps·width values replace."""
-    values = list(values)
-    if len(values) == width and len(field) == width * steps:
-        values = values * steps
+    given = list(values)
+    if len(given) == width and len(field) == width * steps:
+        given = given * steps
     del field[:]
-    field.extend(values)
+    field.extend(given)
 
 
-def _write_matrices(entries, field, steps, rows, cols):
+def _write_matrices(entries: RepeatedMessages[pb.ModelUpdate.MatrixAt], field: RepeatedMessages[pb.Matrix],
+                    steps: int, rows: int, cols: int) -> None:
     if not entries:
         return
     if len(field) != steps:
@@ -69,7 +77,8 @@ def _write_matrices(entries, field, steps, rows, cols):
         field[entry.step].CopyFrom(entry.matrix)
 
 
-def _write_vectors(entries, field, steps, width):
+def _write_vectors(entries: RepeatedMessages[pb.ModelUpdate.VectorAt], field: RepeatedScalars[float], steps: int,
+                   width: int) -> None:
     if not entries:
         return
     if len(field) != steps * width:
@@ -81,7 +90,7 @@ def _write_vectors(entries, field, steps, width):
             field[entry.step * width + i] = v
 
 
-def apply_model_update(update, spec):
+def apply_model_update(update: pb.ModelUpdate, spec: pb.ProblemSpec) -> None:
     """Writes an accepted pb.ModelUpdate into `spec`'s model as the server does: shift, then
     the all-step offsets, then the single steps."""
     m = spec.model
@@ -104,7 +113,7 @@ def apply_model_update(update, spec):
     _write_vectors(update.output_offset, m.output_offset, N + 1, K)
 
 
-def apply_step_to_spec(step, result, spec):
+def apply_step_to_spec(step: pb.Step, result: pb.SolveResult, spec: pb.ProblemSpec) -> None:
     """Applies `step`, answered with `result` (an answer, not an error), to `spec`."""
     if result.status == pb.SOLVE_STATUS_SUPERSEDED:
         return  # nothing of it was applied

@@ -6,21 +6,37 @@ current by apply_step_to_spec), shifted first when the step shifts, so that only
 caller gives changes. Model updates (Step.model) come from a nupmpc.ModelUpdate, checked
 against the spec's dimensions, or as a pb.ModelUpdate sent as it is (the server checks it)."""
 
+from __future__ import annotations
+
 import math
+from typing import TYPE_CHECKING, Literal, Optional, Sequence, Union
 
 import numpy as np
 
 from nupmpc._proto import pb
-from nupmpc.arrays import as_array, finite, per_step, vector
+from nupmpc.arrays import ArrayLike, as_array, finite, per_step, vector
 from nupmpc.errors import ShapeError
 from nupmpc.model_update import ModelUpdate
+from nupmpc.spec_builder import _set
 from nupmpc.spec_update import shift_components
 
-_WARM = {None: pb.WARM_START_UNSPECIFIED, "shift": pb.WARM_START_SHIFT, "keep": pb.WARM_START_KEEP,
-         "cold": pb.WARM_START_COLD}
+if TYPE_CHECKING:
+    from nupmpc._proto import RepeatedMessages
+
+# How a step starts its solve: None (the server's default, "shift"), "shift", "keep" or "cold".
+WarmStart = Optional[Literal["shift", "keep", "cold"]]
+# (lower, upper) of a step's bounds, None for a side kept.
+Bounds = tuple[Optional[ArrayLike], Optional[ArrayLike]]
+# The model terms of one step: checked (nupmpc.ModelUpdate) or sent as they are.
+StepModel = Union[ModelUpdate, pb.ModelUpdate]
+# (M, L, K, N): states, inputs, outputs, horizon.
+Dims = tuple[int, int, int, int]
+
+_WARM: dict[str | None, pb.WarmStart] = {None: pb.WARM_START_UNSPECIFIED, "shift": pb.WARM_START_SHIFT,
+                                          "keep": pb.WARM_START_KEEP, "cold": pb.WARM_START_COLD}
 
 
-def dims_of(spec):
+def dims_of(spec: pb.ProblemSpec) -> Dims:
     """(M, L, K, N) of a spec (GP: the past window, one input and output, horizon H)."""
     if spec.HasField("gp"):
         model = spec.gp.model
@@ -29,12 +45,7 @@ def dims_of(spec):
     return m.num_states, m.num_inputs, m.num_outputs, m.horizon
 
 
-def _set(field, values):
-    del field[:]
-    field.extend(values)
-
-
-def _pair(value, name):
+def _pair(value: Bounds | None, name: str) -> Bounds:
     if value is None:
         return None, None
     if not isinstance(value, (tuple, list)) or len(value) != 2:
@@ -42,7 +53,9 @@ def _pair(value, name):
     return value
 
 
-def _update_components(current, count, steps, which, references, bounds, entries):
+def _update_components(current: Sequence[pb.ComponentPrior], count: int, steps: int, which: str,
+                       references: ArrayLike | None, bounds: Bounds | None,
+                       entries: RepeatedMessages[pb.PriorUpdate.Entry]) -> None:
     """Adds PriorUpdate entries for the components whose reference or bounds change."""
     targets = None if references is None else per_step(references, f"{which}references", steps, count)
     lower, upper = _pair(bounds, f"{which}bounds")
@@ -67,7 +80,7 @@ def _update_components(current, count, steps, which, references, bounds, entries
         entries.add(index=i, prior=prior)
 
 
-def _model(spec, model, step):
+def _model(spec: pb.ProblemSpec, model: StepModel | None, step: pb.Step) -> None:
     if model is None:
         return
     if isinstance(model, pb.ModelUpdate):
@@ -78,8 +91,11 @@ def _model(spec, model, step):
         raise ShapeError("model", f"expected a nupmpc.ModelUpdate, got {type(model).__name__}")
 
 
-def build_step(spec, x=None, references=None, bounds=None, input_references=None, input_bounds=None,
-               shift=False, warm_start=None, max_iterations=0, time_limit_ms=0.0, previous_input=None, model=None):
+def build_step(spec: pb.ProblemSpec, x: ArrayLike | None = None, *, references: ArrayLike | None = None,
+               bounds: Bounds | None = None, input_references: ArrayLike | None = None,
+               input_bounds: Bounds | None = None, shift: bool = False, warm_start: WarmStart = None,
+               max_iterations: int = 0, time_limit_ms: float = 0.0, previous_input: ArrayLike | None = None,
+               model: StepModel | None = None) -> pb.Step:
     """The Step for `session.step(...)`; see Session.step for the arguments."""
     M, L, K, N = dims_of(spec)
     step = pb.Step(max_iterations=max_iterations, time_limit_ms=time_limit_ms)

@@ -2,11 +2,13 @@
 of references and bounds, typed server errors, the asyncio variant."""
 
 import asyncio
+import dataclasses
 
 import numpy as np
 import pytest
 
 import nupmpc
+from nupmpc._proto import pb
 
 
 def test_masses_closed_loop_reaches_the_reference_optimum_at_every_step(client, masses, reference):
@@ -104,6 +106,26 @@ def test_shapes_are_refused_before_anything_is_sent(client, masses):
     assert after.solves == before.solves  # nothing reached a solver
     assert dict(after.errors_by_code) == dict(before.errors_by_code)  # and nothing was refused there
     session.close()
+
+
+def test_step_options_are_keyword_only_and_a_plan_is_frozen_with_a_string_status(client, masses):
+    before = client.server_info()
+    session = client.session(masses.problem)
+    x = masses.closed_loop_states[0]
+    with pytest.raises(TypeError):
+        session.step(x, np.zeros(12))  # references by position
+    assert client.server_info().solves == before.solves  # refused before anything was sent
+    plan = session.step(x)
+    assert plan.status is nupmpc.PlanStatus.CONVERGED and plan.status == "CONVERGED"
+    assert str(plan.status) == f"{plan.status}" == "CONVERGED" and repr([plan.status]) == "['CONVERGED']"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        plan.status = nupmpc.PlanStatus.HELD
+    session.close()
+
+
+def test_plan_status_has_a_member_for_every_solve_status():
+    names = {name.replace("SOLVE_STATUS_", "") for name in pb.SolveStatus.keys()}
+    assert {status.value for status in nupmpc.PlanStatus} == names
 
 
 def test_the_asyncio_session_gives_the_blocking_sessions_plans(server, masses, reference):
