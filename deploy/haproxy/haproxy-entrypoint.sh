@@ -17,7 +17,7 @@
 #   NUPMPC_BALANCER_CLIENT_CRT    --balancer-crt: the balancer's client certificate to the replicas
 # Reload after renewing the files: `kill -USR2 1` in the container (a new worker with the new
 # files; the old one finishes its open streams).
-# The configuration goes to /tmp: the image's user may write nowhere else.
+# The configuration goes to $TMPDIR (default /tmp: the image's user may write nowhere else).
 set -euo pipefail
 [ -n "${NUPMPC_REPLICAS:-}" ] || { echo "haproxy-entrypoint: NUPMPC_REPLICAS is empty" >&2; exit 2; }
 args=(--listen "${NUPMPC_BALANCER_LISTEN:-0.0.0.0:50051}")
@@ -29,7 +29,7 @@ for pair in TLS_CRT:--tls-crt CLIENT_CA:--client-ca REPLICA_CA:--replica-ca REPL
   [ -z "${!variable:-}" ] || args+=("${pair#*:}" "${!variable}")
 done
 read -r -a replicas <<<"$NUPMPC_REPLICAS"
-config=/tmp/haproxy.cfg
+config=${TMPDIR:-/tmp}/haproxy.cfg
 "$(dirname "$0")/haproxy-config.sh" "${args[@]}" "${replicas[@]}" >"$config"
 tls="plaintext to clients and replicas"
 [ -z "${NUPMPC_BALANCER_TLS_CRT:-}" ] || tls="TLS to clients${NUPMPC_BALANCER_CLIENT_CA:+ (client certificates verified)}"
