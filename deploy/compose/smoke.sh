@@ -134,10 +134,11 @@ for who in alice bob; do
 done
 SH
   answers=$("${podman_base[@]}" run --rm --pod "$stack_pod" -v "$direct:/d:ro" \
-              --entrypoint bash "${NUPMPC_SERVER_IMAGE:-localhost/nupmpc:latest}" -c "$direct_sessions" 2>&1) || true
+              --entrypoint bash "${NUPMPC_SERVER_IMAGE:-localhost/nupmpc:latest}" -c "$direct_sessions" \
+              2>"$work/direct.err") || answers+=$'\n'"podman run: $(tail -n 2 "$work/direct.err")"
   verdict=$(/usr/bin/python3 - "$id" "$answers" <<'PY'
 import sys
-session, lines = sys.argv[1], [l.split() for l in sys.argv[2].splitlines()]
+session, lines = sys.argv[1], [l.split() for l in sys.argv[2].splitlines() if l.strip()]
 rows = [l for l in lines if len(l) == 4 and l[0] in ("alice", "bob")]
 holders = [r for who, r, rc, ids in rows if who == "alice" and session in ids.split(",")]
 bad = [" ".join(l) for l in lines if l not in rows or l[2] != "0"]
