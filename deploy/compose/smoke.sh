@@ -18,15 +18,18 @@
 #      failed step, no plan that differs from the core's, and how HAProxy spread the streams;
 #   3. 20 sessions by client-drawn id, each solved 10 times by id (--probe addressed, alice's
 #      certificate): every call reaches its session (none failed, none had to be re-created);
+#   4. rotation (not with --plaintext): 6 streams for 12 s; meanwhile every certificate of
+#      both hops is issued anew and handed over by up.sh --renew-secrets: the replicas and
+#      the balancer serve the new ones, no step fails;
 # then Prometheus in the pod, through its HTTP API, each within 30 s of the probes' end:
-#   4. its job nupmpc's targets are the three replicas' metrics endpoints, all health "up"
+#   5. its job nupmpc's targets are the three replicas' metrics endpoints, all health "up"
 #      (/api/v1/targets; plain HTTP on the pod's loopback);
-#   5. the rule groups of deploy/prometheus/nupmpc-alerts.yml are loaded with every rule of
+#   6. the rule groups of deploy/prometheus/nupmpc-alerts.yml are loaded with every rule of
 #      the file, each evaluated without error, health "ok" (/api/v1/rules);
-#   6. up{job="nupmpc"} is 1 and nupmpc_solves_total (the probes' solves) above 0 on each
+#   7. up{job="nupmpc"} is 1 and nupmpc_solves_total (the probes' solves) above 0 on each
 #      replica (/api/v1/query);
 # then down.sh: every container exits 0 on SIGTERM. Exit status 0 only if all passed.
-# --plaintext: the same with up.sh --plaintext (the loopback/dev variant), without 1.
+# --plaintext: the same with up.sh --plaintext (the loopback/dev variant), without 1 and 4.
 #
 # Usage: deploy/compose/smoke.sh [--port P] [--plaintext]        (default port 50051)
 # Environment:
@@ -167,6 +170,53 @@ echo "smoke: addressed: $addressed"
 echo "smoke: addressed: calls by id per replica (HAProxy): $(spread pinned "$before")"
 check "$addressed" 'd["failed"] == 0 and d["recreated"] == 0 and d["miscounted"] == 0 and d["solves"] == 200' \
   "addressed: a call by session id missed its session"
+
+# Rotation on both hops under load (not with --plaintext): 6 Control streams (alice's token)
+# for 12 s; after 3 s the replicas', the balancer's and its client certificate are issued
+# anew and `up.sh --renew-secrets` hands them over. The replicas must serve the new one
+# (read in the pod's network namespace, as the balancer connects), the balancer too, and no
+# step may fail.
+if [ $plaintext = 0 ]; then
+  infra_pid=$("${podman_base[@]}" inspect --format '{{.State.Pid}}' \
+                "$("${podman_base[@]}" pod inspect "$stack_pod" --format '{{.InfraContainerID}}')")
+  served_serial() {  # PORT [in-pod]: the serial of the certificate served there
+    local connect=(openssl s_client -connect "127.0.0.1:$1" -cert "$pki/balancer-client.pem"
+                   -key "$pki/balancer-client.pem.key")
+    [ "${2:-}" != in-pod ] || connect=(nsenter -t "$infra_pid" -n "${connect[@]}")
+    "${connect[@]}" </dev/null 2>/dev/null | openssl x509 -noout -serial 2>/dev/null || true
+  }
+  "$probe" --server "$server" "${as_alice_token[@]}" --instance "$instance" --probe streams --streams 6 \
+    --duration_s 12 >"$work/rotation.json" 2>"$work/rotation.err" &
+  rotation_probe=$!
+  sleep 3
+  deploy/make-pki.sh "$pki" server replica /CN=localhost DNS:localhost,IP:127.0.0.1
+  deploy/make-pki.sh "$pki" server frontend "/CN=$(hostname)" "DNS:localhost,IP:127.0.0.1,DNS:$(hostname)"
+  deploy/make-pki.sh "$pki" client balancer-client /O=nupmpc/CN=nupmpc-balancer
+  deploy/compose/up.sh --renew-secrets --pki "$pki"
+  new_replica=$(openssl x509 -noout -serial -in "$pki/replica.pem")
+  new_frontend=$(openssl x509 -noout -serial -in "$pki/frontend.pem")
+  rotated="" deadline=$((SECONDS + 15))
+  while [ "$SECONDS" -lt "$deadline" ]; do
+    rotated=""
+    for replica_port in 50061 50062 50063; do
+      [ "$(served_serial $replica_port in-pod)" = "$new_replica" ] && rotated+="r${replica_port#5006} "
+    done
+    [ "$(served_serial "$port")" = "$new_frontend" ] && rotated+="balancer"
+    [ "$rotated" = "r1 r2 r3 balancer" ] && break
+    sleep 0.5
+  done
+  if [ "$rotated" = "r1 r2 r3 balancer" ]; then echo "smoke: rotation: the replicas and the balancer serve their new certificates"
+  else echo "smoke: FAIL: rotation: only ${rotated:-none} serve the new certificates"; failures+=("rotation: certificates"); fi
+  if wait "$rotation_probe"; then
+    rotation=$(cat "$work/rotation.json")
+    echo "smoke: rotation: $rotation"
+    check "$rotation" 'd["failed_steps"] == 0 and d["mismatched"] == 0 and d["verified"] > 0' \
+      "rotation: a step failed while the certificates were renewed"
+  else
+    echo "smoke: FAIL: rotation: the streams probe failed: $(tail -n 3 "$work/rotation.err")"
+    failures+=("rotation: streams probe")
+  fi
+fi
 
 # Prometheus: each look is one GET through `podman exec` (stack_prometheus) and a judgement of
 # its JSON here (the expected count: the three replicas); a look that fails is repeated until

@@ -58,7 +58,9 @@ stack_servers() {
       NR == 1 { sub(/^# /, ""); for (i = 1; i <= NF; i++) col[$i] = i; next }
       $1 == backend && $2 != "FRONTEND" && $2 != "BACKEND" {
         check = $col["check_status"] == "" ? "-" : $col["check_status"]
-        print $2, $col["status"], check, $col["scur"], $col["stot"] }'
+        # One word: a server between states is "UP 1/2" (one check of "fall" failed).
+        status = $col["status"]; gsub(/ /, "_", status)
+        print $2, status, check, $col["scur"], $col["stot"] }'
 }
 
 # Prometheus listens on the pod's loopback only (127.0.0.1:9090, not published: see the
