@@ -53,40 +53,27 @@ fail() {
   exit 1
 }
 
-# --- Certificates, made here with openssl (P-256), one CA for every role. Each key sits
-# beside its certificate as FILE.key, as a Kubernetes TLS Secret mounted with items gives it.
+# --- Certificates and tokens (deploy/make-pki.sh): one CA for every role, each key beside its
+# certificate as FILE.key, as a Kubernetes TLS Secret mounted with items gives it.
 pki="$work/pki"
-mkdir -p "$pki"
-newkey=(openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes)
-"${newkey[@]}" -x509 -days 2 -keyout "$pki/ca.key" -out "$pki/ca.pem" -subj /CN=nupmpc-test-ca 2>/dev/null
+pki() { deploy/make-pki.sh "$pki" "$@"; }
 issue() {  # NAME SUBJECT server|client: a new key and certificate, moved into place key first
-  local ext="$pki/$1.ext"
-  if [ "$3" = server ]; then
-    printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\nextendedKeyUsage=serverAuth\n' >"$ext"
-  else
-    printf 'extendedKeyUsage=clientAuth\n' >"$ext"
-  fi
-  "${newkey[@]}" -keyout "$pki/$1.new.key" -out "$pki/$1.csr" -subj "$2" 2>/dev/null
-  openssl x509 -req -days 2 -in "$pki/$1.csr" -CA "$pki/ca.pem" -CAkey "$pki/ca.key" -CAcreateserial \
-    -out "$pki/$1.new.pem" -extfile "$ext" 2>/dev/null
-  mv "$pki/$1.new.key" "$pki/$1.pem.key"
-  mv "$pki/$1.new.pem" "$pki/$1.pem"
+  if [ "$3" = server ]; then pki server "$1" "$2" DNS:localhost,IP:127.0.0.1; else pki client "$1" "$2"; fi
 }
-subject() { openssl x509 -noout -subject -nameopt RFC2253 -in "$1" | sed 's/^subject= *//'; }
 serial_of() { openssl x509 -noout -serial -in "$1"; }
 served_serial() {  # HOST:PORT: the serial of the certificate a TLS server presents (as the balancer would connect)
   openssl s_client -connect "$1" -alpn h2 -cert "$pki/balancer-client.pem" -key "$pki/balancer-client.pem.key" \
     </dev/null 2>/dev/null | openssl x509 -noout -serial 2>/dev/null || true
 }
+pki ca /CN=nupmpc-test-ca
 issue replica /CN=localhost server
 issue frontend /CN=localhost server
 issue balancer-client "/CN=nupmpc-balancer/O=nupmpc-test" client
 issue alice "/CN=alice/O=plant" client
 issue bob "/CN=bob/O=plant" client
-balancer_subject=$(subject "$pki/balancer-client.pem")
-openssl rand -hex 32 >"$pki/alice.token"
-openssl rand -hex 32 >"$pki/bob.token"
-printf '%s alice\n%s bob\n' "$(cat "$pki/alice.token")" "$(cat "$pki/bob.token")" >"$pki/tokens"
+balancer_subject=$(pki subject balancer-client)
+pki token alice alice
+pki token bob bob
 
 read -r lb_port plain_lb_port p1 p2 p3 q1 q2 q3 m1 m2 m3 < <("$py" tests/util/loopback_port.py 11)
 declare -A port=([r1]=$p1 [r2]=$p2 [r3]=$p3 [q1]=$q1 [q2]=$q2 [q3]=$q3) metrics_port=([r1]=$m1 [r2]=$m2 [r3]=$m3) pid
@@ -160,7 +147,7 @@ say "transport: plaintext to the balancer and to a replica fails, and so does TL
 # 2. Callers.
 got=$(call --target "$lb" info)
 [ "$got" = UNAUTHENTICATED ] || fail "a caller with neither token nor certificate through the balancer got $got"
-got=$(call --target "$lb" --forge "$(subject "$pki/alice.pem")" info)
+got=$(call --target "$lb" --forge "$(pki subject alice)" info)
 [ "$got" = UNAUTHENTICATED ] || fail "a forged subject header alone through the balancer got $got"
 read -r code id < <(call --target "$lb" $(cert_of alice) create "$instance")
 [ "$code" = OK ] || fail "alice could not create a session through the balancer ($code)"
@@ -176,7 +163,7 @@ expect() {  # WHAT EXPECTED ARGS...: one call, its code must be EXPECTED
   got=$(call "$@")
   [ "$got" = "$expected" ] || fail "$what: $got, expected $expected"
 }
-alice_subject=$(subject "$pki/alice.pem")
+alice_subject=$(pki subject alice)
 expect "alice through the balancer" OK --target "$lb" $(cert_of alice) get "$id"
 expect "bob through the balancer" NOT_FOUND --target "$lb" $(cert_of bob) get "$id"
 expect "bob directly" NOT_FOUND --target "127.0.0.1:${port[$holder]}" $(cert_of bob) get "$id"

@@ -14,7 +14,8 @@
 #   4. drain:     SIGTERM to one replica (--drain_delay_s): the balancer takes it out,
 #                 no step fails;
 #   5. scale-up:  a fourth replica and a balancer reload: new streams reach it;
-#   6. compose:   (full run, where podman and the images are) deploy/compose/smoke.sh.
+#   6. compose:   (full run, where podman and the images are) deploy/compose/smoke.sh, the
+#                 secure stack and its --plaintext loopback/dev variant.
 #
 #   deploy/scaleout-test.sh [--quick]            (--quick: short phases, as the ctest entry)
 #   deploy/scaleout-test.sh --secure [--quick]   TLS on both hops, tokens and mTLS callers through
@@ -253,9 +254,13 @@ if [ $quick = 0 ]; then
   if command -v podman >/dev/null && podman image exists localhost/nupmpc:latest 2>/dev/null &&
      podman image exists localhost/nupmpc-haproxy:latest 2>/dev/null &&
      podman image exists localhost/nupmpc-prometheus:latest 2>/dev/null; then
-    say "compose stack (podman kube play): deploy/compose/smoke.sh"
-    NUPMPC_BIN_DIR="$bin" deploy/compose/smoke.sh --port "$("$py" tests/util/loopback_port.py)" ||
-      fail "the compose stack's smoke test"
+    stubs="${NUPMPC_PYTHON_STUBS:-build/python}"
+    [ -f "$stubs/nupmpc/v1/nupmpc_pb2.py" ] || deploy/build.sh nupmpc_python
+    say "compose stack (podman kube play): deploy/compose/smoke.sh, secure and --plaintext"
+    NUPMPC_BIN_DIR="$bin" NUPMPC_PYTHON_STUBS="$stubs" deploy/compose/smoke.sh \
+      --port "$("$py" tests/util/loopback_port.py)" || fail "the compose stack's smoke test"
+    NUPMPC_BIN_DIR="$bin" deploy/compose/smoke.sh --plaintext --port "$("$py" tests/util/loopback_port.py)" ||
+      fail "the compose stack's smoke test (--plaintext)"
   else
     say "compose stack: not run (needs podman and the images of deploy/container/build-image.sh," \
         "deploy/compose/build-balancer-image.sh and deploy/compose/build-prometheus-image.sh)"

@@ -10,6 +10,8 @@
 #   stack_prometheus PATH       the body of Prometheus' answer to GET PATH (status 1 unless 200)
 #   stack_prometheus_config_sum the checksum of deploy/prometheus/'s configuration and rules
 #                               (the Prometheus image's label io.nupmpc.prometheus-config)
+#   stack_make_pki DIR          a CA and the stack's three certificates in DIR (deploy/make-pki.sh)
+#   stack_install_secrets DIR   copies DIR's files into the directories the pod mounts
 #
 # Why a containers.conf: `podman kube play` (4.3) has no --ulimit or --runtime option, and
 # the containers it starts would get podman's default nofile=1048576, which the runtime may not
@@ -22,6 +24,8 @@
 stack_yaml=deploy/compose/nupmpc-stack.yaml
 stack_pod=nupmpc-stack
 stack_conf_dir=/run/nupmpc-compose
+# The hostPath volumes of the YAML: what each container's user may read, and nothing else.
+stack_secrets_dir=$stack_conf_dir/secrets
 
 nupmpc_stack_setup() {
   nupmpc_podman_tag=${nupmpc_podman_tag:-compose}
@@ -54,7 +58,9 @@ stack_servers() {
       NR == 1 { sub(/^# /, ""); for (i = 1; i <= NF; i++) col[$i] = i; next }
       $1 == backend && $2 != "FRONTEND" && $2 != "BACKEND" {
         check = $col["check_status"] == "" ? "-" : $col["check_status"]
-        print $2, $col["status"], check, $col["scur"], $col["stot"] }'
+        # One word: a server between states is "UP 1/2" (one check of "fall" failed).
+        status = $col["status"]; gsub(/ /, "_", status)
+        print $2, status, check, $col["scur"], $col["stot"] }'
 }
 
 # Prometheus listens on the pod's loopback only (127.0.0.1:9090, not published: see the
@@ -75,4 +81,44 @@ stack_prometheus() {
 
 stack_prometheus_config_sum() {
   cat deploy/prometheus/prometheus.yml deploy/prometheus/nupmpc-alerts.yml | sha256sum | cut -d' ' -f1
+}
+
+# The certificates the secure stack needs, for a machine with no CA of its own: the replicas'
+# (named localhost, where the balancer dials them in the pod), the balancer's to clients
+# (localhost, 127.0.0.1 and this host's name) and its client certificate to the replicas, whose
+# subject is the YAML's NUPMPC_TRUSTED_BALANCER_SUBJECT (RFC 2253 lists the RDNs reversed).
+stack_make_pki() {  # DIR
+  local make=(deploy/make-pki.sh "$1") host
+  host=$(hostname)
+  "${make[@]}" ca /CN=nupmpc-compose-ca
+  "${make[@]}" server replica /CN=localhost DNS:localhost,IP:127.0.0.1
+  "${make[@]}" server frontend "/CN=$host" "DNS:localhost,IP:127.0.0.1,DNS:$host"
+  "${make[@]}" client balancer-client /O=nupmpc/CN=nupmpc-balancer
+}
+
+# The files each container reads, copied from a PKI directory (stack_make_pki's names plus
+# the tokens file) with the owner of that container's user (the images' fixed uids: replicas
+# 10001, balancer 10002), mode 0400. Each file is written beside its place and renamed into
+# it, keys before certificates, so that a replica re-reading its files (and a balancer
+# reloading) never sees half a file or a certificate without its key.
+stack_install_secrets() {  # PKI_DIR
+  local pki=$1 role owner file dir
+  local -A files=([replica]="ca.pem tokens replica.pem.key replica.pem"
+                  [balancer]="ca.pem frontend.pem.key frontend.pem balancer-client.pem.key balancer-client.pem")
+  local -A uid=([replica]=10001 [balancer]=10002)
+  for role in replica balancer; do
+    for file in ${files[$role]}; do
+      [ -r "$pki/$file" ] || { echo "stack-env: no $pki/$file (deploy/compose/README.md: the PKI directory)" >&2; return 1; }
+    done
+  done
+  for role in replica balancer; do
+    dir=$stack_secrets_dir/$role owner=${uid[$role]}
+    mkdir -p "$dir"
+    chown "$owner:$owner" "$dir"
+    chmod 0500 "$dir"
+    for file in ${files[$role]}; do
+      install -m 0400 -o "$owner" -g "$owner" "$pki/$file" "$dir/.$file.new"
+      mv -f "$dir/.$file.new" "$dir/$file"
+    done
+  done
 }
