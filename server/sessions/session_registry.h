@@ -64,6 +64,11 @@ struct SessionEntry {
   // One message-passing pass of its last solve (wall time): the solver checks its time
   // limit between passes, so a step's deadline leaves it this much room (step_solver.cc).
   std::atomic<double> last_pass_ms{0.0};
+  // The shortest pass of its solves so far (wall time; 0: none yet): a step left less time
+  // than this is answered without a solve. The shortest, not the last: a pass slowed by a
+  // shared core would otherwise turn away the session's next steps, and a step turned away
+  // measures nothing that could correct it.
+  std::atomic<double> shortest_pass_ms{0.0};
   std::atomic<Clock::rep> last_used{0};
 
   void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }

@@ -64,7 +64,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   // The step's deadline (step_deadline.h): the solve gets what is left of it, less the cost
   // of sending the answer and one pass (the solver looks at its time limit between passes,
   // so the last one may end a pass after it). One that could not start in time, or whose
-  // time left is shorter than the session's last pass, is answered at once without a plan
+  // time left is shorter than the session's shortest pass, is answered at once without a plan
   // (its update applied above, as for any answered step) unless the session wants it
   // solved late.
   const std::optional<Clock::time_point> due =
@@ -80,7 +80,8 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     }
     started_late = left_s <= 0.0;
     const double pass_s = entry.last_pass_ms.load(std::memory_order_relaxed) * 1e-3;
-    const bool cannot_finish_a_pass = !started_late && left_s < pass_s;
+    const bool cannot_finish_a_pass =
+        !started_late && left_s < entry.shortest_pass_ms.load(std::memory_order_relaxed) * 1e-3;
     if (cannot_finish_a_pass && !entry.timing.solve_late_steps) {
       AnswerCannotFinishAPass(*due, out);
       entry.Touch();
@@ -111,7 +112,11 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
                                 std::memory_order_relaxed);
   entry.solves.fetch_add(1, std::memory_order_relaxed);
   if (summary.iterations > 0) {
-    entry.last_pass_ms.store(summary.solve_seconds * 1e3 / summary.iterations, std::memory_order_relaxed);
+    const double pass_ms = summary.solve_seconds * 1e3 / summary.iterations;
+    entry.last_pass_ms.store(pass_ms, std::memory_order_relaxed);
+    // One solve at a time per session: no other writer between the load and the store.
+    const double shortest = entry.shortest_pass_ms.load(std::memory_order_relaxed);
+    if (shortest == 0.0 || pass_ms < shortest) entry.shortest_pass_ms.store(pass_ms, std::memory_order_relaxed);
   }
   ResultToProto(summary, entry.solution, out);
   RecordDeadlineOutcome(due, started_late, out);
