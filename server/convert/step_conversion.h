@@ -8,8 +8,7 @@
 // messages name the same fields without the "step." prefix.
 
 #include "absl/status/statusor.h"
-#include "core/session/mpc_session.h"
-#include "core/session/step_update.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::server {

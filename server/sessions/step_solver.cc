@@ -4,7 +4,7 @@
 #include <optional>
 
 #include "absl/strings/str_cat.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 #include "server/convert/result_conversion.h"
 #include "server/convert/step_conversion.h"
 #include "server/scheduling/thread_cpu_time.h"
