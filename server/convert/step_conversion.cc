@@ -114,6 +114,22 @@ absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const
   return update;
 }
 
+void ApplyWarmStart(v1::WarmStart warm_start, core::MpcSession& session, core::SolveLimits* limits) {
+  switch (warm_start) {
+    case v1::WARM_START_UNSPECIFIED:
+    case v1::WARM_START_SHIFT:
+      session.ShiftWarmStart();
+      break;
+    case v1::WARM_START_KEEP:
+      break;
+    case v1::WARM_START_COLD:
+      limits->warm_start = false;
+      break;
+    default:
+      break;
+  }
+}
+
 absl::Status AsStepError(const absl::Status& status) {
   if (status.ok()) return status;
   const absl::string_view message = status.message();
