@@ -100,20 +100,6 @@ absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> ChannelCredentialsFor(
                                                                  token_needs));
 }
 
-std::shared_ptr<grpc::Channel> CreateChannel(const std::string& target,
-                                             const std::shared_ptr<grpc::ChannelCredentials>& credentials,
-                                             const ChannelSecurity& security, grpc::ChannelArguments args) {
-  if (security.uses_tls() && !security.tls_server_name.empty()) args.SetSslTargetNameOverride(security.tls_server_name);
-  return grpc::CreateCustomChannel(target, credentials, args);
-}
-
-absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target, const ChannelSecurity& security,
-                                                             const grpc::ChannelArguments& args) {
-  absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> credentials = ChannelCredentialsFor(security, target);
-  if (!credentials.ok()) return credentials.status();
-  return CreateChannel(target, *credentials, security, args);
-}
-
 absl::StatusOr<ChannelSecurity> ChannelSecurityFromEnvironment() {
   ChannelSecurity security;
   if (const char* v = Environment("NUPMPC_TLS")) security.tls = std::string(v) == "1" || std::string(v) == "true";

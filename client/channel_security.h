@@ -30,15 +30,6 @@ struct ChannelSecurity {
 absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> ChannelCredentialsFor(const ChannelSecurity& security,
                                                                                 const std::string& target);
 
-// A channel to `target` with `credentials` (from ChannelCredentialsFor(security, target))
-// and `args`, plus the arguments the security needs (the TLS server name override).
-std::shared_ptr<grpc::Channel> CreateChannel(const std::string& target,
-                                             const std::shared_ptr<grpc::ChannelCredentials>& credentials,
-                                             const ChannelSecurity& security, grpc::ChannelArguments args);
-// The same with credentials made here (errors as ChannelCredentialsFor's).
-absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(const std::string& target, const ChannelSecurity& security,
-                                                             const grpc::ChannelArguments& args);
-
 // ChannelSecurity from the environment, for command-line tools and tests: NUPMPC_TLS (1:
 // on), NUPMPC_TLS_CA_FILE, NUPMPC_TLS_CERT_FILE, NUPMPC_TLS_KEY_FILE,
 // NUPMPC_TLS_SERVER_NAME, NUPMPC_TOKEN or NUPMPC_TOKEN_FILE (first line).

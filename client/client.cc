@@ -4,6 +4,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "client/channel_factory.h"
 #include "client/session_routing.h"
 
 namespace nupmpc {
@@ -13,26 +14,11 @@ absl::Status FromGrpc(const grpc::Status& s) {
   return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
 }
 
-// `own_subchannel`: a connection of this channel's own, not shared through gRPC's global
-// subchannel pool with other channels to the same address (and so not sharing their
-// reconnect back-off either).
+// `own_subchannel`: a connection of this channel's own (ChannelOptions.own_connection).
 std::shared_ptr<grpc::Channel> MakeChannel(const std::string& target,
                                            const std::shared_ptr<grpc::ChannelCredentials>& credentials,
                                            const ChannelSecurity& security, bool own_subchannel) {
-  grpc::ChannelArguments args;
-  // Plans of long horizons exceed gRPC's 4 MB default; the server enforces its own limit.
-  args.SetMaxReceiveMessageSize(-1);
-  args.SetMaxSendMessageSize(-1);
-  if (own_subchannel) args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-  // HTTP/2 keepalive: a ping every 2 s, also without calls in flight, and the connection
-  // closed when one is not answered within 2 s, so a partition or a frozen server is found
-  // in seconds rather than by TCP's timers (minutes). nupmpc-server accepts pings this often;
-  // the Python client sends the same (client/python/nupmpc/security.py).
-  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 2000);
-  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 2000);
-  args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-  args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
-  return CreateChannel(target, credentials, security, args);
+  return OpenChannel(target, credentials, security, ClientChannelOptions(own_subchannel));
 }
 }  // namespace
 

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <tuple>
 #include <utility>
 
@@ -90,17 +91,8 @@ absl::Status ValidateOptions(const NonlinearSessionOptions& o, const NonlinearMo
       CheckPerComponent(o.region.state_proximal_stddev, m.num_states, "state_proximal_stddev", "state"));
   NUPMPC_CLIENT_RETURN_IF_ERROR(
       CheckPerComponent(o.region.input_proximal_stddev, m.num_inputs, "input_proximal_stddev", "input"));
-  const StepControl& c = o.step_control;
-  for (const auto& [name, value] : {std::pair{"growth", c.growth}, {"max_scale", c.max_scale}, {"shrink", c.shrink}}) {
-    if (!(value >= 1.0) || !std::isfinite(value)) {
-      return invalid(absl::StrCat("step_control.", name, " = ", value, ": must be finite and ≥ 1"));
-    }
-  }
-  if (!(c.model_error > 0.0) || !std::isfinite(c.model_error)) {
-    return invalid(absl::StrCat("step_control.model_error = ", c.model_error, ": must be finite and > 0"));
-  }
-  if (!(c.violation_floor >= 0.0) || !std::isfinite(c.violation_floor)) {
-    return invalid(absl::StrCat("step_control.violation_floor = ", c.violation_floor, ": must be finite and ≥ 0"));
+  if (const std::optional<StepControlError> bad = o.step_control.FirstInvalid(); bad.has_value()) {
+    return invalid(absl::StrCat("step_control.", bad->field, " = ", bad->value, ": ", bad->requirement));
   }
   return absl::OkStatus();
 }
@@ -441,7 +433,6 @@ absl::StatusOr<NonlinearPlan> NonlinearSession::Step(const std::vector<double>& 
   };
 
   const StepControl& control = options_.step_control;
-  const bool step_control = control.shrink > 1.0;
   double scale = 1.0, accepted_defect = kInfinity;
   bool accepted = false;
   PeriodReport& report = answer.report;
@@ -481,16 +472,13 @@ absl::StatusOr<NonlinearPlan> NonlinearSession::Step(const std::vector<double>& 
     if (!defect.ok()) return fail(defect.status(), k);
     const double step_size =
         std::max(MaxAbsDifference(plan.states, point.states), MaxAbsDifference(plan.inputs, point.inputs));
-    // Step control (StepControl): a plan from a solve that did not converge, or one the
-    // linear model mispredicts by more than its step warrants, is discarded unless it
-    // halved the last accepted plan's defect; the point stays and the proximal terms narrow.
-    const bool rejected =
-        step_control && (result->status() == v1::SOLVE_STATUS_ITERATION_LIMIT ||
-                         (*defect > 0.5 * accepted_defect &&
-                          *defect > std::max(control.violation_floor, control.model_error * step_size)));
+    // Step control (step_control.h): a discarded plan keeps the point and narrows the
+    // proximal terms.
+    const bool rejected = control.Rejects(
+        StepTrial{result->status() == v1::SOLVE_STATUS_ITERATION_LIMIT, *defect, step_size}, accepted_defect);
     if (rejected) {
       ++report.rejected;
-      scale /= control.shrink;
+      scale = control.Shrunk(scale);
       if (accepted) continue;
       // Kept only as the answer of last resort: no plan of this period accepted yet.
     }
@@ -506,13 +494,10 @@ absl::StatusOr<NonlinearPlan> NonlinearSession::Step(const std::vector<double>& 
     report.last_step = step_size / (1.0 + std::max(MaxAbs(plan.states), MaxAbs(plan.inputs)));
     const v1::SolveStatus status = answer.result.status();
     const bool solved = status == v1::SOLVE_STATUS_CONVERGED;
-    if (solved && scale < control.max_scale) scale = std::min(scale * control.growth, control.max_scale);
+    if (solved) scale = control.Grown(scale);
     point = plan;
-    // As in core SequentialSolver: while the proximal terms are narrower than their widest,
-    // steps are short because they are damped; the pull step/(scale·σ)² is what must vanish.
-    const double narrowed = std::min(1.0, scale / control.max_scale);
-    if (solved &&
-        (options_.max_linearisations == 1 || report.last_step <= options_.step_tolerance * narrowed * narrowed)) {
+    if (solved && (options_.max_linearisations == 1 ||
+                   report.last_step <= options_.step_tolerance * control.ToleranceFactor(scale))) {
       report.converged = true;
       break;
     }

@@ -35,6 +35,7 @@
 #include "absl/status/statusor.h"
 #include "client/client.h"
 #include "client/nonlinear_model.h"
+#include "core/public/standalone/step_control.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc {
@@ -52,20 +53,10 @@ struct LinearisationRegion {
   std::vector<double> input_proximal_stddev;  // L values > 0
 };
 
-// Levenberg-Marquardt step control of the proximal terms' widths within one period (as
-// core SequentialOptions.proximal_*): after a solve that converged the widths grow by
-// `growth` (up to `max_scale` times their initial size); a solve that hit its iteration
-// cap, or whose plan misses the nonlinear model by more than both `violation_floor` and
-// `model_error` times the step (unless it halved the last accepted plan's miss), is
-// discarded and re-solved at the same point with the widths divided by `shrink`.
-// shrink = 1 (the default) turns it off.
-struct StepControl {
-  double growth = 1.0;
-  double max_scale = 1.0;
-  double shrink = 1.0;
-  double model_error = 0.1;
-  double violation_floor = 1e-6;
-};
+// Levenberg-Marquardt step control of the proximal terms' widths within one period:
+// StepControl (core/public/standalone/step_control.h), the rules core SequentialOptions.proximal_*
+// use. Each solve's iteration cap is this period's own (max_iterations), so a solve that
+// hit it is discarded. shrink = 1 (the default) turns it off.
 
 struct NonlinearSessionOptions {
   // Linearisations (solves) per period: 1 is the real-time iteration; more re-linearise

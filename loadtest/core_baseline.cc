@@ -4,7 +4,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "core/session/mpc_session.h"
+#include "core/nupmpc.h"
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/load_stream.h"
 #include "loadtest/quantile.h"

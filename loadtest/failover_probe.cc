@@ -12,7 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "client/addressed_session.h"
 #include "client/client.h"
-#include "core/session/mpc_session.h"
+#include "core/nupmpc.h"
 #include "loadtest/instances/benchmark_instance.h"
 #include "loadtest/quantile.h"
 #include "nlohmann/json.hpp"

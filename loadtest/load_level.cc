@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "client/channel_factory.h"
 #include "loadtest/quantile.h"
 
 namespace nupmpc::loadtest {
@@ -18,10 +19,10 @@ namespace {
 // would (gRPC would otherwise share one connection between channels to the same target).
 absl::StatusOr<std::shared_ptr<grpc::Channel>> OwnConnection(const std::string& target,
                                                              const ChannelSecurity& security) {
-  grpc::ChannelArguments args;
-  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-  args.SetMaxReceiveMessageSize(-1);
-  return CreateChannel(target, security, args);
+  ChannelOptions options;
+  options.own_connection = true;
+  options.unlimited_receive = true;
+  return OpenChannel(target, security, options);
 }
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }

@@ -14,16 +14,7 @@ absl::StatusOr<core::SolveSummary> StepAsTheServerDoes(server::BuiltSession& ses
       server::SolveLimitsFor(session.timing.default_time_limit_ms, &message, server::CallContext{});
   if (!limits.ok()) return limits.status();
   if (absl::Status applied = server::AsStepError(solver.Apply(*step)); !applied.ok()) return applied;
-  switch (message.warm_start()) {
-    case v1::WARM_START_KEEP:
-      break;
-    case v1::WARM_START_COLD:
-      limits->warm_start = false;
-      break;
-    default:
-      solver.ShiftWarmStart();
-      break;
-  }
+  server::ApplyWarmStart(message.warm_start(), solver, &*limits);
   return solver.Solve(*limits, solution);
 }
 

@@ -8,7 +8,7 @@
 // baselines time and the bare peer answers.
 
 #include "absl/status/statusor.h"
-#include "core/session/mpc_session.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/sessions/session_factory.h"
 

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "client/channel_factory.h"
 #include "grpcpp/generic/generic_stub.h"
 #include "grpcpp/grpcpp.h"
 #include "loadtest/quantile.h"
@@ -37,9 +38,9 @@ grpc::Status Check(grpc::GenericStub& stub, grpc::CompletionQueue& cq) {
 
 absl::StatusOr<TransportFloor> MeasureTransportFloor(const std::string& target, int calls,
                                                      const ChannelSecurity& security) {
-  grpc::ChannelArguments arguments;
-  arguments.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // not shared with the streams' channels
-  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = CreateChannel(target, security, arguments);
+  ChannelOptions options;
+  options.own_connection = true;  // not shared with the streams' channels
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = OpenChannel(target, security, options);
   if (!channel.ok()) return channel.status();
   grpc::GenericStub stub(*std::move(channel));
   grpc::CompletionQueue cq;

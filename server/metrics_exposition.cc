@@ -5,7 +5,7 @@
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/string_view.h"
-#include "core/platform/cpu_baseline.h"
+#include "core/public/cpu_baseline.h"
 #include "server/observability/process_memory.h"
 #include "server/observability/prometheus_text.h"
 #include "server/observability/version.h"

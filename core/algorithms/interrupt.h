@@ -18,19 +18,18 @@
 // the algorithm (core/session/session.cc).
 
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <climits>
 #include <optional>
 
 #include "core/options.h"
+#include "core/public/deadline.h"
 #include "core/solution.h"
 
 namespace nupmpc::core {
 
 class Interrupt {
  public:
-  using Clock = std::chrono::steady_clock;
+  using Clock = Deadline::Clock;
   // About 2·10⁶ flops between two clock reads: ≤ 1 ms at 2 GFLOP/s (20 ms even at a
   // sanitizer's 0.1 GFLOP/s), while a clock read (~25 ns) costs < 0.1 % of that work.
   static constexpr double kFlopsBetweenChecks = 2e6;
@@ -38,29 +37,21 @@ class Interrupt {
   // An interrupt that never fires.
   Interrupt() = default;
   // Fires when the limits' cancel flag is raised (kCancelled) or their time limit, counted
-  // from `start`, has passed (kTimeLimit). `flops_per_step`: one time step of one pass
-  // (EstimateFootprint), which sets pass_interval().
-  // A time limit of kNeverSeconds or more never fires: it is past any solve, and larger ones
-  // would overflow the clock's 64-bit nanoseconds (292 years) when added to `start`.
-  static constexpr double kNeverSeconds = 1e9;
+  // from `start`, has passed (kTimeLimit); a time limit of Deadline::kNeverSeconds or more
+  // never fires. `flops_per_step`: one time step of one pass (EstimateFootprint), which
+  // sets pass_interval().
   Interrupt(const SolveLimits& limits, Clock::time_point start, double flops_per_step)
-      : cancel_(limits.cancel),
-        has_deadline_(limits.time_limit_seconds > 0.0 && limits.time_limit_seconds < kNeverSeconds) {
-    if (has_deadline_) {
-      deadline_ =
-          start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(limits.time_limit_seconds));
-    }
-    armed_ = has_deadline_ || cancel_ != nullptr;
+      : stop_(Deadline::After(limits.time_limit_seconds, limits.cancel, start)) {
     pass_interval_ = IntervalFor(flops_per_step);
   }
 
   // Reads the flag and the clock now. Sticky: true from the first time it is true.
   bool CheckNow() {
     if (fired_.has_value()) return true;
-    if (!armed_) return false;
-    if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) {
+    if (!stop_.armed()) return false;
+    if (stop_.Cancelled()) {
       fired_ = SolveStatus::kCancelled;
-    } else if (has_deadline_ && Clock::now() >= deadline_) {
+    } else if (stop_.Passed()) {
       fired_ = SolveStatus::kTimeLimit;
     }
     return fired_.has_value();
@@ -71,7 +62,7 @@ class Interrupt {
 
   // Steps between two clock reads for a loop whose step costs `step_flops`.
   int IntervalFor(double step_flops) const {
-    if (!armed_) return INT_MAX;
+    if (!stop_.armed()) return INT_MAX;
     if (!(step_flops > 0.0)) return INT_MAX / 2;
     return static_cast<int>(std::clamp(kFlopsBetweenChecks / step_flops, 1.0, static_cast<double>(INT_MAX / 2)));
   }
@@ -79,10 +70,7 @@ class Interrupt {
   int pass_interval() const { return pass_interval_; }
 
  private:
-  const std::atomic<bool>* cancel_ = nullptr;
-  bool has_deadline_ = false;
-  bool armed_ = false;
-  Clock::time_point deadline_{};
+  Deadline stop_;
   int pass_interval_ = INT_MAX;
   std::optional<SolveStatus> fired_;
 };

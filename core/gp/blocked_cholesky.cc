@@ -13,7 +13,7 @@ constexpr Index kBlock = kCholeskyBlock;
 
 }  // namespace
 
-absl::Status BlockedCholesky(Eigen::Ref<Eigen::MatrixXd> a, const Interrupt& stop, absl::string_view what) {
+absl::Status BlockedCholesky(Eigen::Ref<Eigen::MatrixXd> a, const core::Deadline& stop, absl::string_view what) {
   const Index n = a.rows();
   const auto where = [&](Index column) {
     return absl::StrCat("factorising ", what, " (column ", column, " of ", n, ")");
@@ -43,7 +43,7 @@ absl::Status BlockedCholesky(Eigen::Ref<Eigen::MatrixXd> a, const Interrupt& sto
   return absl::OkStatus();
 }
 
-absl::Status InverseFromCholesky(Eigen::Ref<Eigen::MatrixXd> a, Eigen::MatrixXd* row_block, const Interrupt& stop,
+absl::Status InverseFromCholesky(Eigen::Ref<Eigen::MatrixXd> a, Eigen::MatrixXd* row_block, const core::Deadline& stop,
                                  absl::string_view what) {
   const Index n = a.rows();
   Eigen::MatrixXd& t = *row_block;

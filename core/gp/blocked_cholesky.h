@@ -5,13 +5,13 @@
 // flag can stop. The GP's K + σ_n² I is P × P (P up to the server's max_gp_points), and
 // factorising or inverting it is O(P³): done in one Eigen call it holds a worker for as long
 // as it takes, whatever the caller's deadline. Here the work runs in blocks of at most
-// kBlock × kBlock × P multiply-adds, with an Interrupt check between blocks, so that a
+// kBlock × kBlock × P multiply-adds, with a deadline check (core/public/deadline.h) between blocks, so that a
 // worker is free within one such block after the deadline.
 
 #include "Eigen/Core"
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
-#include "core/gp/interrupt.h"
+#include "core/public/deadline.h"
 
 namespace nupmpc::gp {
 
@@ -23,15 +23,15 @@ inline constexpr int kCholeskyBlock = 64;
 // (the strict upper triangle is neither read nor written): right-looking, Eigen's LLT on
 // each diagonal block, a triangular solve of the panel below it and a rank-k update of the
 // trailing matrix in column strips. FAILED_PRECONDITION when `a` is not positive definite
-// in floating point; the interrupt's status when it fired. `what` names the matrix in
+// in floating point; the deadline's status when it fired. `what` names the matrix in
 // messages.
-absl::Status BlockedCholesky(Eigen::Ref<Eigen::MatrixXd> a, const Interrupt& stop, absl::string_view what);
+absl::Status BlockedCholesky(Eigen::Ref<Eigen::MatrixXd> a, const core::Deadline& stop, absl::string_view what);
 
 // From the lower Cholesky factor L in `a`, the lower triangle of (L Lᵀ)⁻¹ = L⁻ᵀ L⁻¹ in
 // place: first L⁻¹ by block rows (left-looking), then L⁻ᵀ L⁻¹ by block rows, each in
 // strips. `row_block` is kCholeskyBlock × P scratch (resized once by the caller; not
-// resized here). Returns the interrupt's status when it fired (`a` is then garbage).
-absl::Status InverseFromCholesky(Eigen::Ref<Eigen::MatrixXd> a, Eigen::MatrixXd* row_block, const Interrupt& stop,
+// resized here). Returns the deadline's status when it fired (`a` is then garbage).
+absl::Status InverseFromCholesky(Eigen::Ref<Eigen::MatrixXd> a, Eigen::MatrixXd* row_block, const core::Deadline& stop,
                                  absl::string_view what);
 
 }  // namespace nupmpc::gp

@@ -42,11 +42,11 @@ double LinGp::Variance(const Eigen::VectorXd& delta) const {
 
 Eigen::MatrixXd KernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs) {
   Eigen::MatrixXd k, scaled;
-  FillKernelMatrix(kernel, inputs, Interrupt{}, &k, &scaled).IgnoreError();  // no interrupt: cannot fail
+  FillKernelMatrix(kernel, inputs, core::Deadline{}, &k, &scaled).IgnoreError();  // no interrupt: cannot fail
   return k;
 }
 
-absl::Status FillKernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs, const Interrupt& stop,
+absl::Status FillKernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs, const core::Deadline& stop,
                               Eigen::MatrixXd* k, Eigen::MatrixXd* scaled) {
   const Eigen::Index n = inputs.rows(), d = inputs.cols();
   if (k->rows() != n || k->cols() != n) k->resize(n, n);
@@ -80,7 +80,7 @@ GpModel::GpModel(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel ke
 }
 
 absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel,
-                                        const Interrupt& stop) {
+                                        const core::Deadline& stop) {
   if (inputs.rows() < 1 || inputs.cols() < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("inputs: need at least one point of dimension ≥ 1, got ", inputs.rows(), "x", inputs.cols()));
@@ -121,7 +121,7 @@ absl::StatusOr<GpModel> GpModel::Create(Eigen::MatrixXd inputs, Eigen::VectorXd 
   return model;
 }
 
-absl::StatusOr<Eigen::MatrixXd> GpModel::FactorPivots(const Eigen::MatrixXd& k, const Interrupt& stop) {
+absl::StatusOr<Eigen::MatrixXd> GpModel::FactorPivots(const Eigen::MatrixXd& k, const core::Deadline& stop) {
   // Greedy pivoted Cholesky (the largest residual diagonal first) until every residual
   // diagonal is at the eigenvalue cut. O(N m) per pivot, checked per pivot.
   const int n = num_points(), max_pivots = std::min(kMaxPivots, static_cast<int>(kMaxPivotFraction * n));
@@ -166,7 +166,7 @@ absl::StatusOr<Eigen::MatrixXd> GpModel::FactorPivots(const Eigen::MatrixXd& k, 
   return l;
 }
 
-absl::Status GpModel::FactorBasis(const Eigen::MatrixXd& l, const Interrupt& stop) {
+absl::Status GpModel::FactorBasis(const Eigen::MatrixXd& l, const core::Deadline& stop) {
   const Eigen::Index m = l.cols();
   constexpr Eigen::Index kColumns = 16;  // per check: O(N m kColumns)
   const auto where = [&](Eigen::Index column) {

@@ -7,7 +7,7 @@
 //   k(x, x') = σ_f² exp(-½ Σ_i (x_i - x'_i)² / ℓ_i²),   y = f(x) + ε,  ε ~ N(0, σ_n²)
 //
 // The Cholesky factor of K + σ_n² I and α = (K + σ_n² I)⁻¹ Y are computed once per model
-// (Create, stoppable by a deadline or cancel flag: core/gp/interrupt.h) and reused by every
+// (Create, stoppable by a deadline or cancel flag: core/public/deadline.h) and reused by every
 // prediction. Predictions are of the latent f (no noise
 // term), as in [Nghiem] (1).
 //
@@ -20,7 +20,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/gp/interrupt.h"
+#include "core/public/deadline.h"
 
 namespace nupmpc::gp {
 
@@ -56,7 +56,7 @@ class GpModel {
   // definite in floating point; DEADLINE_EXCEEDED / CANCELLED when `stop` fires, saying in
   // which step (each O(N²) or O(N³) step is checked in blocks: core/gp/blocked_cholesky.h).
   static absl::StatusOr<GpModel> Create(Eigen::MatrixXd inputs, Eigen::VectorXd targets, SeArdKernel kernel,
-                                        const Interrupt& stop = {});
+                                        const core::Deadline& stop = {});
 
   // The low-rank factor K ≈ L Lᵀ stops when every diagonal entry of what it leaves out,
   // K - L Lᵀ (PSD), is below this fraction of σ_n² (Linearise() says what that bounds).
@@ -132,10 +132,10 @@ class GpModel {
   // R Rᵀ + σ_n² I and returns L (N × m), or leaves no low-rank path and returns an empty
   // matrix when it needs more than min(kMaxPivots, kMaxPivotFraction·N) pivots (then the
   // exact Cholesky path is about as cheap).
-  absl::StatusOr<Eigen::MatrixXd> FactorPivots(const Eigen::MatrixXd& k, const Interrupt& stop);
+  absl::StatusOr<Eigen::MatrixXd> FactorPivots(const Eigen::MatrixXd& k, const core::Deadline& stop);
   // Q, an orthonormal basis of the columns of `l` (block Gram-Schmidt, twice), and the
   // Cholesky factor of R Rᵀ + σ_n² I, R = Qᵀ l.
-  absl::Status FactorBasis(const Eigen::MatrixXd& l, const Interrupt& stop);
+  absl::Status FactorBasis(const Eigen::MatrixXd& l, const core::Deadline& stop);
   // The fast path at one point; false (nothing written) when a column's power is too large.
   bool LineariseFromPivots(const Eigen::VectorXd& x, LinGp* lin, LinearisationScratch* scratch) const;
   static constexpr double kMaxPivotFraction = 0.25;
@@ -160,7 +160,7 @@ class GpModel {
 Eigen::MatrixXd KernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs);
 // The same into *k (resized only if its size differs), a block of columns per interrupt
 // check; `scaled` is scratch (N × d, same rule).
-absl::Status FillKernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs, const Interrupt& stop,
+absl::Status FillKernelMatrix(const SeArdKernel& kernel, const Eigen::MatrixXd& inputs, const core::Deadline& stop,
                               Eigen::MatrixXd* k, Eigen::MatrixXd* scaled);
 
 }  // namespace nupmpc::gp

@@ -40,12 +40,12 @@ SeArdKernel FromLog(const double* theta, int d, double min_noise) {
 absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& kernel, Eigen::VectorXd* log_gradient) {
   LikelihoodWorkspace workspace;
-  return NegativeLogLikelihood(inputs, targets, kernel, log_gradient, Interrupt{}, &workspace);
+  return NegativeLogLikelihood(inputs, targets, kernel, log_gradient, core::Deadline{}, &workspace);
 }
 
 absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& kernel, Eigen::VectorXd* log_gradient,
-                                             const Interrupt& stop, LikelihoodWorkspace* workspace) {
+                                             const core::Deadline& stop, LikelihoodWorkspace* workspace) {
   const int n = static_cast<int>(inputs.rows()), d = static_cast<int>(inputs.cols());
   if (absl::Status valid = Validate(kernel, d); !valid.ok()) return valid;
   if (targets.size() != n) return absl::InvalidArgumentError("targets: one value per input row");
@@ -109,13 +109,13 @@ struct FitRun {
         targets(targets),
         options(options),
         start(std::chrono::steady_clock::now()),
-        stop(Interrupt::After(options.max_seconds, options.cancel)) {}
+        stop(core::Deadline::After(options.max_seconds, options.cancel)) {}
 
   const Eigen::MatrixXd& inputs;
   const Eigen::VectorXd& targets;
   const FitOptions& options;
   std::chrono::steady_clock::time_point start;
-  Interrupt stop;  // max_seconds from the start, and the cancel flag
+  core::Deadline stop;  // max_seconds from the start, and the cancel flag
   LikelihoodWorkspace workspace;
   Eigen::VectorXd gradient;  // NegativeLogLikelihood's output, reused across evaluations
   double previous_nll = std::numeric_limits<double>::infinity();

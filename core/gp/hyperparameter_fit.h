@@ -17,7 +17,7 @@
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/gp/gp_model.h"
-#include "core/gp/interrupt.h"
+#include "core/public/deadline.h"
 
 namespace nupmpc::gp {
 
@@ -65,7 +65,7 @@ absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, cons
 // The same in `workspace`, stopped by `stop` (DEADLINE_EXCEEDED / CANCELLED saying where).
 absl::StatusOr<double> NegativeLogLikelihood(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& kernel, Eigen::VectorXd* log_gradient,
-                                             const Interrupt& stop, LikelihoodWorkspace* workspace);
+                                             const core::Deadline& stop, LikelihoodWorkspace* workspace);
 
 absl::StatusOr<FitResult> FitHyperparameters(const Eigen::MatrixXd& inputs, const Eigen::VectorXd& targets,
                                              const SeArdKernel& initial, const FitOptions& options = {});

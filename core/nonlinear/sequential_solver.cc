@@ -35,23 +35,25 @@ double RelativeStep(double absolute_step, const Solution& plan) {
 
 }  // namespace
 
-bool SequentialSolver::StepControlActive() const {
-  return options_.proximal_shrink > 1.0 && options_.inner_iterations == 0;
+StepControl StepControlOf(const SequentialOptions& options) {
+  return StepControl{options.proximal_growth, options.proximal_max_scale, options.proximal_shrink,
+                     options.proximal_model_error, options.proximal_violation_floor};
 }
 
-// Step control (SequentialOptions.proximal_*): a linearised problem that did not converge
-// within the iteration cap, or whose plan's nonlinear violation (the linear model's error
-// over the step, second order in it) exceeds proximal_model_error times the step, was
-// linearised with too wide a proximal term, unless the plan at least halved the last
-// accepted plan's violation (a point that is itself far from the model must be repaired
-// by a step no proximal width shortens).
+bool SequentialSolver::StepControlActive() const {
+  return StepControlOf(options_).active() && options_.inner_iterations == 0;
+}
+
+// Step control (SequentialOptions.proximal_*, the rules of step_control.h): the plan's
+// nonlinear violation is the linear model's error over the step, second order in it. An
+// inner solve that stopped because the caller's iteration budget ran out did not hit the
+// linearisation's own cap.
 bool SequentialSolver::StepControlRejects(const SequentialSummary& summary, double violation, double step,
                                           const SolveLimits& limits, double accepted_violation) const {
   if (!StepControlActive()) return false;
-  if (limits.max_iterations > 0 && summary.inner_iterations >= limits.max_iterations) return false;  // no budget left
-  if (summary.last_inner.status == SolveStatus::kIterationLimit) return true;
-  if (violation <= 0.5 * accepted_violation) return false;
-  return violation > std::max(options_.proximal_violation_floor, options_.proximal_model_error * step);
+  const bool budget_spent = limits.max_iterations > 0 && summary.inner_iterations >= limits.max_iterations;
+  const StepTrial trial{summary.last_inner.status == SolveStatus::kIterationLimit && !budget_spent, violation, step};
+  return StepControlOf(options_).Rejects(trial, accepted_violation);
 }
 
 absl::Status Validate(const SequentialOptions& options) {
@@ -71,22 +73,9 @@ absl::Status Validate(const SequentialOptions& options) {
     return absl::InvalidArgumentError(
         absl::StrCat("SequentialOptions.damping: must be in (0, 1], got ", options.damping));
   }
-  const auto at_least_one = [](const char* field, double value) {
-    return value >= 1.0 && std::isfinite(value)
-               ? absl::OkStatus()
-               : absl::InvalidArgumentError(
-                     absl::StrCat("SequentialOptions.", field, ": must be finite and ≥ 1, got ", value));
-  };
-  NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_growth", options.proximal_growth));
-  NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_max_scale", options.proximal_max_scale));
-  NUPMPC_RETURN_IF_ERROR(at_least_one("proximal_shrink", options.proximal_shrink));
-  if (!(options.proximal_model_error > 0.0) || !std::isfinite(options.proximal_model_error)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "SequentialOptions.proximal_model_error: must be finite and > 0, got ", options.proximal_model_error));
-  }
-  if (!(options.proximal_violation_floor >= 0.0) || !std::isfinite(options.proximal_violation_floor)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "SequentialOptions.proximal_violation_floor: must be finite and ≥ 0, got ", options.proximal_violation_floor));
+  if (const std::optional<StepControlError> bad = StepControlOf(options).FirstInvalid(); bad.has_value()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("SequentialOptions.proximal_", bad->field, ": ", bad->requirement, ", got ", bad->value));
   }
   return absl::OkStatus();
 }
@@ -182,7 +171,7 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
     if (StepControlRejects(summary, violation, step, limits, accepted_violation)) {
       // The linear model promised too much: keep the point, shorten the step.
       ++summary.rejected;
-      proximal_scale /= options_.proximal_shrink;
+      proximal_scale = StepControlOf(options_).Shrunk(proximal_scale);
       linearisation_->SetProximalScale(proximal_scale);
       continue;
     }
@@ -193,7 +182,7 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
     summary.last_step = RelativeStep(step, plan_);
     const bool inner_done = options_.inner_iterations > 0 || summary.last_inner.status == SolveStatus::kConverged;
     if (summary.last_inner.status == SolveStatus::kConverged && proximal_scale < options_.proximal_max_scale) {
-      proximal_scale = std::min(proximal_scale * options_.proximal_growth, options_.proximal_max_scale);
+      proximal_scale = StepControlOf(options_).Grown(proximal_scale);
       linearisation_->SetProximalScale(proximal_scale);
     }
     if (options_.damping < 1.0 && summary.last_step > options_.step_tolerance) {
@@ -202,11 +191,9 @@ absl::StatusOr<SequentialSummary> SequentialSolver::Solve(const Solution& initia
     } else {
       point_ = plan_;
     }
-    // Under step control a damped step is small because it is damped: the proximal
-    // terms' pull, step / (scale·σ)², is what must vanish, so the tolerance shrinks with
-    // the square of the scale below its maximum.
-    const double damped = std::min(1.0, proximal_scale / options_.proximal_max_scale);
-    if (inner_done && summary.last_step <= options_.step_tolerance * damped * damped) {
+    // Under step control a damped step is small because it is damped (StepControl::ToleranceFactor).
+    if (inner_done &&
+        summary.last_step <= options_.step_tolerance * StepControlOf(options_).ToleranceFactor(proximal_scale)) {
       summary.converged = true;
       break;
     }

@@ -22,6 +22,7 @@
 #include "absl/status/statusor.h"
 #include "core/options.h"
 #include "core/problem.h"
+#include "core/public/standalone/step_control.h"
 #include "core/session/session.h"
 #include "core/solution.h"
 
@@ -75,11 +76,16 @@ struct SequentialOptions {
   // A plan is also discarded when its nonlinear violation exceeds both the floor and
   // `proximal_model_error` times the step (max-norm change of states and inputs), unless
   // it halved the last accepted plan's violation. Step control needs inner solves run to
-  // convergence (inner_iterations = 0) and is off while proximal_shrink = 1.
+  // convergence (inner_iterations = 0) and is off while proximal_shrink = 1. The rules are
+  // StepControl's (core/public/standalone/step_control.h, shared with the client's
+  // NonlinearSession); an inner solve stopped because Solve()'s max_iterations for the
+  // whole sequence ran out is judged by its violation alone.
   double proximal_violation_floor = 1e-6;
   double proximal_model_error = 0.1;
 };
 absl::Status Validate(const SequentialOptions& options);
+// The proximal_* fields as the step-control rules shared with the client.
+StepControl StepControlOf(const SequentialOptions& options);
 
 struct SequentialSummary {
   bool converged = false;

@@ -12,7 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "cli/program_flags.h"
-#include "core/session/session.h"
+#include "core/public/session.h"
 #include "loadtest/bench/bench_report.h"
 #include "loadtest/instances/benchmark_instance.h"
 

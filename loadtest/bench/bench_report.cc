@@ -10,7 +10,7 @@
 
 #include "Eigen/Core"
 #include "absl/strings/str_format.h"
-#include "core/session/session.h"
+#include "core/public/session.h"
 #include "loadtest/bench/instance_result.h"
 #include "loadtest/bench/pass_trace.h"
 #include "loadtest/bench/scaling_report.h"

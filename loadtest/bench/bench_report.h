@@ -4,8 +4,7 @@
 #include <string>
 #include <vector>
 
-#include "core/options.h"
-#include "core/problem.h"
+#include "core/nupmpc.h"
 
 namespace nupmpc::bench {
 

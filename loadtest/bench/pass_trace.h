@@ -3,7 +3,7 @@
 
 #include <string>
 
-#include "core/session/session.h"
+#include "core/public/session.h"
 
 namespace nupmpc::bench {
 

@@ -3,7 +3,7 @@
 
 #include <cstdint>
 
-#include "core/problem.h"
+#include "core/nupmpc.h"
 
 namespace nupmpc::bench {
 

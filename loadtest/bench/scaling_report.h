@@ -5,7 +5,7 @@
 #include <memory>
 #include <vector>
 
-#include "core/session/session.h"
+#include "core/public/session.h"
 #include "loadtest/bench/bench_report.h"
 #include "loadtest/bench/instance_result.h"
 

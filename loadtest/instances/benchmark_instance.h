@@ -8,7 +8,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/problem.h"
+#include "core/nupmpc.h"
 #include "server/convert/spec_conversion.h"
 
 namespace nupmpc::bench {

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::bench {
 namespace {

@@ -5,7 +5,7 @@
 // reverse of server::ProblemFromSpec; the service itself never needs this direction).
 
 #include "absl/status/statusor.h"
-#include "core/problem.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::bench {

@@ -6,7 +6,8 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "core/util/status_macros.h"
+#include "core/public/deadline.h"
+#include "core/public/status_macros.h"
 #include "server/convert/invalid_argument.h"
 
 namespace nupmpc::server {
@@ -254,7 +255,7 @@ absl::StatusOr<std::unique_ptr<gp::GpMpcSession>> GpSessionFromSpec(const v1::Pr
   // O(P³) set-up runs (kernel fit, factorisation), stopped by the call's deadline or
   // cancellation: a stopped set-up returns DEADLINE_EXCEEDED or CANCELLED saying how far it
   // got, and nothing is cached.
-  const gp::Interrupt stop = gp::Interrupt::After(fit_options.max_seconds, fit_options.cancel);
+  const core::Deadline stop = core::Deadline::After(fit_options.max_seconds, fit_options.cancel);
   const auto make_model = [&]() -> absl::StatusOr<gp::GpModel> {
     NUPMPC_ASSIGN_OR_RETURN(const gp::SeArdKernel kernel, KernelFor(g.model(), training, "spec.gp.model", fit_options));
     absl::StatusOr<gp::GpModel> model =
@@ -294,7 +295,7 @@ absl::Status FitGpModel(const v1::FitGpModelRequest& request, const SizeLimits& 
   gp::FitOptions options = fit_limits;
   if (request.max_iterations() > 0) options.max_iterations = static_cast<int>(request.max_iterations());
   const auto start_time = std::chrono::steady_clock::now();
-  const gp::Interrupt stop = gp::Interrupt::After(options.max_seconds, options.cancel);
+  const core::Deadline stop = core::Deadline::After(options.max_seconds, options.cancel);
   absl::StatusOr<gp::FitResult> fit =
       gp::FitHyperparameters(training.data.regressors, training.data.targets, start, options);
   if (!fit.ok()) return absl::Status(fit.status().code(), absl::StrCat("model: ", fit.status().message()));

@@ -3,7 +3,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 #include "server/convert/spec_conversion.h"
 
 namespace nupmpc::server {

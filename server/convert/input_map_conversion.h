@@ -6,8 +6,7 @@
 // solves the expanded or augmented problem while clients keep seeing their own inputs.
 
 #include "absl/status/statusor.h"
-#include "core/problem.h"
-#include "core/session/input_mapped_session.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::server {

@@ -5,8 +5,7 @@
 // options. Every error names the proto field path ("spec.keep_out.regions[2].half_axis_b").
 
 #include "absl/status/statusor.h"
-#include "core/nonlinear/keep_out.h"
-#include "core/nonlinear/sequential_solver.h"
+#include "core/public/nonlinear.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::server {

@@ -3,8 +3,7 @@
 
 // core → proto: what a solve sends back.
 
-#include "core/options.h"
-#include "core/solution.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::server {

@@ -4,8 +4,8 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
-#include "core/session/footprint.h"
-#include "core/util/status_macros.h"
+#include "core/public/footprint.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::server {
 namespace {

@@ -7,7 +7,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 #include "server/convert/invalid_argument.h"
 
 namespace nupmpc::server {

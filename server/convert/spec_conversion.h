@@ -6,9 +6,7 @@
 // the rule.
 
 #include "absl/status/statusor.h"
-#include "core/options.h"
-#include "core/problem.h"
-#include "core/solution.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::server {

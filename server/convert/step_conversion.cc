@@ -7,7 +7,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 #include "server/convert/spec_conversion.h"
 
 namespace nupmpc::server {
@@ -112,6 +112,22 @@ absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const
     NUPMPC_ASSIGN_OR_RETURN(update.outputs, ComponentsFromProto(u.outputs(), dimensions.horizon + 1, "outputs"));
   }
   return update;
+}
+
+void ApplyWarmStart(v1::WarmStart warm_start, core::MpcSession& session, core::SolveLimits* limits) {
+  switch (warm_start) {
+    case v1::WARM_START_UNSPECIFIED:
+    case v1::WARM_START_SHIFT:
+      session.ShiftWarmStart();
+      break;
+    case v1::WARM_START_KEEP:
+      break;
+    case v1::WARM_START_COLD:
+      limits->warm_start = false;
+      break;
+    default:
+      break;
+  }
 }
 
 absl::Status AsStepError(const absl::Status& status) {

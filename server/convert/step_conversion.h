@@ -8,14 +8,18 @@
 // messages name the same fields without the "step." prefix.
 
 #include "absl/status/statusor.h"
-#include "core/session/mpc_session.h"
-#include "core/session/step_update.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::server {
 
 // The update of `step` for a session of `dimensions` (its horizon sizes the priors).
 absl::StatusOr<core::StepUpdate> StepUpdateFromProto(const v1::Step& step, const core::Dimensions& dimensions);
+
+// Step.warm_start applied to a session about to solve the step: SHIFT (and UNSPECIFIED)
+// moves its warm start one step on, KEEP leaves it as it is, COLD solves without it
+// (`limits`). An unknown value (StepUpdateFromProto refuses it) changes nothing.
+void ApplyWarmStart(v1::WarmStart warm_start, core::MpcSession& session, core::SolveLimits* limits);
 
 // A status of the session's Apply with its field names as the Step's ("step.state[0] ...";
 // a message that names no field gets "step: ").

@@ -1,8 +1,8 @@
 #include "server/rpc/mpc_service.h"
 
 #include "absl/strings/ascii.h"
-#include "core/platform/cpu_baseline.h"
-#include "core/util/status_macros.h"
+#include "core/public/cpu_baseline.h"
+#include "core/public/status_macros.h"
 #include "server/convert/gp_conversion.h"
 #include "server/convert/result_conversion.h"
 #include "server/convert/session_cost.h"

@@ -11,7 +11,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "core/gp/hyperparameter_fit.h"
-#include "core/options.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::server {

@@ -11,7 +11,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/strip.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::server {
 namespace {

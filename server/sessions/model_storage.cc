@@ -3,7 +3,7 @@
 #include <algorithm>
 
 #include "absl/strings/str_cat.h"
-#include "core/session/footprint.h"
+#include "core/public/footprint.h"
 
 namespace nupmpc::server {
 

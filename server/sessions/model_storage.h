@@ -7,8 +7,8 @@
 // applied: within the per-session limit, and reserved in the server's budget.
 
 #include "absl/status/status.h"
-#include "core/session/model_update.h"
-#include "core/session/mpc_session.h"
+#include "core/nupmpc.h"
+#include "core/public/model_update.h"
 #include "server/sessions/session_registry.h"
 
 namespace nupmpc::server {

@@ -4,10 +4,10 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "core/nonlinear/keep_out_session.h"
-#include "core/session/input_mapped_session.h"
-#include "core/session/session.h"
-#include "core/util/status_macros.h"
+#include "core/nupmpc.h"
+#include "core/public/nonlinear.h"
+#include "core/public/session.h"
+#include "core/public/status_macros.h"
 #include "server/convert/gp_conversion.h"
 #include "server/convert/input_map_conversion.h"
 #include "server/convert/keep_out_conversion.h"

@@ -9,7 +9,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
-#include "core/session/mpc_session.h"
+#include "core/nupmpc.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 #include "server/convert/gp_model_cache.h"
 #include "server/convert/spec_conversion.h"

@@ -7,7 +7,7 @@
 #include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 #include "server/convert/result_conversion.h"
 #include "server/observability/log_context.h"
 #include "spdlog/spdlog.h"

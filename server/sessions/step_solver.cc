@@ -4,7 +4,7 @@
 #include <optional>
 
 #include "absl/strings/str_cat.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 #include "server/convert/result_conversion.h"
 #include "server/convert/step_conversion.h"
 #include "server/scheduling/thread_cpu_time.h"
@@ -48,19 +48,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
   }
   entry.algorithm.store(solver.algorithm());  // other priors may need another algorithm
 
-  switch (step.warm_start()) {
-    case v1::WARM_START_UNSPECIFIED:
-    case v1::WARM_START_SHIFT:
-      solver.ShiftWarmStart();
-      break;
-    case v1::WARM_START_KEEP:
-      break;
-    case v1::WARM_START_COLD:
-      limits.warm_start = false;
-      break;
-    default:
-      break;
-  }
+  ApplyWarmStart(step.warm_start(), solver, &limits);
   // The step's deadline (step_deadline.h): the solve gets what is left of it, less the cost
   // of sending the answer and one pass (the solver looks at its time limit between passes,
   // so the last one may end a pass after it). One that could not start in time, or whose

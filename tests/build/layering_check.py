@@ -6,7 +6,11 @@
 Every C++ file of the repository belongs to a room (its folder: core/, core/gp/,
 core/examples/, server/, client/, loadtest/ and its subfolders, cli/, tests/); each room
 may include only the rooms it depends on, and some external libraries are kept out of some
-rooms (the core has no gRPC, protobuf, logging, JSON or optimiser libraries). The build
+rooms (the core has no gRPC, protobuf, logging, JSON or optimiser libraries). Outside core/
+(and its GP library) the core is reached through its public headers only: the facade
+core/nupmpc.h and core/public/ (the room "core/public"). core/public/standalone/ holds the
+headers that need nothing but the C++ standard library: the client, which does not link the
+core, shares the step-control rules through them. The build
 enforces the same through per-target include roots (cmake/include_roots.cmake); this check
 also names the rule, covers headers no target compiles on their own, and refuses a
 CMakeLists.txt that exports the repository root as an include directory. Exit status 1
@@ -23,21 +27,28 @@ import sys
 # The server's folders, lowest first (server/CMakeLists.txt says what each holds).
 SERVER_ROOMS = ["server/convert", "server/scheduling", "server/observability", "server/http", "server/auth",
                 "server/sessions", "server/state", "server/rpc", "server"]
-ROOMS = ["core/gp", "core/examples", "core", "cli", "proto", *SERVER_ROOMS, "client", "loadtest/instances",
+ROOMS = ["core/gp", "core/examples", "core/public/standalone", "core/public", "core", "cli", "proto", *SERVER_ROOMS, "client", "loadtest/instances",
          "loadtest/bench/gp", "loadtest/bench", "loadtest", "tests/fuzz", "tests"]
 # What a session is made of: the rooms below the state every RPC shares.
+# The core's public headers: the facade core/nupmpc.h and core/public/ (forwarding to the
+# rooms inside the core, or standing alone).
+PUBLIC_CORE = {"core/public", "core/public/standalone"}
+FACADE = "core/nupmpc.h"
 SESSION_ROOMS = {"server/sessions", "server/convert", "server/scheduling", "server/auth", "server/observability",
-                 "core", "core/gp", "proto"}
+                 "core/gp", "proto"} | PUBLIC_CORE
 
 ALLOWED = {
     # nupmpc_core: Eigen and Abseil only; never the GP library or the seed applications.
-    "core": {"core"},
-    "core/gp": {"core", "core/gp"},
-    # The seed applications: programs on top of the core (their command line from cli/).
-    "core/examples": {"core", "core/gp", "core/examples", "cli"},
+    "core": {"core"} | PUBLIC_CORE,
+    "core/public": {"core"} | PUBLIC_CORE,
+    # The C++ standard library only (STANDARD_LIBRARY_ONLY).
+    "core/public/standalone": {"core/public/standalone"},
+    "core/gp": {"core", "core/gp"} | PUBLIC_CORE,
+    # The seed applications: programs on top of the core's public API (their command line from cli/).
+    "core/examples": {"core/gp", "core/examples", "cli"} | PUBLIC_CORE,
     "cli": {"cli"},
     # Conversion sees the core and the API, never gRPC (EXTERNAL_FORBIDDEN) or sessions.
-    "server/convert": {"server/convert", "core", "core/gp", "proto"},
+    "server/convert": {"server/convert", "core/gp", "proto"} | PUBLIC_CORE,
     "server/scheduling": {"server/scheduling"},
     "server/observability": {"server/observability", "proto"},
     "server/http": {"server/http"},
@@ -46,17 +57,18 @@ ALLOWED = {
     "server/state": SESSION_ROOMS | {"server/state"},
     "server/rpc": SESSION_ROOMS | {"server/state", "server/rpc"},
     # The process: everything of the server, and the command line.
-    "server": set(SERVER_ROOMS) | {"core", "core/gp", "proto", "cli"},
-    # The client library and the nupmpc CLI: proto + gRPC only.
-    "client": {"client", "proto", "cli"},
+    "server": set(SERVER_ROOMS) | {"core/gp", "proto", "cli"} | PUBLIC_CORE,
+    # The client library and the nupmpc CLI: proto + gRPC only, and the core's standalone
+    # rules (NonlinearSession's step control).
+    "client": {"client", "proto", "cli", "core/public/standalone"},
     # nupmpc-loadtest; its core peer builds the session the server builds (server/).
-    "loadtest": {"loadtest", "loadtest/instances", "client", "proto", "cli", "core", *SERVER_ROOMS},
+    "loadtest": {"loadtest", "loadtest/instances", "client", "proto", "cli", *SERVER_ROOMS} | PUBLIC_CORE,
     # The shared test data: instances through client/'s reader and the server's conversion.
-    "loadtest/instances": {"loadtest/instances", "client", "server/convert", "core", "proto"},
-    "loadtest/bench": {"loadtest/bench", "loadtest/instances", "core", "cli"},
-    "loadtest/bench/gp": {"loadtest/bench/gp", "core", "core/gp", "core/examples", "cli"},
+    "loadtest/instances": {"loadtest/instances", "client", "server/convert", "proto"} | PUBLIC_CORE,
+    "loadtest/bench": {"loadtest/bench", "loadtest/instances", "cli"} | PUBLIC_CORE,
+    "loadtest/bench/gp": {"loadtest/bench/gp", "core/gp", "core/examples", "cli"} | PUBLIC_CORE,
     # The fuzz targets drive the server's code paths and the client's readers in-process.
-    "tests/fuzz": {"tests/fuzz", "client", "proto", "core", *SERVER_ROOMS},
+    "tests/fuzz": {"tests/fuzz", "client", "proto", *SERVER_ROOMS} | PUBLIC_CORE,
     "tests": set(ROOMS),
 }
 
@@ -65,12 +77,17 @@ NOT_IN_CORE = ("grpc", "grpcpp/", "google/protobuf/", "spdlog/", "nlohmann/", "c
 NO_GRPC = ("grpc", "grpcpp/")
 EXTERNAL_FORBIDDEN = {
     "core": NOT_IN_CORE + ("lbfgs.h",),
+    "core/public": NOT_IN_CORE + ("lbfgs.h",),
     "core/gp": NOT_IN_CORE,
     "server/convert": NO_GRPC,
     "server/scheduling": NO_GRPC + ("google/protobuf/",),
     "server/http": NO_GRPC + ("google/protobuf/", "spdlog/"),
     "client": ("Eigen/", "spdlog/", "nlohmann/", "ceres/", "lbfgs.h"),
 }
+
+# Rooms whose files include nothing but the C++ standard library (<name>, no folder, no suffix).
+STANDARD_LIBRARY_ONLY = {"core/public/standalone"}
+STANDARD_HEADER = re.compile(r"^[a-z_]+$")
 
 INCLUDE = re.compile(r'^\s*#\s*include\s*([<"])([^">]+)[">]')
 SOURCE_SUFFIXES = (".h", ".hpp", ".cc", ".cpp", ".cxx", ".c", ".inc")
@@ -81,6 +98,8 @@ def room_of(path):
     """The room of a repository-relative path (or an included path), or None."""
     if path.startswith("nupmpc/"):
         return "proto"
+    if path == FACADE:
+        return "core/public"
     for room in ROOMS:
         if path == room or path.startswith(room + "/"):
             return room
@@ -131,8 +150,14 @@ def check(source_dir):
                         # Found beside the including file first (the compiler looks there
                         # before the include roots): its room is where it really is.
                         target = room_of(os.path.normpath(os.path.join(rel_top, included)))
-                    if target is not None:
-                        if target not in ALLOWED[room]:
+                    if room in STANDARD_LIBRARY_ONLY and target != room and not (
+                            m.group(1) == "<" and STANDARD_HEADER.match(included)):
+                        findings.append(f"{where}: {room}/ may include the C++ standard library only")
+                    elif target is not None:
+                        if target == "core" and "core" not in ALLOWED[room] and "core/public" in ALLOWED[room]:
+                            findings.append(f"{where}: outside core/, only the core's public headers ({FACADE}, "
+                                            "core/public/) may be included")
+                        elif target not in ALLOWED[room]:
                             findings.append(f"{where}: {room}/ may include {describe(ALLOWED[room])} only "
                                             f"(not {target}{'' if target == 'proto' else '/'})")
                     elif included.startswith(EXTERNAL_FORBIDDEN.get(room, ())):

@@ -46,6 +46,17 @@ plant loadtest/instances/benchmark_instance.cc '#include "server/sessions/step_s
 plant loadtest/load_level.cc '#include "loadtest/bench/bench_report.h"'
 plant core/model/factor_graph.cc '#include "../../server/spec_conversion.h"'
 plant core/problem.cc '#include "gp/gp_model.h"'
+# Outside core/, the core only through its public headers (core/nupmpc.h, core/public/).
+plant server/sessions/session_factory.cc '#include "core/session/session.h"'
+plant loadtest/core_baseline.cc '#include "core/algorithms/iffbdd.h"'
+plant core/examples/scenarios/dac.cc '#include "core/session/footprint.h"'
+plant tests/fuzz/step_fuzzer.cc '#include "core/util/status_macros.h"'
+# The standalone public headers: the C++ standard library only; the client sees no other.
+plant core/public/standalone/step_control.h '#include "absl/strings/str_cat.h"'
+plant core/public/standalone/step_control.h '#include "core/problem.h"'
+plant core/public/standalone/step_control.h '#include <Eigen/Core>'
+plant client/nonlinear_session.cc '#include "core/public/session.h"'
+plant client/nonlinear_session.cc '#include "core/nupmpc.h"'
 plant client/CMakeLists.txt 'target_include_directories(nupmpc_client PUBLIC ${PROJECT_SOURCE_DIR})'
 python3 "$check" "$work"
 echo "ok: the check fails on every planted forbidden include and passes without them"

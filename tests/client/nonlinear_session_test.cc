@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "client/channel_factory.h"
 #include "client/examples/bicycle.h"
 #include "client/examples/period_table.h"
 #include "client/examples/race_track.h"
@@ -368,7 +369,7 @@ class ApiExamplePrograms : public ::testing::Test {
     ASSERT_GT(port_, 0);
     server_ =
         std::make_unique<ServerProcess>(NUPMPC_SERVER_BINARY, port_, std::vector<std::string>{"--log_level=warn"});
-    auto channel = grpc::CreateChannel(server_->target(), grpc::InsecureChannelCredentials());
+    auto channel = nupmpc::OpenChannel(server_->target());
     ASSERT_TRUE(channel->WaitForConnected(std::chrono::system_clock::now() + std::chrono::seconds(30)));
   }
   // stdout and stderr of `binary --server=... flags`, and its exit status.

@@ -13,6 +13,7 @@
 #include <string>
 #include <thread>
 
+#include "client/channel_factory.h"
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 #include "server/grpc_server.h"
@@ -39,8 +40,8 @@ GrpcServer& Server() {
 }
 
 nupmpc::v1::MpcService::Stub& Stub() {
-  static std::unique_ptr<nupmpc::v1::MpcService::Stub> stub = nupmpc::v1::MpcService::NewStub(
-      grpc::CreateChannel("127.0.0.1:" + std::to_string(Server().port()), grpc::InsecureChannelCredentials()));
+  static std::unique_ptr<nupmpc::v1::MpcService::Stub> stub =
+      nupmpc::v1::MpcService::NewStub(nupmpc::OpenChannel("127.0.0.1:" + std::to_string(Server().port())));
   return *stub;
 }
 

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <thread>
 
+#include "client/channel_factory.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "loadtest/core_baseline.h"
@@ -218,8 +219,7 @@ std::vector<v1::ControlResponse> StepThrough(v1::MpcService::Stub& stub, const W
 TEST_F(LoadTest, BarePeerSolvesEveryStepAsTheServerDoes) {
   absl::StatusOr<std::unique_ptr<loadtest::EchoControlServer>> bare = loadtest::EchoControlServer::StartSolving();
   ASSERT_TRUE(bare.ok()) << bare.status();
-  const auto bare_stub =
-      v1::MpcService::NewStub(grpc::CreateChannel((*bare)->target(), grpc::InsecureChannelCredentials()));
+  const auto bare_stub = v1::MpcService::NewStub(nupmpc::OpenChannel((*bare)->target()));
   const std::vector<v1::ControlResponse> from_server = StepThrough(client_->stub(), workload_, 2);
   const std::vector<v1::ControlResponse> from_bare = StepThrough(*bare_stub, workload_, 2);
   ASSERT_EQ(from_server.size(), 2 * workload_.states.size());

@@ -18,6 +18,7 @@
 #include <utility>
 #include <vector>
 
+#include "client/channel_factory.h"
 #include "client/client.h"
 #include "client/problem_file.h"
 #include "gmock/gmock.h"
@@ -41,7 +42,7 @@ std::unique_ptr<ServerProcess> StartServer(const char* threads_env) {
 TEST(ServerBinaryTest, HealthReflectionEnvironmentAndGracefulSigterm) {
   const std::unique_ptr<ServerProcess> started = StartServer(/*threads_env=*/"3");
   ServerProcess& server = *started;
-  auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
+  auto channel = nupmpc::OpenChannel(server.target());
   ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
 
   auto health = grpc::health::v1::Health::NewStub(channel);
@@ -87,7 +88,7 @@ grpc::health::v1::HealthCheckResponse::ServingStatus HealthOf(grpc::health::v1::
 TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
   ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(), {"--log_level=warn", "--grace_period_s=2"},
                        {{"NUPMPC_DRAIN_DELAY_S", "60"}});
-  auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
+  auto channel = nupmpc::OpenChannel(server.target());
   ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   auto health = grpc::health::v1::Health::NewStub(channel);
   ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::SERVING);
@@ -131,7 +132,7 @@ TEST(ServerBinaryTest, DrainDelayReportsNotServingWhileStillServing) {
 TEST(ServerBinaryTest, OneSigtermServesOutTheDrainDelayThenExits) {
   ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
                        {"--log_level=warn", "--grace_period_s=1", "--drain_delay_s=1"});
-  auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
+  auto channel = nupmpc::OpenChannel(server.target());
   ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   auto health = grpc::health::v1::Health::NewStub(channel);
   ASSERT_EQ(HealthOf(*health), grpc::health::v1::HealthCheckResponse::SERVING);
@@ -154,7 +155,7 @@ TEST(ServerBinaryTest, AfterTheDrainDelayAnIdleConnectionAndStreamDoNotHoldTheEx
   constexpr int kGraceS = 20;
   ServerProcess server(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
                        {"--log_level=warn", "--grace_period_s=" + std::to_string(kGraceS), "--drain_delay_s=0.2"});
-  auto channel = grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials());
+  auto channel = nupmpc::OpenChannel(server.target());
   ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   absl::StatusOr<ProblemFile> masses =
       LoadBenchmarkInstanceSpec(std::string(NUPMPC_BENCHMARK_DIR) + "/masses_N30.json");
@@ -247,7 +248,7 @@ TEST(ServerBinaryTest, ASecondServerOnAPortInUseRefusesToStart) {
   const std::string metrics_address = "--metrics_address=127.0.0.1:" + std::to_string(metrics_port);
   ServerProcess first(NUPMPC_SERVER_BINARY, FreeLoopbackPort(),
                       {"--log_level=warn", "--grace_period_s=1", metrics_address});
-  auto channel = grpc::CreateChannel(first.target(), grpc::InsecureChannelCredentials());
+  auto channel = nupmpc::OpenChannel(first.target());
   ASSERT_TRUE(WaitUntilServing(channel, std::chrono::seconds(10)));
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
   while (!AcceptsConnections(metrics_port) && std::chrono::steady_clock::now() < deadline) {

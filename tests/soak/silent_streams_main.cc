@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "client/channel_factory.h"
 #include "nlohmann/json.hpp"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 
@@ -92,10 +93,9 @@ int main(int argc, char** argv) {
       std::chrono::duration_cast<std::chrono::system_clock::duration>(std::chrono::duration<double>(give_up_s));
   std::vector<std::unique_ptr<v1::MpcService::Stub>> stubs;
   for (int first = 0; first < count; first += per_connection) {
-    grpc::ChannelArguments args;
-    args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // a connection of its own per channel
-    stubs.push_back(
-        v1::MpcService::NewStub(grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args)));
+    nupmpc::ChannelOptions own;
+    own.own_connection = true;  // a connection of its own per channel
+    stubs.push_back(v1::MpcService::NewStub(nupmpc::OpenChannel(target, own)));
   }
   std::vector<std::unique_ptr<SilentStream>> streams;
   for (int i = 0; i < count; ++i)

@@ -8,8 +8,7 @@
 #include <cstdlib>
 #include <thread>
 
-#include "grpcpp/create_channel.h"
-#include "grpcpp/security/credentials.h"
+#include "client/channel_factory.h"
 
 namespace nupmpc::testing {
 
@@ -59,7 +58,7 @@ bool WaitUntilServing(const std::shared_ptr<grpc::Channel>& channel, std::chrono
 }
 
 bool WaitUntilServing(const std::string& target, std::chrono::seconds timeout) {
-  return WaitUntilServing(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()), timeout);
+  return WaitUntilServing(nupmpc::OpenChannel(target), timeout);
 }
 
 }  // namespace nupmpc::testing

@@ -4,9 +4,8 @@
 #include <cmath>
 
 #include "core/examples/scenarios/timed_solve.h"
-#include "core/model/input_differences.h"
-#include "core/model/multilevel_inputs.h"
-#include "core/util/status_macros.h"
+#include "core/public/input_maps.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::examples {
 namespace {

@@ -7,8 +7,8 @@
 
 #include "Eigen/LU"
 #include "core/examples/scenarios/timed_solve.h"
-#include "core/session/session.h"
-#include "core/util/status_macros.h"
+#include "core/public/session.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::examples {
 namespace {

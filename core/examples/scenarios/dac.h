@@ -9,7 +9,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/problem.h"
+#include "core/nupmpc.h"
 
 namespace nupmpc::examples {
 

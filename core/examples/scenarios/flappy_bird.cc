@@ -5,7 +5,7 @@
 #include <random>
 
 #include "core/examples/scenarios/timed_solve.h"
-#include "core/util/status_macros.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::examples {
 namespace {

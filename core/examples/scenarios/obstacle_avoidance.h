@@ -10,9 +10,8 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/nonlinear/keep_out.h"
-#include "core/nonlinear/sequential_solver.h"
-#include "core/problem.h"
+#include "core/nupmpc.h"
+#include "core/public/nonlinear.h"
 
 namespace nupmpc::examples {
 

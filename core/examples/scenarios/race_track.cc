@@ -4,9 +4,9 @@
 #include <cmath>
 #include <numbers>
 
-#include "core/priors/scalar_prior.h"
-#include "core/session/session.h"
-#include "core/util/status_macros.h"
+#include "core/nupmpc.h"
+#include "core/public/session.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::examples {
 namespace {

@@ -19,9 +19,8 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/nonlinear/nonlinear_model.h"
-#include "core/nonlinear/sequential_solver.h"
-#include "core/options.h"
+#include "core/nupmpc.h"
+#include "core/public/nonlinear.h"
 
 namespace nupmpc::examples {
 

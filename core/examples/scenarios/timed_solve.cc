@@ -3,8 +3,8 @@
 #include <chrono>
 #include <memory>
 
-#include "core/session/session.h"
-#include "core/util/status_macros.h"
+#include "core/public/session.h"
+#include "core/public/status_macros.h"
 
 namespace nupmpc::examples {
 

@@ -5,9 +5,7 @@
 // examples with non-convex priors run a fixed budget, nup-algorithms.md §7.2).
 
 #include "absl/status/statusor.h"
-#include "core/options.h"
-#include "core/problem.h"
-#include "core/solution.h"
+#include "core/nupmpc.h"
 
 namespace nupmpc::examples {
 

@@ -332,25 +332,25 @@ TEST(BlockedCholesky, MatchesEigenAndStopsWhenAsked) {
   Eigen::MatrixXd a = b * b.transpose();
   a.diagonal().array() += n;
   Eigen::MatrixXd f = a;
-  ASSERT_TRUE(BlockedCholesky(f, Interrupt{}, "A").ok());
+  ASSERT_TRUE(BlockedCholesky(f, core::Deadline{}, "A").ok());
   const Eigen::MatrixXd reference = a.llt().matrixL();
   const Eigen::MatrixXd lower = f.triangularView<Eigen::Lower>();
   EXPECT_LT((lower - reference).norm(), 1e-12 * reference.norm());
   Eigen::MatrixXd scratch(kCholeskyBlock, n + kCholeskyBlock);
-  ASSERT_TRUE(InverseFromCholesky(f, &scratch, Interrupt{}, "A").ok());
+  ASSERT_TRUE(InverseFromCholesky(f, &scratch, core::Deadline{}, "A").ok());
   const Eigen::MatrixXd inverse = f.selfadjointView<Eigen::Lower>();
   EXPECT_LT((inverse * a - Eigen::MatrixXd::Identity(n, n)).norm(), 1e-10);
 
   Eigen::MatrixXd indefinite = a;
   indefinite(n - 1, n - 1) = -1.0;
-  EXPECT_EQ(BlockedCholesky(indefinite, Interrupt{}, "A").code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(BlockedCholesky(indefinite, core::Deadline{}, "A").code(), absl::StatusCode::kFailedPrecondition);
   const std::atomic<bool> cancel{true};
-  Interrupt cancelled;
+  core::Deadline cancelled;
   cancelled.cancel = &cancel;
   f = a;
   EXPECT_EQ(BlockedCholesky(f, cancelled, "A").code(), absl::StatusCode::kCancelled);
-  Interrupt passed;
-  passed.deadline = Interrupt::Clock::now();
+  core::Deadline passed;
+  passed.at = core::Deadline::Clock::now();
   f = a;
   const absl::Status late = BlockedCholesky(f, passed, "A");
   EXPECT_EQ(late.code(), absl::StatusCode::kDeadlineExceeded);
@@ -363,13 +363,13 @@ TEST(BlockedCholesky, MatchesEigenAndStopsWhenAsked) {
 TEST(GpModel, SetUpAndLikelihoodStopWhenAsked) {
   const Data d = SmoothData(600, 3);
   const std::atomic<bool> cancel{true};
-  Interrupt cancelled;
+  core::Deadline cancelled;
   cancelled.cancel = &cancel;
   absl::StatusOr<GpModel> model = GpModel::Create(d.x, d.y, TestKernel(), cancelled);
   EXPECT_EQ(model.status().code(), absl::StatusCode::kCancelled);
   EXPECT_NE(model.status().message().find("step 1 of 3"), absl::string_view::npos) << model.status();
-  Interrupt passed;
-  passed.deadline = Interrupt::Clock::now();
+  core::Deadline passed;
+  passed.at = core::Deadline::Clock::now();
   model = GpModel::Create(d.x, d.y, TestKernel(), passed);
   EXPECT_EQ(model.status().code(), absl::StatusCode::kDeadlineExceeded);
   LikelihoodWorkspace workspace;

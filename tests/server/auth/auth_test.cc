@@ -8,6 +8,7 @@
 #include <fstream>
 #include <thread>
 
+#include "client/channel_factory.h"
 #include "client/channel_security.h"
 #include "client/session_routing.h"
 #include "gtest/gtest.h"
@@ -209,7 +210,7 @@ TEST_F(AuthTest, AChangedTokensFileTakesEffectWithoutARestart) {
 // Two authorization headers: which would count depends on their order, so neither does.
 TEST_F(AuthTest, TwoAuthorizationHeadersAreRefusedInEitherOrder) {
   Start();
-  auto channel = grpc::CreateChannel(target_, grpc::InsecureChannelCredentials());
+  auto channel = nupmpc::OpenChannel(target_);
   auto stub = v1::MpcService::NewStub(channel);
   for (const auto& [first, second] : {std::pair{kAliceToken, kBobToken}, std::pair{kBobToken, kAliceToken}}) {
     grpc::ClientContext context;
@@ -303,9 +304,9 @@ TEST(ListWithoutAuth, ListSessionsShowsTheCallersConnectionsSessionsUnlessListAl
     auto first = Client::Connect(target, plaintext);
     ASSERT_TRUE(first.ok());
     // Client::Connect's channels share gRPC's subchannel pool; a channel of its own is another connection.
-    grpc::ChannelArguments own;
-    own.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
-    Client second(grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), own));
+    ChannelOptions own;
+    own.own_connection = true;
+    Client second(OpenChannel(target, own));
     auto created = (*first)->CreateSession(spec);
     ASSERT_TRUE(created.ok());
     auto mine = (*first)->ListSessions();

@@ -11,7 +11,7 @@
 #include <thread>
 #include <tuple>
 
-#include "client/channel_security.h"
+#include "client/channel_factory.h"
 #include "client/session_routing.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -75,7 +75,7 @@ class BalancerAuthTest : public ::testing::Test {
     security.tls_ca_file = pki_->CaFile("ca");
     security.tls_cert_file = keys_.at(who).cert_file;
     security.tls_key_file = keys_.at(who).key_file;
-    absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = CreateChannel(target_, security, {});
+    absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = OpenChannel(target_, security, {});
     EXPECT_TRUE(channel.ok()) << channel.status();
     return v1::MpcService::NewStub(*channel);
   }

@@ -6,6 +6,7 @@
 #include <memory>
 #include <vector>
 
+#include "client/channel_factory.h"
 #include "gmock/gmock.h"
 
 namespace nupmpc::testing {
@@ -28,7 +29,7 @@ void ShutDownQueue(grpc::CompletionQueue* queue) {
 }  // namespace
 
 grpc::Status CallWithBytes(const std::string& target, const std::string& method, const std::string& bytes) {
-  grpc::GenericStub stub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
+  grpc::GenericStub stub(nupmpc::OpenChannel(target));
   grpc::CompletionQueue queue;
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
@@ -48,7 +49,7 @@ grpc::Status CallWithBytes(const std::string& target, const std::string& method,
 }
 
 RawControlStream::RawControlStream(const std::string& target)
-    : stub_(std::make_unique<grpc::GenericStub>(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()))) {
+    : stub_(std::make_unique<grpc::GenericStub>(nupmpc::OpenChannel(target))) {
   context_.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
   stream_ = stub_->PrepareCall(&context_, std::string(kService) + "Control", &queue_);
   stream_->StartCall(nullptr);

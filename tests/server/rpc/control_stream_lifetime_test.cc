@@ -8,6 +8,7 @@
 #include <thread>
 #include <vector>
 
+#include "client/channel_factory.h"
 #include "grpcpp/grpcpp.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 #include "tests/server/service/service_fixture.h"
@@ -51,7 +52,7 @@ TEST_F(ServiceTest, StreamsEndingWhileTheirSolveIsQueuedOrRunningLeaveNothingBeh
   std::vector<std::thread> threads;
   for (int t = 0; t < kThreads; ++t) {
     threads.emplace_back([&, t] {
-      const std::shared_ptr<grpc::Channel> channel = grpc::CreateChannel(target_, grpc::InsecureChannelCredentials());
+      const std::shared_ptr<grpc::Channel> channel = nupmpc::OpenChannel(target_);
       const std::unique_ptr<v1::MpcService::Stub> stub = v1::MpcService::NewStub(channel);
       for (int i = 0; i < kStreamsPerThread; ++i) RunShortStream(*stub, first, static_cast<Ending>((t + i) % 3));
     });
@@ -82,8 +83,7 @@ TEST_F(ServiceTest, AStreamsOwnSessionIsClosedBeforeTheClientHasTheStreamsStatus
   *first.mutable_spec() = SpecOrDie(inst.problem);
   const Eigen::VectorXd& x = inst.closed_loop->x1[0];
   first.mutable_step()->mutable_state()->Add(x.data(), x.data() + x.size());
-  const std::unique_ptr<v1::MpcService::Stub> stub =
-      v1::MpcService::NewStub(grpc::CreateChannel(target_, grpc::InsecureChannelCredentials()));
+  const std::unique_ptr<v1::MpcService::Stub> stub = v1::MpcService::NewStub(nupmpc::OpenChannel(target_));
   for (int i = 0; i < 20; ++i) {
     RunShortStream(*stub, first, Ending::kHalfCloseAfterTheAnswer);
     absl::StatusOr<v1::GetServerInfoResponse> info = client_->GetServerInfo();

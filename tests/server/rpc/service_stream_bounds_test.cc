@@ -8,10 +8,8 @@
 #include <thread>
 #include <vector>
 
+#include "client/channel_factory.h"
 #include "gmock/gmock.h"
-#include "grpcpp/create_channel.h"
-#include "grpcpp/security/credentials.h"
-#include "grpcpp/support/channel_arguments.h"
 #include "server/metrics_exposition.h"
 #include "tests/server/service/service_fixture.h"
 
@@ -68,10 +66,9 @@ TEST_F(ServiceStreamBoundsTest, AClientThatDoesNotReadMakesTheStreamStopReadingA
   // BDP probing that window stays at gRPC's initial size, far below the answers to the
   // steps below; with it, a fast server can grow it until it holds them all, and the
   // server's writes never wait (so it never has a reason to stop reading).
-  grpc::ChannelArguments no_window_growth;
-  no_window_growth.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
-  const std::shared_ptr<grpc::Channel> channel =
-      grpc::CreateCustomChannel(target_, grpc::InsecureChannelCredentials(), no_window_growth);
+  ChannelOptions no_window_growth;
+  no_window_growth.extra.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  const std::shared_ptr<grpc::Channel> channel = OpenChannel(target_, no_window_growth);
   const std::unique_ptr<v1::MpcService::Stub> stub = v1::MpcService::NewStub(channel);
   grpc::ClientContext context;
   std::unique_ptr<Stream> stream = stub->Control(&context);
