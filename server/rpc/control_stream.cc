@@ -73,7 +73,7 @@ void ControlStream::Begin() {
   HandToGrpc(&kFirstMessageAlarms);
   {
     std::lock_guard<std::mutex> lock(mu_);
-    ++reads_starting_;
+    flow_.ReadDecided();
   }
   ReadNext();
 }
@@ -82,11 +82,10 @@ void ControlStream::OnFirstMessageTimeout(bool fired) {
   if (!fired) return;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (done_ || phase_ != Phase::kAwaitingFirst) return;
-    // Through Pump, which finishes only once Begin's read has been started (reads_starting_):
+    // Through Pump, which finishes only once Begin's read has been started (ReadStarted):
     // the timer can fire before it is. The pending read then completes with !ok, or with a
     // late first message that OnReadDone drops.
-    phase_ = Phase::kEnding;
+    if (done_ || !flow_.EndWithoutFirstMessage()) return;
     final_status_ = state_->ToGrpc(
         Rpc::kControl,
         absl::DeadlineExceededError(absl::StrCat(
@@ -100,10 +99,9 @@ void ControlStream::Revoke() {
   {
     std::lock_guard<std::mutex> lock(mu_);
     // While the first message's session is built (kAttaching) the phase is not ours to
-    // change: the janitor revokes again a second later.
-    if (done_ || phase_ == Phase::kAttaching || phase_ == Phase::kEnding || phase_ == Phase::kFinished) return;
-    phase_ = Phase::kEnding;
-    parked_.reset();  // nothing more is solved for a caller whose access is gone
+    // change: the janitor revokes again a second later. A parked step is dropped: nothing
+    // more is solved for a caller whose access is gone.
+    if (done_ || !flow_.Revoke()) return;
     final_status_ = state_->ToGrpc(
         Rpc::kControl, absl::UnauthenticatedError(absl::StrCat("principal \"", caller_.principal,
                                                                "\": its token was removed from the server's tokens "
@@ -113,12 +111,11 @@ void ControlStream::Revoke() {
 }
 
 bool ControlStream::ShouldReadLocked() {
-  if (phase_ == Phase::kEnding || phase_ == Phase::kFinished || reading_ == Reading::kDone) return false;
   // The client does not read its answers: stop reading its steps (flow control) until it does.
-  const bool pause = static_cast<int>(writes_.size()) >= state_->options.max_stream_answers;
-  if (pause && reading_ != Reading::kPaused) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
-  reading_ = pause ? Reading::kPaused : Reading::kActive;
-  return !pause;
+  bool paused_now = false;
+  const bool read = flow_.ShouldRead(state_->options.max_stream_answers, &paused_now);
+  if (paused_now) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
+  return read;
 }
 
 absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::ControlRequest& first) {
@@ -161,7 +158,7 @@ void ControlStream::OnReadDone(bool ok) {
   if (!ok) {  // the client half-closed (or went away)
     {
       std::lock_guard<std::mutex> lock(mu_);
-      reading_ = Reading::kDone;
+      flow_.ReadingDone();
     }
     Pump();
     return;
@@ -177,9 +174,9 @@ void ControlStream::OnReadDone(bool ok) {
     std::lock_guard<std::mutex> lock(mu_);
     last_message_at_ = Clock::now();
     // Ending before its first message was handled (its timer fired): drop what arrives.
-    if (phase_ == Phase::kFinished || phase_ == Phase::kEnding) return;
-    first_message = phase_ == Phase::kAwaitingFirst;
-    if (first_message) phase_ = Phase::kAttaching;
+    const Flow::Arrival arrival = flow_.MessageArrived();
+    if (arrival == Flow::Arrival::kDropped) return;
+    first_message = arrival == Flow::Arrival::kFirst;
   }
   if (parsed.ok() && request.held_periods() > 0) NoteHeldPeriods(request.held_periods());
   if (first_message) first_message_timer_.Cancel();
@@ -187,7 +184,7 @@ void ControlStream::OnReadDone(bool ok) {
     {
       std::lock_guard<std::mutex> lock(mu_);
       final_status_ = state_->ToGrpc(Rpc::kControl, parsed);
-      phase_ = Phase::kEnding;
+      flow_.End();
     }
     Pump();
     return;
@@ -214,7 +211,7 @@ void ControlStream::OnReadDone(bool ok) {
           request.sequence(),
           state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
     } else {
-      read_timing_.StepArrived(solving_, read_after_solve_, Clock::now() - read_started_at_, writing_);
+      read_timing_.StepArrived(flow_.solving(), read_after_solve_, Clock::now() - read_started_at_, flow_.writing());
       start = EnqueueStepLocked(std::move(request));
       read_ahead = read_timing_.ReadAhead();
     }
@@ -222,8 +219,8 @@ void ControlStream::OnReadDone(bool ok) {
     // Reading on first: a newer step that arrives during the solve supersedes the parked
     // one; unless the client waits for its answers and the step is solved here (ReadTiming).
     read_after_solve = read_more && start.has_value() && !read_ahead &&
-                       PlaceStep(StepDue(entry_->timing, start->step(), solving_received_at_)).in_place;
-    if (read_more && !read_after_solve) ++reads_starting_;
+                       PlaceStep(StepDue(entry_->timing, start->step(), flow_.solving_received_at())).in_place;
+    if (read_more && !read_after_solve) flow_.ReadDecided();
   }
   if (read_more && !read_after_solve) ReadNext();
   if (start.has_value()) StartSolve(*std::move(start), read_after_solve);
@@ -237,7 +234,7 @@ void ControlStream::StartAttach(v1::ControlRequest first) {
   }
   {
     std::lock_guard<std::mutex> lock(mu_);
-    phase_ = Phase::kAttaching;  // keeps the stream from finishing while the pool builds the session
+    flow_.Attaching();  // keeps the stream from finishing while the pool builds the session
   }
   const absl::Status queued = state_->pool.TrySubmit(
       [self = shared_from_this(), first = std::move(first)]() mutable { self->AttachAndContinue(std::move(first)); });
@@ -245,7 +242,7 @@ void ControlStream::StartAttach(v1::ControlRequest first) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     final_status_ = state_->ToGrpc(Rpc::kControl, queued);
-    phase_ = Phase::kEnding;
+    flow_.End();
   }
   Pump();
 }
@@ -263,10 +260,10 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
     std::lock_guard<std::mutex> lock(mu_);
     if (!entry.ok()) {
       final_status_ = state_->ToGrpc(Rpc::kControl, entry.status());
-      phase_ = Phase::kEnding;
+      flow_.End();
     } else {
       entry_ = *std::move(entry);
-      phase_ = Phase::kOpen;
+      flow_.Opened();
       if (first.has_step()) {
         start = EnqueueStepLocked(std::move(first));
       } else {
@@ -276,7 +273,7 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
         QueueWriteLocked(hello);
       }
       read_more = ShouldReadLocked();
-      if (read_more) ++reads_starting_;
+      if (read_more) flow_.ReadDecided();
     }
   }
   if (read_more) ReadNext();
@@ -290,29 +287,24 @@ std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRe
         request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
     return std::nullopt;
   }
-  if (parked_.has_value()) {
+  if (const std::optional<v1::ControlRequest> replaced = flow_.Park(std::move(request), Clock::now())) {
     v1::ControlResponse superseded;
-    superseded.set_sequence(parked_->sequence());
+    superseded.set_sequence(replaced->sequence());
     superseded.mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
     QueueWriteLocked(superseded);
   }
-  parked_ = std::move(request);
-  parked_received_at_ = Clock::now();
   return TakeParkedLocked();
 }
 
 std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
-  if (solving_ || !parked_.has_value()) return std::nullopt;
-  std::optional<v1::ControlRequest> step = std::move(parked_);
-  parked_.reset();
-  solving_received_at_ = parked_received_at_;
-  SetSolvingLocked(true);
+  std::optional<v1::ControlRequest> step = flow_.TakeParked();
+  if (step.has_value()) state_->work_in_flight.fetch_add(1);
   return step;
 }
 
-void ControlStream::SetSolvingLocked(bool solving) {
-  if (solving != solving_) state_->work_in_flight.fetch_add(solving ? 1 : -1);
-  solving_ = solving;
+void ControlStream::SolveEndedLocked() {
+  if (flow_.solving()) state_->work_in_flight.fetch_add(-1);
+  flow_.SolveEnded();
 }
 
 ControlStream::WhereToSolve ControlStream::PlaceStep(std::optional<Clock::time_point> due) const {
@@ -341,7 +333,7 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
     Clock::time_point received_at;
     {
       std::lock_guard<std::mutex> lock(mu_);
-      received_at = solving_received_at_;
+      received_at = flow_.solving_received_at();
     }
     const std::optional<Clock::time_point> due = StepDue(entry_->timing, request.step(), received_at);
     const WhereToSolve placement = PlaceStep(due);
@@ -374,7 +366,7 @@ void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve
     {
       std::lock_guard<std::mutex> lock(mu_);
       QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, queued)));
-      SetSolvingLocked(false);
+      SolveEndedLocked();
       next = TakeParkedLocked();  // parked while this one was being handed over
     }
     if (!next.has_value()) return;
@@ -387,7 +379,7 @@ void ControlStream::ReadHeldBack() {
   {
     std::lock_guard<std::mutex> lock(mu_);
     read_more = ShouldReadLocked();
-    if (read_more) ++reads_starting_;
+    if (read_more) flow_.ReadDecided();
   }
   if (read_more) {
     ReadNext(/*after_solve=*/true);
@@ -401,7 +393,7 @@ void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& 
   {
     std::lock_guard<std::mutex> lock(mu_);
     QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, refused)));
-    SetSolvingLocked(false);
+    SolveEndedLocked();
     next = TakeParkedLocked();
   }
   if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
@@ -415,7 +407,7 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
   call.cancel = &cancelled_;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    call.received_at = solving_received_at_;
+    call.received_at = flow_.solving_received_at();
   }
   call.send_cost_ms = send_cost_ms_.load(std::memory_order_relaxed);
   v1::ControlResponse response;
@@ -430,12 +422,12 @@ void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_a
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (status.ok()) {
-      if (!writing_ && writes_.empty()) timed_write_since_ = Clock::now();  // written at once: a clean sample
+      if (flow_.answers_idle()) timed_write_since_ = Clock::now();  // written at once: a clean sample
       QueueWriteLocked(response);
     } else {
       QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
     }
-    SetSolvingLocked(false);
+    SolveEndedLocked();
     next = TakeParkedLocked();
   }
   // Still inside this session's strand task: the next step queues behind it.
@@ -449,7 +441,7 @@ void ControlStream::QueueWriteLocked(const v1::ControlResponse& response) {
     (void)SerializeRaw(ErrorResponse(response.sequence(), grpc::Status(grpc::StatusCode::INTERNAL, "unserializable")),
                        &bytes);
   }
-  writes_.push_back(bytes);
+  flow_.QueueAnswer(std::move(bytes));
 }
 
 void ControlStream::Pump() {
@@ -458,16 +450,9 @@ void ControlStream::Pump() {
   bool close_owned_session = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (phase_ == Phase::kFinished) return;
-    if (!writing_ && !writes_.empty()) {
-      writing_ = true;
-      to_write = &writes_.front();  // deque: stays valid while other elements are added at the back
-    } else if (!writing_ && !solving_ && reads_starting_ == 0 && phase_ != Phase::kAttaching &&
-               (phase_ == Phase::kEnding || (reading_ == Reading::kDone && !parked_.has_value()))) {
-      phase_ = Phase::kFinished;
-      finish = true;
-      close_owned_session = entry_ != nullptr && entry_->owned_by_stream;  // no solve of it runs: !solving_
-    }
+    finish = flow_.Pump(&to_write) == Flow::Next::kFinish;
+    // No solve of it runs: the flow finishes only when none is being solved.
+    close_owned_session = finish && entry_ != nullptr && entry_->owned_by_stream;
   }
   if (to_write != nullptr) Write(to_write);
   if (close_owned_session) CloseOwnedSession();
@@ -495,8 +480,7 @@ void ControlStream::ReadNext(bool after_solve) {
   bool pump;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    --reads_starting_;
-    pump = reads_starting_ == 0 && (phase_ == Phase::kEnding || reading_ == Reading::kDone);
+    pump = flow_.ReadStarted();
   }
   if (pump) Pump();
 }
@@ -522,15 +506,9 @@ void ControlStream::OnWriteDone(bool ok) {
       send_cost_ms_.store(0.8 * cost_ms + 0.2 * took_ms, std::memory_order_relaxed);
       timed_write_since_.reset();
     }
-    writes_.pop_front();
-    writing_ = false;
-    if (!ok) {  // the client is gone: drop what is left
-      writes_.clear();
-      parked_.reset();
-      reading_ = Reading::kDone;
-    }
-    resume_reading = reading_ == Reading::kPaused && ShouldReadLocked();
-    if (resume_reading) ++reads_starting_;
+    // !ok: the client is gone; what is left is dropped.
+    resume_reading = flow_.WriteDone(ok, state_->options.max_stream_answers);
+    if (resume_reading) flow_.ReadDecided();
   }
   if (resume_reading) ReadNext();
   Pump();
