@@ -17,7 +17,9 @@
 namespace nupmpc::server {
 
 // One Control stream (the main path). The first message attaches to a session or creates
-// one owned by the stream; every message with a step is answered once, in order.
+// one owned by the stream; every message with a step is answered once, in order. The
+// reactor's plumbing is control_stream.cc, the first message control_stream_attach.cc, a
+// step's way from parking to its answer control_stream_solve.cc.
 //
 // Flow control (server/rpc/stream_flow.h, this reactor carries out its decisions with
 // gRPC's calls), "newest state wins": at most one step of a stream is being solved and at
@@ -104,6 +106,8 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump);
   // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
+  // The answer to a message that failed with `status` (error_code, error_message).
+  static v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& status);
   void QueueWriteLocked(const v1::ControlResponse& response);
   // Whether to start the next read now: not while the client leaves max_stream_answers
   // answers unread (StreamFlow::ShouldRead; counts the pauses). Called with mu_; a caller
