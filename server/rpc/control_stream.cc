@@ -195,7 +195,7 @@ void ControlStream::QueueWriteLocked(const v1::ControlResponse& response) {
     (void)SerializeRaw(ErrorResponse(response.sequence(), grpc::Status(grpc::StatusCode::INTERNAL, "unserializable")),
                        &bytes);
   }
-  flow_.QueueAnswer(std::move(bytes));
+  flow_.QueueAnswer(bytes);
 }
 
 void ControlStream::Pump() {

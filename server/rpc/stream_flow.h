@@ -123,7 +123,7 @@ class StreamFlow {
   // The step being solved was answered (or could not be solved).
   void SolveEnded() { solving_ = false; }
 
-  void QueueAnswer(Answer answer) { writes_.push_back(std::move(answer)); }
+  void QueueAnswer(const Answer& answer) { writes_.push_back(answer); }
 
   // What to do next when nothing else is happening: write the front answer (`*to_write`,
   // valid until WriteDone), finish the stream (once: the phase is then kFinished), or
