@@ -39,25 +39,12 @@ absl::Status Iffbdd::CheckApplicable(const Problem& p) {
   return absl::OkStatus();
 }
 
-Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(options) {
-  bool inputs_constrained = false;
-  for (const ScalarPrior& prior : problem.input_priors) inputs_constrained |= prior.kind != PriorKind::kNone;
-  graph_ = BuildFactorGraph(problem, inputs_constrained);
-  // The input sub-problem (AdoptCarriedRegionsForPolish) needs output kinds whose inside
-  // costs nothing (bounds, not L1). Without input constraints it would be unconstrained:
-  // nothing to predict, and active outputs (random_outbox) would waste its attempts.
-  const bool outputs_are_bounds = std::all_of(problem.output_priors.begin(), problem.output_priors.end(),
-                                              [](const ScalarPrior& p) { return p.kind != PriorKind::kL1; });
-  uses_input_polish_ = inputs_constrained && outputs_are_bounds && options.polish_after_stable_iterations > 0;
-  if (uses_input_polish_) {
-    input_polish_ = std::make_unique<IbffdPolicy>(problem, /*check_outputs=*/true);
-    input_polish_region_.resize(static_cast<std::size_t>(graph_.N) * graph_.L);
-    input_row_.assign(static_cast<std::size_t>(graph_.N) * graph_.L, -1);
-    for (int r = 0; r < graph_.num_rows(); ++r) {
-      const RowOrigin& o = graph_.row_origin[r];
-      if (o.type == RowOrigin::Type::kInput) input_row_[o.step * graph_.L + o.index] = r;
-    }
-  }
+Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options)
+    : graph_(BuildFactorGraph(problem, std::any_of(problem.input_priors.begin(), problem.input_priors.end(),
+                                                   [](const ScalarPrior& p) { return p.kind != PriorKind::kNone; }))),
+      // The graph is augmented iff some input is constrained.
+      input_polish_(problem, graph_, /*inputs_constrained=*/graph_.augmented, options),
+      interior_point_(options) {
   const int R = graph_.num_rows();
   input_factor_.resize(graph_.input_prior.size());
   nup_.resize(R);
@@ -80,62 +67,35 @@ Iffbdd::Iffbdd(const Problem& problem, const SolverOptions& options) : options_(
 
 void Iffbdd::ReleaseWorkspace() {
   fw_ = ForwardFilterWorkspace();
-  interior_rows_ = InteriorPointRows();
+  interior_point_.Release();
   newton_z_.resize(0);
-  interior_plan_ = newton_plan_ = PrimalIterate();
-  ForgetSolve();
   workspace_held_ = false;
-  if (input_polish_) {
-    released_policy_ = input_polish_->TakeMemory();
-    input_polish_.reset();
-  }
+  input_polish_.Release();
 }
 
 void Iffbdd::AcquireWorkspace(const Problem& problem) {
-  if (uses_input_polish_ && !input_polish_) {
-    input_polish_ = std::make_unique<IbffdPolicy>(problem, /*check_outputs=*/true);
-    input_polish_->set_interrupt(interrupt_);
-    input_polish_->RestoreMemory(std::move(released_policy_));
-    released_policy_ = {};
-  }
+  input_polish_.Acquire(problem, interrupt_);
   if (workspace_held_) return;
   fw_.Resize(graph_, /*keep_edges=*/false);
-  // The interior-point iteration's state, when the problem's shape admits it (its priors
-  // may still change: DecideInteriorPoint decides at each refresh).
-  if (MayUseInteriorPoint()) {
-    interior_rows_.Resize(graph_.num_rows());
-    newton_z_.setZero(graph_.num_rows());
-    interior_plan_.Resize(graph_.base_M, graph_.L, graph_.N);
-    newton_plan_.Resize(graph_.base_M, graph_.L, graph_.N);
-  }
+  interior_point_.Acquire(graph_);
+  if (interior_point_.MayUse(graph_)) newton_z_.setZero(graph_.num_rows());
   LoadInputMoments(graph_, input_factor_.data(), &fw_);
   workspace_held_ = true;
 }
 
 void Iffbdd::Refresh(const Problem& problem) {
   RefreshFactorGraph(problem, &graph_);
-  if (input_polish_) input_polish_->Refresh(problem);
+  input_polish_.Refresh(problem);
   RefreshDerived();
-}
-
-bool Iffbdd::MayUseInteriorPoint() const {
-  return options_.interior_point && options_.polish_after_stable_iterations > 0 && !graph_.augmented;
-}
-
-void Iffbdd::DecideInteriorPoint() {
-  const auto& rows = graph_.row_prior;
-  interior_point_ = MayUseInteriorPoint() && std::all_of(rows.begin(), rows.end(), InteriorPointHandles) &&
-                    std::any_of(rows.begin(), rows.end(), [](const ScalarPrior& p) { return p.is_constraint(); });
-  ForgetSolve();
 }
 
 void Iffbdd::RefreshOutputPriors(const Problem& problem) {
   RefreshFactorGraphOutputPriors(problem, &graph_);
-  DecideInteriorPoint();
+  interior_point_.Decide(graph_);
 }
 
 void Iffbdd::RefreshDerived() {
-  DecideInteriorPoint();
+  interior_point_.Decide(graph_);
   for (std::size_t i = 0; i < input_factor_.size(); ++i) {
     input_factor_[i] = ScalarFactor::GaussianPart(graph_.input_prior[i]);
   }
@@ -155,9 +115,8 @@ void Iffbdd::ColdStart() {
   }
   has_regions_ = false;
   has_duals_ = false;
-  ForgetSolve();
-  if (input_polish_) input_polish_->Forget();
-  released_policy_.valid = false;
+  interior_point_.ForgetSolve();
+  input_polish_.ColdStart();
 }
 
 void Iffbdd::ShiftWarmStart() {
@@ -170,9 +129,8 @@ void Iffbdd::ShiftWarmStart() {
     row_dual_(r) = row_dual_(src);
   }
   for (int n = 0; n < graph_.N; ++n) step_costate_.col(n) = step_costate_.col(n + 1);
-  ForgetSolve();
-  if (input_polish_) input_polish_->Shift();
-  if (released_policy_.valid) ++released_policy_.shifts;
+  interior_point_.ForgetSolve();
+  input_polish_.Shift();
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     if (prior.kind == PriorKind::kBox && prior.is_hard()) gamma_[r] = GammaInitial(prior);
@@ -180,7 +138,16 @@ void Iffbdd::ShiftWarmStart() {
 }
 
 int Iffbdd::Iterate(PrimalIterate* out) {
-  if (interior_point_ && !dual_iteration_) return IterateInteriorPoint(out);
+  if (interior_point_.iterates()) {
+    const int changed = interior_point_.Iterate(*this, &region_, out);
+    if (changed == IffbddInteriorPoint::kInterrupted) return -1;
+    if (changed != IffbddInteriorPoint::kBreakdown) {
+      has_regions_ = true;
+      largest_dual_ = interior_point_.largest_multiplier();
+      return changed;
+    }
+    // A breakdown: this solve goes on with the dual iteration (IffbddInteriorPoint::Iterate).
+  }
   for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = WithGaussianPart(graph_.row_prior[r], nup_[r]);
   RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
   if (Interrupted()) return -1;  // incomplete: the carried state is untouched so far
@@ -189,86 +156,20 @@ int Iffbdd::Iterate(PrimalIterate* out) {
   return changed;
 }
 
-int Iffbdd::IterateInteriorPoint(PrimalIterate* out) {
-  const FactorGraph& g = graph_;
-  const int R = g.num_rows();
-  // Predictor (affine-scaling direction, target 0). The first pass of a solve starts each
-  // row when the filter reaches it, knowing the row's prediction and prior variance.
-  if (!interior_point_started_) {
-    interior_rows_.Forget();
-    for (int r = 0; r < R; ++r) row_factor_[r] = ScalarFactor::GaussianPart(g.row_prior[r]);
-    RunForwardFilterDeciding(
-        g, row_factor_.data(),
-        [this](int r, double yhat, double s, const double*) {
-          return row_factor_[r] = interior_rows_.Start(r, graph_.row_prior[r], yhat, s);
-        },
-        &fw_, interrupt_);
-    if (Interrupted()) return -1;
-    Backward(Pass::kNewton, out);
-    interior_plan_.u.setZero();
-    interior_plan_.x0 = g.m0.head(g.base_M);
-    interior_point_started_ = true;
-    interior_rows_.TakeDirections(newton_z_);
-  } else {
-    interior_rows_.AimPredictor(row_factor_.data());
-    if (!SolveNewtonDirection(/*full_filter=*/true, out)) return -1;
-  }
-  if (Interrupted()) return -1;
-  // The regions the polish would start from: where the predictor's full step would put
-  // each row (its limit as μ → 0, a better guess of the optimum's active set than the
-  // current iterate's, whose rows near their bounds still sit at a distance set by μ).
-  int changed = 0;
-  for (int r = 0; r < R; ++r) {
-    const Region region = interior_rows_.active(r) ? interior_rows_.RegionOf(r, fw_.s(r), 1.0) : Region::kInside;
-    if (region != region_[r]) ++changed;
-    region_[r] = region;
-  }
-  // Mehrotra's centring σ = (μ_aff / μ)³, from the complementarity the predictor would reach.
-  const double mu = interior_rows_.Complementarity();
-  const double mu_affine = interior_rows_.Complementarity(std::min(1.0, interior_rows_.MaxStep()));
-  const double sigma_mu = mu > 0.0 ? std::min(1.0, std::pow(mu_affine / mu, 3)) * mu : 0.0;
-  // Corrector, then Gondzio's centrality correctors while they lengthen the step (his
-  // paper's trial step 1.08 α + 0.08 and acceptance at 1.005 α, at most 3); each a means
-  // pass with the predictor's gains.
-  interior_rows_.AimCorrector(sigma_mu, row_factor_.data());
-  if (!SolveNewtonDirection(/*full_filter=*/false, out)) return -1;
-  double reach = interior_rows_.MaxStep();
-  for (int correction = 0; correction < 3 && reach < 1.0; ++correction) {
-    newton_plan_.u = out->u;
-    newton_plan_.x0 = out->x0;
-    interior_rows_.AimCentrality(std::min(1.0, 1.08 * reach + 0.08), sigma_mu, row_factor_.data());
-    if (!SolveNewtonDirection(/*full_filter=*/false, out)) return -1;
-    const double enhanced = interior_rows_.MaxStep();
-    if (enhanced < 1.005 * reach) {
-      interior_rows_.Reject();
-      out->u = newton_plan_.u;
-      out->x0 = newton_plan_.x0;
-      break;
-    }
-    reach = enhanced;
-  }
-  // A step to a fraction of the boundary (Wright 1997, ch. 10); the plan moves with it.
-  const double step = std::isnan(reach) ? reach : std::min(1.0, 0.995 * reach);  // a NaN must reach the test below
-  if (!(step > options_.objective_tolerance) || !out->u.allFinite() || !out->x0.allFinite()) {
-    // A breakdown (a slack or multiplier under- or overflowed: NaN), or a step too short
-    // to move the objective by the solve loop's tolerance, whose test would then take a
-    // stalled iterate for a converged one (an infeasible problem's interior point stalls
-    // so): this solve goes on with IFFBDD's own iteration from its carried state, which
-    // the interior point never touched, and its infeasibility watch.
-    dual_iteration_ = true;
-    return Iterate(out);
-  }
-  interior_rows_.Step(step);
-  interior_plan_.u += step * (out->u - interior_plan_.u);
-  interior_plan_.x0 += step * (out->x0 - interior_plan_.x0);
-  out->u = interior_plan_.u;
-  out->x0 = interior_plan_.x0;
-  has_regions_ = true;
-  largest_dual_ = interior_rows_.largest_multiplier();
-  return changed;
+bool Iffbdd::StartingPass(InteriorPointRows* rows, PrimalIterate* out) {
+  for (int r = 0; r < graph_.num_rows(); ++r) row_factor_[r] = ScalarFactor::GaussianPart(graph_.row_prior[r]);
+  RunForwardFilterDeciding(
+      graph_, row_factor_.data(),
+      [this, rows](int r, double yhat, double s, const double*) {
+        return row_factor_[r] = rows->Start(r, graph_.row_prior[r], yhat, s);
+      },
+      &fw_, interrupt_);
+  if (Interrupted()) return false;
+  Backward(Pass::kNewton, out);
+  return true;
 }
 
-bool Iffbdd::SolveNewtonDirection(bool full_filter, PrimalIterate* out) {
+bool Iffbdd::NewtonPass(bool full_filter, PrimalIterate* out) {
   if (full_filter) {
     RunForwardFilter(graph_, nullptr, row_factor_.data(), /*keep_edges=*/false, &fw_, interrupt_);
   } else {
@@ -276,9 +177,7 @@ bool Iffbdd::SolveNewtonDirection(bool full_filter, PrimalIterate* out) {
   }
   if (Interrupted()) return false;
   Backward(Pass::kNewton, out);
-  if (Interrupted()) return false;
-  interior_rows_.TakeDirections(newton_z_);
-  return true;
+  return !Interrupted();
 }
 
 void Iffbdd::AdoptRegionsForPolish() {
@@ -289,7 +188,7 @@ void Iffbdd::AdoptRegionsForPolish() {
 
 void Iffbdd::AdoptCarriedRegionsForPolish() {
   ActiveSetIteration::AdoptRegionsForPolish();
-  dual_iteration_ = true;
+  interior_point_.UseDualIteration();
   decide_forward_next_ = has_duals_;
   polishing_inputs_ = StartInputPolish(/*carried=*/true);
 }
@@ -306,9 +205,8 @@ bool Iffbdd::OutputConstraintsInside() const {
 
 bool Iffbdd::StartInputPolish(bool carried) {
   // With an active output constraint the sub-problem would be the wrong one.
-  if (!input_polish_ || !OutputConstraintsInside()) return false;
-  for (std::size_t i = 0; i < input_row_.size(); ++i) input_polish_region_[i] = region_[input_row_[i]];
-  input_polish_->StartPolish(carried);
+  if (!input_polish_.active() || !OutputConstraintsInside()) return false;
+  input_polish_.Start(region_, carried);
   return true;
 }
 
@@ -316,11 +214,10 @@ void Iffbdd::AcceptPolishRegions() {
   if (!polishing_inputs_) {
     ActiveSetIteration::AcceptPolishRegions();
     // The sub-problem's carried policy belongs to an older active set now.
-    if (input_polish_) input_polish_->Forget();
+    input_polish_.ForgetPolicy();
     return;
   }
-  for (int r = 0; r < graph_.num_rows(); ++r) region_[r] = Region::kInside;  // outputs inactive
-  for (std::size_t i = 0; i < input_row_.size(); ++i) region_[input_row_[i]] = input_polish_region_[i];
+  input_polish_.ProposedRegions(&region_);  // outputs inactive
   // This algorithm's duals are the last own pass's, not the accepted solution's.
   has_duals_ = false;
   polishing_inputs_ = false;
@@ -346,16 +243,15 @@ ScalarFactor Iffbdd::DecideRowForward(int r, double yhat, double s, const double
 }
 
 double Iffbdd::Polish(PrimalIterate* out) {
-  if (polishing_inputs_ && input_polish_->outputs_outside()) {
+  if (polishing_inputs_ && input_polish_.outputs_outside()) {
     // The last pass (not accepted) left an output outside its bounds: an output constraint
     // became active. Go on with this algorithm's own polish from the input regions the
     // sub-problem proposed; outputs start inside and the pass proposes the violated ones.
     polishing_inputs_ = false;
     decide_forward_next_ = false;
-    for (int r = 0; r < graph_.num_rows(); ++r) polish_region_[r] = Region::kInside;
-    for (std::size_t i = 0; i < input_row_.size(); ++i) polish_region_[input_row_[i]] = input_polish_region_[i];
+    input_polish_.ProposedRegions(&polish_region_);
   }
-  if (polishing_inputs_) return input_polish_->Polish(&input_polish_region_, out);
+  if (polishing_inputs_) return input_polish_.Polish(out);
   for (int r = 0; r < graph_.num_rows(); ++r) {
     const ScalarPrior& prior = graph_.row_prior[r];
     row_factor_[r] = prior.kind == PriorKind::kNone ? ScalarFactor::GaussianPart(prior)

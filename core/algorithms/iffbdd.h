@@ -1,12 +1,11 @@
 #ifndef NUPMPC_CORE_ALGORITHMS_IFFBDD_H_
 #define NUPMPC_CORE_ALGORITHMS_IFFBDD_H_
 
-#include <memory>
 #include <vector>
 
 #include "absl/status/status.h"
-#include "core/algorithms/ibffd_policy.h"
-#include "core/algorithms/interior_point_rows.h"
+#include "core/algorithms/iffbdd_input_polish.h"
+#include "core/algorithms/iffbdd_interior_point.h"
 #include "core/algorithms/outer_iteration.h"
 #include "core/message_passing/forward_filter.h"
 #include "core/model/factor_graph.h"
@@ -22,12 +21,16 @@ namespace nupmpc::core {
 //
 // Problems whose only constrained rows are hard output bounds (no constrained input, no
 // soft or L1 row) are iterated instead with a primal-dual interior-point method on the
-// same passes (SolverOptions.interior_point, InteriorPointRows): IFFBDD's dual updates find
-// such an active set at a linear rate (tens of passes on random output boxes), Mehrotra's
-// predictor-corrector at a superlinear one. Its iterates feed the same active-set polish.
-// A warm solve still starts with the carried active set and, if that polish fails,
-// continues with IFFBDD's own iteration.
-class Iffbdd final : public ActiveSetIteration {
+// same passes (SolverOptions.interior_point, IffbddInteriorPoint): IFFBDD's dual updates
+// find such an active set at a linear rate (tens of passes on random output boxes),
+// Mehrotra's predictor-corrector at a superlinear one. Its iterates feed the same
+// active-set polish. A warm solve still starts with the carried active set and, if that
+// polish fails, continues with IFFBDD's own iteration.
+//
+// This class is the dual NUP iteration and its own polish, and runs the passes of both
+// collaborators: the interior point (IffbddInteriorPoint) and the polish on the input
+// sub-problem (IffbddInputPolish).
+class Iffbdd final : public ActiveSetIteration, private IffbddInteriorPoint::Passes {
  public:
   // Why this problem cannot run IFFBDD (OkStatus if it can).
   static absl::Status CheckApplicable(const Problem& problem);
@@ -36,14 +39,14 @@ class Iffbdd final : public ActiveSetIteration {
   Algorithm algorithm() const override { return Algorithm::kIffbdd; }
   void set_interrupt(Interrupt* interrupt) override {
     OuterIteration::set_interrupt(interrupt);
-    if (input_polish_) input_polish_->set_interrupt(interrupt);
+    input_polish_.set_interrupt(interrupt);
   }
   void Refresh(const Problem& problem) override;
   void RefreshOutputPriors(const Problem& problem) override;
   void RefreshInitialState(const Problem& problem) override {
     RefreshFactorGraphInitialState(problem, &graph_);
-    if (input_polish_) input_polish_->RefreshInitialState(problem);
-    ForgetSolve();
+    input_polish_.RefreshInitialState(problem);
+    interior_point_.ForgetSolve();
   }
   void ColdStart() override;
   void ShiftWarmStart() override;
@@ -65,7 +68,7 @@ class Iffbdd final : public ActiveSetIteration {
   // this algorithm's own polish.
   void AdoptCarriedRegionsForPolish() override;
   void AcceptPolishRegions() override;
-  bool NextPolishSolvesInputsOnly() const override { return input_polish_ && OutputConstraintsInside(); }
+  bool NextPolishSolvesInputsOnly() const override { return input_polish_.active() && OutputConstraintsInside(); }
   double largest_dual() const override { return largest_dual_; }
   void ReleaseWorkspace() override;
   void AcquireWorkspace(const Problem& problem) override;
@@ -83,26 +86,16 @@ class Iffbdd final : public ActiveSetIteration {
   // constraint inside in region_); if so, hands it region_'s input regions.
   bool StartInputPolish(bool carried);
   bool OutputConstraintsInside() const;  ///< in region_
-  // One interior-point iteration (a filter pass for the predictor, a means-only pass with
-  // the same gains for the corrector); returns the region changes like Iterate().
-  int IterateInteriorPoint(PrimalIterate* out);
-  // A Newton pass with the factors of the interior-point rows' last Aim (a full filter
-  // pass, or a means pass with the last one's gains): the rows' new values, their
-  // directions, and the plan into `out`. False when interrupted.
-  bool SolveNewtonDirection(bool full_filter, PrimalIterate* out);
-  // Whether the options and the graph's shape admit the interior-point iteration.
-  bool MayUseInteriorPoint() const;
-  // A new solve begins (new values or a shifted horizon): the interior-point iteration
-  // starts afresh. A solve that adopts carried regions (warm) iterates with IFFBDD's own
-  // carried dual state instead, which a solve near the last one's optimum needs few
-  // passes of (an interior point always starts from the middle); so does one whose
-  // interior point broke down.
-  void ForgetSolve() {
-    interior_point_started_ = false;
-    dual_iteration_ = false;
-  }
-  // Whether the rows' priors admit it now (sets interior_point_; the next solve starts afresh).
-  void DecideInteriorPoint();
+
+  // IffbddInteriorPoint::Passes: the interior point's passes on this graph.
+  const FactorGraph& graph() const override { return graph_; }
+  ScalarFactor* row_factors() override { return row_factor_.data(); }
+  bool StartingPass(InteriorPointRows* rows, PrimalIterate* out) override;
+  bool NewtonPass(bool full_filter, PrimalIterate* out) override;
+  const Eigen::VectorXd& newton_values() const override { return newton_z_; }
+  double PredictedVariance(int r) const override { return fw_.s(r); }
+  bool PassInterrupted() const override { return Interrupted(); }
+
   // What Refresh() derives from the graph: the inputs' Gaussian factors (and moments), γ.
   void RefreshDerived();
   // The region (and polish factor) of constrained row r from its forward prediction and the
@@ -126,28 +119,13 @@ class Iffbdd final : public ActiveSetIteration {
   bool has_duals_ = false;
   double largest_dual_ = 0.0;  ///< max |ỹ| over the constrained rows of the last Iterate()
   bool decide_forward_next_ = false;
-  // The warm polish on the input sub-problem (used when some input is constrained and every
-  // output prior is a box or half-space), its regions of the input scalars (n·L + l), and
-  // whether the current polish runs there. It is scratch: ReleaseWorkspace destroys it
-  // (most of an idle session's memory) and keeps only its policy's memory;
-  // AcquireWorkspace rebuilds it from the problem.
-  SolverOptions options_;
-  bool uses_input_polish_ = false;
-  std::unique_ptr<IbffdPolicy> input_polish_;
-  std::vector<Region> input_polish_region_;
-  IbffdPolicy::Memory released_policy_;
+  // The warm polish on the input sub-problem, and whether the current polish runs there.
+  IffbddInputPolish input_polish_;
   bool polishing_inputs_ = false;
-  std::vector<int> input_row_;  ///< the augmented row of input scalar n·L + l
-  // The interior-point iteration (see the class comment): whether the problem gets it now,
-  // whether it has started in this solve, its per-row state, the rows' values of the last
-  // Newton pass, and its plan (moved by the primal steps).
-  bool interior_point_ = false;
-  bool interior_point_started_ = false;
-  bool dual_iteration_ = false;  ///< this solve iterates with IFFBDD's updates (ForgetSolve)
-  InteriorPointRows interior_rows_;
+  // The interior-point iteration (see the class comment), and the rows' values of the last
+  // Newton pass.
+  IffbddInteriorPoint interior_point_;
   Eigen::VectorXd newton_z_;
-  PrimalIterate interior_plan_;
-  PrimalIterate newton_plan_;  ///< the direction's plan before a centrality correction
 };
 
 }  // namespace nupmpc::core

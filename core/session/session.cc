@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <limits>
 #include <utility>
 
@@ -12,14 +11,11 @@
 #include "core/session/discrete_search.h"
 #include "core/session/elastic.h"
 #include "core/session/footprint.h"
+#include "core/session/solve_loop.h"
 #include "core/util/status_macros.h"
 
 namespace nupmpc::core {
 namespace {
-
-// Largest input change between passes (relative to 1 + the largest input) at which a
-// problem with non-convex priors counts as settled.
-constexpr double kNonconvexStepTolerance = 1e-9;
 
 bool AnyInputConstrained(const Problem& p) {
   for (const ScalarPrior& prior : p.input_priors) {
@@ -187,10 +183,7 @@ absl::Status Session::AdoptNewValues(bool was_input_constrained, bool new_storag
 }
 
 bool Session::PassInterrupted(SolveSummary* summary) {
-  if (!interrupt_->fired()) return false;
-  summary->status = *interrupt_->reason();
-  pass_interrupted_ = true;
-  return true;
+  return core::PassInterrupted(*interrupt_, summary, &pass_interrupted_);
 }
 
 void Session::ShiftWarmStart() {
@@ -280,161 +273,19 @@ int Session::IterationCap(const SolveLimits& limits) const {
 }
 
 SolveSummary Session::RunLoop(const SolveLimits& limits, bool warm) {
-  const int max_iterations = IterationCap(limits);
-  const double violation_tolerance = options_.violation_tolerance * evaluator_.bound_scale();
-  const bool polish_enabled = options_.polish_after_stable_iterations > 0;
-
-  SolveSummary summary;
-  summary.status = SolveStatus::kIterationLimit;
-  bool have_finite = false;  ///< best_ holds a complete, finite iterate of this loop
-  // The plain iterate of this loop closest to the bounds, returned if the loop finds them
-  // contradictory (the last iterate has then diverged with the multipliers).
-  double least_violation = kInfinity, least_violation_objective = 0.0;
-  infeasibility_.Start();
-
-  const auto stop_requested = [&]() { return StopNow(interrupt_, &summary); };
-  // After an evaluation: a pass the interrupt cut short there is neither returned nor
-  // counted (the plan returned is the previous pass's, as a solve capped there returns it).
-  const auto evaluation_cut_short = [&]() {
-    if (!interrupt_->fired()) return false;
-    --summary.iterations;
-    return true;
-  };
-
-  // Tries the active-set polish (1 + polish_rounds passes, more up to polish_max_rounds
-  // while the deciding residual keeps falling); true if it was accepted.
-  const auto try_polish = [&]() {
-    double best_residual = kInfinity;
-    for (int round = 0; summary.iterations < max_iterations; ++round) {
-      if (round > 0 && stop_requested()) return false;  // up to 13 passes: honour the limits
-      const double residual = algorithm_->Polish(&candidate_);
-      if (PassInterrupted(&summary)) return false;  // an incomplete pass: discarded
-      ++summary.iterations;
-      if (limits.trace) {
-        limits.trace({.kind = PassTrace::Kind::kPolish, .pass = summary.iterations, .residual = residual});
-      }
-      const bool progress = residual < best_residual;
-      best_residual = std::min(best_residual, residual);
-      if (residual <= violation_tolerance && AllFinite(candidate_)) {
-        const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
-        if (evaluation_cut_short()) return false;  // not evaluated: not accepted
-        if (std::isfinite(r.objective) && r.max_violation <= violation_tolerance) {
-          std::swap(best_, candidate_);
-          algorithm_->AcceptPolishRegions();
-          summary.objective = r.objective;
-          summary.max_violation = r.max_violation;
-          summary.polished = true;
-          summary.has_plan = true;
-          summary.status = SolveStatus::kConverged;
-          return true;
-        }
-      }
-      if (!have_finite && AllFinite(candidate_)) {
-        // Not verified, but a complete pass of this solve for this x[0]: until a plain
-        // iterate exists, the solve's plan (a warm solve capped at one pass returns it).
-        const ObjectiveEvaluator::Result r = evaluator_.Evaluate(problem_, candidate_, interrupt_);
-        if (evaluation_cut_short()) return false;
-        if (std::isfinite(r.objective) && std::isfinite(r.max_violation)) {
-          std::swap(best_, candidate_);
-          have_finite = true;
-          summary.objective = r.objective;
-          summary.max_violation = r.max_violation;
-        }
-      }
-      const bool keep_going = round < options_.polish_rounds || (progress && round < options_.polish_max_rounds);
-      if (!keep_going) break;
-    }
-    return false;
-  };
-
-  // A warm start carries the previous active set: if it is still right, one exact pass
-  // finishes the solve (restarting from the optimum takes one iteration).
-  if (warm && polish_enabled && algorithm_->has_regions() && !stop_requested()) {
-    algorithm_->AdoptCarriedRegionsForPolish();
-    if (try_polish()) return summary;
-  }
-
-  double previous_objective = std::numeric_limits<double>::quiet_NaN();
-  int stable = 0;
-  int polish_wait = options_.polish_after_stable_iterations;
-  // Whether `changed` region changes count as a settled active set. Which fraction applies
-  // depends on the next polish (NextPolishSolvesInputsOnly scans every row): asked only
-  // when the two fractions disagree about `changed`.
-  const auto settled = [&](int changed) {
-    const double scalars = algorithm_->decided_scalars();
-    const double inputs_only = options_.input_polish_settled_fraction * scalars;
-    const double whole = options_.polish_settled_fraction * scalars;
-    if (changed <= std::min(inputs_only, whole)) return true;
-    if (changed > std::max(inputs_only, whole)) return false;
-    return changed <= (algorithm_->NextPolishSolvesInputsOnly() ? inputs_only : whole);
-  };
-  while (summary.iterations < max_iterations) {
-    if (stop_requested()) break;
-    const int changed = algorithm_->Iterate(&current_);
-    if (PassInterrupted(&summary)) break;  // an incomplete pass: discarded
-    ++summary.iterations;
-    const ObjectiveEvaluator::Result r = AllFinite(current_) ? evaluator_.Evaluate(problem_, current_, interrupt_)
-                                                             : ObjectiveEvaluator::Result{NAN, NAN};
-    if (evaluation_cut_short()) {  // a complete pass, not evaluated: not returned either
-      summary.status = *interrupt_->reason();
-      break;
-    }
-    if (!std::isfinite(r.objective) || !std::isfinite(r.max_violation)) {
-      summary.status = SolveStatus::kNumericalError;
-      break;
-    }
-    // Non-convex priors (NUV, binary) leave no trace in J (§5.1): J alone can sit still
-    // while the inputs are still being sparsified or binarised, so the plan must settle
-    // too.
-    const bool iterate_settled =
-        !has_nonconvex_priors_ || (current_.u - best_.u).cwiseAbs().maxCoeff() <=
-                                      kNonconvexStepTolerance * (1.0 + current_.u.cwiseAbs().maxCoeff());
-    if (limits.trace) {
-      limits.trace({.kind = PassTrace::Kind::kIterate,
-                    .pass = summary.iterations,
-                    .changed = changed,
-                    .objective = r.objective,
-                    .max_violation = r.max_violation});
-    }
-    std::swap(best_, current_);
-    have_finite = true;
-    summary.objective = r.objective;
-    summary.max_violation = r.max_violation;
-    const bool objective_settled = iterate_settled && std::abs(r.objective - previous_objective) <=
-                                                          options_.objective_tolerance * std::abs(r.objective);
-    if (objective_settled && r.max_violation <= violation_tolerance) {
-      summary.status = SolveStatus::kConverged;
-      break;
-    }
-    if (r.max_violation <= least_violation) {  // ties: the later, further converged one
-      least_violation = r.max_violation;
-      least_violation_objective = r.objective;
-      least_violation_.x0 = best_.x0;  // same sizes: no allocation
-      least_violation_.u = best_.u;
-    }
-    if (infeasibility_.Observe(algorithm_->largest_dual(), r.max_violation, objective_settled, violation_tolerance)) {
-      std::swap(best_, least_violation_);
-      summary.objective = least_violation_objective;
-      summary.max_violation = least_violation;
-      summary.status = SolveStatus::kInfeasible;
-      break;
-    }
-    previous_objective = r.objective;
-
-    stable = changed >= 0 && settled(changed) ? stable + 1 : 0;
-    if (polish_enabled && changed >= 0 && stable >= polish_wait) {
-      algorithm_->AdoptRegionsForPolish();
-      if (try_polish()) break;
-      if (interrupt_->fired()) break;
-      // The active set was not right yet: wait longer before the next attempt.
-      stable = 0;
-      polish_wait = std::min(2 * polish_wait + 1, 64);
-    }
-  }
-  // No iterate of this solve survived (limits hit first, or a breakdown): best_ is a
-  // previous solve's plan, for another x[0], and is never reported as a plan.
-  summary.has_plan = have_finite || summary.polished;
-  return summary;
+  const SolveLoopParts parts{.problem = problem_,
+                             .options = options_,
+                             .algorithm = *algorithm_,
+                             .evaluator = evaluator_,
+                             .interrupt = *interrupt_,
+                             .current = current_,
+                             .candidate = candidate_,
+                             .best = best_,
+                             .least_violation = least_violation_,
+                             .infeasibility = infeasibility_,
+                             .pass_interrupted = pass_interrupted_,
+                             .nonconvex_priors = has_nonconvex_priors_};
+  return SolveLoop(parts, limits, IterationCap(limits)).Run(warm);
 }
 
 }  // namespace nupmpc::core

@@ -3,28 +3,25 @@
 #include "absl/strings/str_cat.h"
 #include "nupmpc/grpc_handover.h"
 #include "server/observability/log_context.h"
-#include "server/rpc/catch_exceptions.h"
 #include "server/rpc/raw_messages.h"
-#include "server/scheduling/solve_in_place.h"
-#include "server/sessions/session_factory.h"
-#include "server/sessions/step_solver.h"
+#include "server/sessions/step_deadline.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
 namespace {
 
-v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& status) {
+// The hand-over address of the first-message alarms' callbacks (server/rpc/grpc_handover.h).
+const char kFirstMessageAlarms = 0;
+
+}  // namespace
+
+v1::ControlResponse ControlStream::ErrorResponse(std::uint64_t sequence, const grpc::Status& status) {
   v1::ControlResponse r;
   r.set_sequence(sequence);
   r.set_error_code(status.error_code());
   r.set_error_message(status.error_message());
   return r;
 }
-
-// The hand-over address of the first-message alarms' callbacks (server/rpc/grpc_handover.h).
-const char kFirstMessageAlarms = 0;
-
-}  // namespace
 
 ControlStream* ControlStream::Start(ServerState* state, grpc::CallbackServerContext* context) {
   // std::make_shared cannot reach the private constructor.
@@ -73,7 +70,7 @@ void ControlStream::Begin() {
   HandToGrpc(&kFirstMessageAlarms);
   {
     std::lock_guard<std::mutex> lock(mu_);
-    ++reads_starting_;
+    flow_.ReadDecided();
   }
   ReadNext();
 }
@@ -82,11 +79,10 @@ void ControlStream::OnFirstMessageTimeout(bool fired) {
   if (!fired) return;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (done_ || phase_ != Phase::kAwaitingFirst) return;
-    // Through Pump, which finishes only once Begin's read has been started (reads_starting_):
+    // Through Pump, which finishes only once Begin's read has been started (ReadStarted):
     // the timer can fire before it is. The pending read then completes with !ok, or with a
     // late first message that OnReadDone drops.
-    phase_ = Phase::kEnding;
+    if (done_ || !flow_.EndWithoutFirstMessage()) return;
     final_status_ = state_->ToGrpc(
         Rpc::kControl,
         absl::DeadlineExceededError(absl::StrCat(
@@ -100,10 +96,9 @@ void ControlStream::Revoke() {
   {
     std::lock_guard<std::mutex> lock(mu_);
     // While the first message's session is built (kAttaching) the phase is not ours to
-    // change: the janitor revokes again a second later.
-    if (done_ || phase_ == Phase::kAttaching || phase_ == Phase::kEnding || phase_ == Phase::kFinished) return;
-    phase_ = Phase::kEnding;
-    parked_.reset();  // nothing more is solved for a caller whose access is gone
+    // change: the janitor revokes again a second later. A parked step is dropped: nothing
+    // more is solved for a caller whose access is gone.
+    if (done_ || !flow_.Revoke()) return;
     final_status_ = state_->ToGrpc(
         Rpc::kControl, absl::UnauthenticatedError(absl::StrCat("principal \"", caller_.principal,
                                                                "\": its token was removed from the server's tokens "
@@ -113,47 +108,11 @@ void ControlStream::Revoke() {
 }
 
 bool ControlStream::ShouldReadLocked() {
-  if (phase_ == Phase::kEnding || phase_ == Phase::kFinished || reading_ == Reading::kDone) return false;
   // The client does not read its answers: stop reading its steps (flow control) until it does.
-  const bool pause = static_cast<int>(writes_.size()) >= state_->options.max_stream_answers;
-  if (pause && reading_ != Reading::kPaused) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
-  reading_ = pause ? Reading::kPaused : Reading::kActive;
-  return !pause;
-}
-
-absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::ControlRequest& first) {
-  std::shared_ptr<SessionEntry> entry;
-  switch (first.attach_case()) {
-    case v1::ControlRequest::kSessionId: {
-      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->registry.Find(first.session_id(), caller_);
-      if (!found.ok()) return found.status();
-      entry = *std::move(found);
-      if (entry->owned_by_stream || entry->attached.exchange(true)) {
-        return absl::FailedPreconditionError(absl::StrCat("session_id ", QuoteSessionId(first.session_id()),
-                                                          ": another Control stream is attached to it"));
-      }
-      break;
-    }
-    case v1::ControlRequest::kSpec: {
-      CallContext call;  // the stream's deadline and cancellation bound a kernel fit on creation
-      call.deadline = SteadyDeadline(*context_);
-      call.cancel = &cancelled_;
-      absl::StatusOr<std::shared_ptr<SessionEntry>> added =
-          CreateAndRegister(first.spec(), state_->options.size_limits, &state_->gp_models, &state_->budget,
-                            &state_->registry, call, /*owned_by_stream=*/true, /*requested_id=*/{}, OwnerFor(caller_));
-      if (!added.ok()) return added.status();
-      entry = *std::move(added);
-      entry->attached.store(true);
-      const LogContext log_context(entry->id, caller_.principal);
-      spdlog::info("session {} created by a Control stream (M={}, L={}, K={}, N={})", entry->id,
-                   entry->dims.num_states(), entry->dims.num_inputs(), entry->dims.num_outputs(),
-                   entry->dims.horizon());
-      break;
-    }
-    case v1::ControlRequest::ATTACH_NOT_SET:
-      return absl::InvalidArgumentError("first ControlRequest: must carry session_id or spec (attach)");
-  }
-  return entry;
+  bool paused_now = false;
+  const bool read = flow_.ShouldRead(state_->options.max_stream_answers, &paused_now);
+  if (paused_now) state_->stream_read_pauses.fetch_add(1, std::memory_order_relaxed);
+  return read;
 }
 
 void ControlStream::OnReadDone(bool ok) {
@@ -161,7 +120,7 @@ void ControlStream::OnReadDone(bool ok) {
   if (!ok) {  // the client half-closed (or went away)
     {
       std::lock_guard<std::mutex> lock(mu_);
-      reading_ = Reading::kDone;
+      flow_.ReadingDone();
     }
     Pump();
     return;
@@ -177,9 +136,9 @@ void ControlStream::OnReadDone(bool ok) {
     std::lock_guard<std::mutex> lock(mu_);
     last_message_at_ = Clock::now();
     // Ending before its first message was handled (its timer fired): drop what arrives.
-    if (phase_ == Phase::kFinished || phase_ == Phase::kEnding) return;
-    first_message = phase_ == Phase::kAwaitingFirst;
-    if (first_message) phase_ = Phase::kAttaching;
+    const Flow::Arrival arrival = flow_.MessageArrived();
+    if (arrival == Flow::Arrival::kDropped) return;
+    first_message = arrival == Flow::Arrival::kFirst;
   }
   if (parsed.ok() && request.held_periods() > 0) NoteHeldPeriods(request.held_periods());
   if (first_message) first_message_timer_.Cancel();
@@ -187,7 +146,7 @@ void ControlStream::OnReadDone(bool ok) {
     {
       std::lock_guard<std::mutex> lock(mu_);
       final_status_ = state_->ToGrpc(Rpc::kControl, parsed);
-      phase_ = Phase::kEnding;
+      flow_.End();
     }
     Pump();
     return;
@@ -214,7 +173,7 @@ void ControlStream::OnReadDone(bool ok) {
           request.sequence(),
           state_->ToGrpc(Rpc::kControl, absl::InvalidArgumentError("step: required after the first message"))));
     } else {
-      read_timing_.StepArrived(solving_, read_after_solve_, Clock::now() - read_started_at_, writing_);
+      read_timing_.StepArrived(flow_.solving(), read_after_solve_, Clock::now() - read_started_at_, flow_.writing());
       start = EnqueueStepLocked(std::move(request));
       read_ahead = read_timing_.ReadAhead();
     }
@@ -222,225 +181,12 @@ void ControlStream::OnReadDone(bool ok) {
     // Reading on first: a newer step that arrives during the solve supersedes the parked
     // one; unless the client waits for its answers and the step is solved here (ReadTiming).
     read_after_solve = read_more && start.has_value() && !read_ahead &&
-                       PlaceStep(StepDue(entry_->timing, start->step(), solving_received_at_)).in_place;
-    if (read_more && !read_after_solve) ++reads_starting_;
+                       PlaceStep(StepDue(entry_->timing, start->step(), flow_.solving_received_at())).in_place;
+    if (read_more && !read_after_solve) flow_.ReadDecided();
   }
   if (read_more && !read_after_solve) ReadNext();
   if (start.has_value()) StartSolve(*std::move(start), read_after_solve);
   Pump();
-}
-
-void ControlStream::StartAttach(v1::ControlRequest first) {
-  if (first.attach_case() != v1::ControlRequest::kSpec) {  // a registry lookup: fine in the reaction
-    AttachAndContinue(std::move(first));
-    return;
-  }
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    phase_ = Phase::kAttaching;  // keeps the stream from finishing while the pool builds the session
-  }
-  const absl::Status queued = state_->pool.TrySubmit(
-      [self = shared_from_this(), first = std::move(first)]() mutable { self->AttachAndContinue(std::move(first)); });
-  if (queued.ok()) return;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    final_status_ = state_->ToGrpc(Rpc::kControl, queued);
-    phase_ = Phase::kEnding;
-  }
-  Pump();
-}
-
-void ControlStream::AttachAndContinue(v1::ControlRequest first) {
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry;
-  const absl::Status attached = RunCatchingExceptions("Control (first message)", [&] {
-    entry = Attach(first);
-    return entry.status();
-  });
-  if (!attached.ok()) entry = attached;
-  bool read_more = false;
-  std::optional<v1::ControlRequest> start;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (!entry.ok()) {
-      final_status_ = state_->ToGrpc(Rpc::kControl, entry.status());
-      phase_ = Phase::kEnding;
-    } else {
-      entry_ = *std::move(entry);
-      phase_ = Phase::kOpen;
-      if (first.has_step()) {
-        start = EnqueueStepLocked(std::move(first));
-      } else {
-        v1::ControlResponse hello;
-        hello.set_sequence(first.sequence());
-        hello.set_session_id(entry_->id);
-        QueueWriteLocked(hello);
-      }
-      read_more = ShouldReadLocked();
-      if (read_more) ++reads_starting_;
-    }
-  }
-  if (read_more) ReadNext();
-  if (start.has_value()) StartSolve(*std::move(start), /*read_after_solve=*/false);
-  Pump();
-}
-
-std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
-  if (state_->draining.load()) {
-    QueueWriteLocked(ErrorResponse(
-        request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
-    return std::nullopt;
-  }
-  if (parked_.has_value()) {
-    v1::ControlResponse superseded;
-    superseded.set_sequence(parked_->sequence());
-    superseded.mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
-    QueueWriteLocked(superseded);
-  }
-  parked_ = std::move(request);
-  parked_received_at_ = Clock::now();
-  return TakeParkedLocked();
-}
-
-std::optional<v1::ControlRequest> ControlStream::TakeParkedLocked() {
-  if (solving_ || !parked_.has_value()) return std::nullopt;
-  std::optional<v1::ControlRequest> step = std::move(parked_);
-  parked_.reset();
-  solving_received_at_ = parked_received_at_;
-  SetSolvingLocked(true);
-  return step;
-}
-
-void ControlStream::SetSolvingLocked(bool solving) {
-  if (solving != solving_) state_->work_in_flight.fetch_add(solving ? 1 : -1);
-  solving_ = solving;
-}
-
-ControlStream::WhereToSolve ControlStream::PlaceStep(std::optional<Clock::time_point> due) const {
-  InPlaceInputs in;
-  in.expected_cpu_ms = entry_->last_solve_cpu_ms.load(std::memory_order_relaxed);
-  in.inline_max_ms = state_->options.inline_solve_max_ms;
-  in.handoff_ms = state_->pool.handoff_ms();
-  if (due.has_value()) {
-    in.left_ms = std::chrono::duration<double, std::milli>(*due - Clock::now()).count() -
-                 send_cost_ms_.load(std::memory_order_relaxed);
-  }
-  return {.in_place = SolvesInPlace(in), .short_solve = IsShortSolve(in)};
-}
-
-void ControlStream::StartSolve(v1::ControlRequest request, bool read_after_solve) {
-  for (;;) {
-    const std::uint64_t sequence = request.sequence();
-    const auto queued_at = Clock::now();
-    // Through the session's strand either way: a unary Solve accepted just before this
-    // stream attached runs first, without a worker waiting for it.
-    // In place, the answer is written once the session is given back: the client's next
-    // step, sent as soon as it has the answer, then finds the session free. This thread
-    // keeps the core for up to inline_solve_max_ms more of short steps that arrived
-    // meanwhile (other streams', and this one's next), as a worker would, but without
-    // handing each to another thread.
-    Clock::time_point received_at;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      received_at = solving_received_at_;
-    }
-    const std::optional<Clock::time_point> due = StepDue(entry_->timing, request.step(), received_at);
-    const WhereToSolve placement = PlaceStep(due);
-    if (placement.in_place &&
-        SessionStrand::TryRunHere(
-            entry_->strand, state_->pool, [&] { Solve(std::move(request), queued_at, /*pump=*/false); },
-            [this, read_after_solve] {
-              Pump();  // the answer first: the read must not start before it left
-              if (read_after_solve) ReadHeldBack();
-            },
-            state_->options.inline_solve_max_ms)) {
-      return;
-    }
-    if (read_after_solve) {  // not solved here after all: read ahead of the solve on the pool
-      read_after_solve = false;
-      ReadHeldBack();
-    }
-    const absl::Status queued = SessionStrand::Submit(
-        entry_->strand, state_->pool,
-        {[self = shared_from_this(), request = std::move(request), queued_at]() mutable {
-           self->Solve(std::move(request), queued_at, /*pump=*/true);
-         },
-         [self = shared_from_this(), sequence](const absl::Status& refused) {
-           self->FailQueuedSolve(sequence, refused);
-         },
-         entry_->last_solve_ms.load(std::memory_order_relaxed),
-         placement.short_solve ? WorkerPool::Placement::kAnyCoreHolder : WorkerPool::Placement::kWorker, due});
-    if (queued.ok()) return;
-    std::optional<v1::ControlRequest> next;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, queued)));
-      SetSolvingLocked(false);
-      next = TakeParkedLocked();  // parked while this one was being handed over
-    }
-    if (!next.has_value()) return;
-    request = *std::move(next);
-  }
-}
-
-void ControlStream::ReadHeldBack() {
-  bool read_more;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    read_more = ShouldReadLocked();
-    if (read_more) ++reads_starting_;
-  }
-  if (read_more) {
-    ReadNext(/*after_solve=*/true);
-  } else {
-    Pump();  // the read the stream waited for will not come: it may finish now
-  }
-}
-
-void ControlStream::FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused) {
-  std::optional<v1::ControlRequest> next;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    QueueWriteLocked(ErrorResponse(sequence, state_->ToGrpc(Rpc::kControl, refused)));
-    SetSolvingLocked(false);
-    next = TakeParkedLocked();
-  }
-  if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
-  Pump();
-}
-
-void ControlStream::Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump) {
-  const auto started_at = Clock::now();
-  CallContext call;
-  call.deadline = SteadyDeadline(*context_);
-  call.cancel = &cancelled_;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    call.received_at = solving_received_at_;
-  }
-  call.send_cost_ms = send_cost_ms_.load(std::memory_order_relaxed);
-  v1::ControlResponse response;
-  response.set_sequence(request.sequence());
-  const absl::Status status = RunCatchingExceptions(
-      "Control", [&] { return SolveStep(*entry_, request.step(), call, response.mutable_result()); });
-  if (status.ok()) {
-    state_->RecordSolve(response.result(), entry_.get(), std::chrono::duration<double>(started_at - queued_at).count(),
-                        std::chrono::duration<double>(Clock::now() - queued_at).count());
-  }
-  std::optional<v1::ControlRequest> next;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (status.ok()) {
-      if (!writing_ && writes_.empty()) timed_write_since_ = Clock::now();  // written at once: a clean sample
-      QueueWriteLocked(response);
-    } else {
-      QueueWriteLocked(ErrorResponse(request.sequence(), state_->ToGrpc(Rpc::kControl, status)));
-    }
-    SetSolvingLocked(false);
-    next = TakeParkedLocked();
-  }
-  // Still inside this session's strand task: the next step queues behind it.
-  if (next.has_value()) StartSolve(*std::move(next), /*read_after_solve=*/false);
-  if (pump) Pump();
 }
 
 void ControlStream::QueueWriteLocked(const v1::ControlResponse& response) {
@@ -449,7 +195,7 @@ void ControlStream::QueueWriteLocked(const v1::ControlResponse& response) {
     (void)SerializeRaw(ErrorResponse(response.sequence(), grpc::Status(grpc::StatusCode::INTERNAL, "unserializable")),
                        &bytes);
   }
-  writes_.push_back(bytes);
+  flow_.QueueAnswer(bytes);
 }
 
 void ControlStream::Pump() {
@@ -458,16 +204,9 @@ void ControlStream::Pump() {
   bool close_owned_session = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (phase_ == Phase::kFinished) return;
-    if (!writing_ && !writes_.empty()) {
-      writing_ = true;
-      to_write = &writes_.front();  // deque: stays valid while other elements are added at the back
-    } else if (!writing_ && !solving_ && reads_starting_ == 0 && phase_ != Phase::kAttaching &&
-               (phase_ == Phase::kEnding || (reading_ == Reading::kDone && !parked_.has_value()))) {
-      phase_ = Phase::kFinished;
-      finish = true;
-      close_owned_session = entry_ != nullptr && entry_->owned_by_stream;  // no solve of it runs: !solving_
-    }
+    finish = flow_.Pump(&to_write) == Flow::Next::kFinish;
+    // No solve of it runs: the flow finishes only when none is being solved.
+    close_owned_session = finish && entry_ != nullptr && entry_->owned_by_stream;
   }
   if (to_write != nullptr) Write(to_write);
   if (close_owned_session) CloseOwnedSession();
@@ -495,8 +234,7 @@ void ControlStream::ReadNext(bool after_solve) {
   bool pump;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    --reads_starting_;
-    pump = reads_starting_ == 0 && (phase_ == Phase::kEnding || reading_ == Reading::kDone);
+    pump = flow_.ReadStarted();
   }
   if (pump) Pump();
 }
@@ -522,15 +260,9 @@ void ControlStream::OnWriteDone(bool ok) {
       send_cost_ms_.store(0.8 * cost_ms + 0.2 * took_ms, std::memory_order_relaxed);
       timed_write_since_.reset();
     }
-    writes_.pop_front();
-    writing_ = false;
-    if (!ok) {  // the client is gone: drop what is left
-      writes_.clear();
-      parked_.reset();
-      reading_ = Reading::kDone;
-    }
-    resume_reading = reading_ == Reading::kPaused && ShouldReadLocked();
-    if (resume_reading) ++reads_starting_;
+    // !ok: the client is gone; what is left is dropped.
+    resume_reading = flow_.WriteDone(ok, state_->options.max_stream_answers);
+    if (resume_reading) flow_.ReadDecided();
   }
   if (resume_reading) ReadNext();
   Pump();

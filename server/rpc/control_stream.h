@@ -2,7 +2,6 @@
 #define NUPMPC_SERVER_RPC_CONTROL_STREAM_H_
 
 #include <atomic>
-#include <deque>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -12,14 +11,18 @@
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 #include "server/auth/caller.h"
 #include "server/rpc/read_timing.h"
+#include "server/rpc/stream_flow.h"
 #include "server/state/server_state.h"
 
 namespace nupmpc::server {
 
 // One Control stream (the main path). The first message attaches to a session or creates
-// one owned by the stream; every message with a step is answered once, in order.
+// one owned by the stream; every message with a step is answered once, in order. The
+// reactor's plumbing is control_stream.cc, the first message control_stream_attach.cc, a
+// step's way from parking to its answer control_stream_solve.cc.
 //
-// Flow control, "newest state wins": at most one step of a stream is being solved and at
+// Flow control (server/rpc/stream_flow.h, this reactor carries out its decisions with
+// gRPC's calls), "newest state wins": at most one step of a stream is being solved and at
 // most one waits. A step that arrives while another one waits replaces it, and the replaced
 // one is answered at once with SOLVE_STATUS_SUPERSEDED (nothing of it is applied). A client
 // that sends faster than the server solves therefore always gets the plan for its latest
@@ -42,7 +45,7 @@ namespace nupmpc::server {
 // Lifetime: gRPC and every task on the worker pool each hold a reference. gRPC calls
 // OnDone (and drops its reference) once Finish has completed, which can happen on a
 // gRPC thread while a worker is still running the tail of its task after it handed back
-// the stream (answer queued, `solving_` cleared, lock released); the last reference to
+// the stream (answer queued, the solve ended in flow_, lock released); the last reference to
 // go deletes the stream.
 class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
                       public std::enable_shared_from_this<ControlStream> {
@@ -76,10 +79,11 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   // Accepts a step: parks it (superseding the parked one) and returns the step to start now
   // if none is being solved (the caller passes it to StartSolve once it has let go of mu_).
   std::optional<v1::ControlRequest> EnqueueStepLocked(v1::ControlRequest request);
-  // The parked step, marked as being solved, if none is. Called with mu_.
+  // The parked step, marked as being solved (and counted in ServerState::work_in_flight),
+  // if none is. Called with mu_.
   std::optional<v1::ControlRequest> TakeParkedLocked();
-  // Sets solving_, counting the step in ServerState::work_in_flight while it is set.
-  void SetSolvingLocked(bool solving);
+  // The step being solved was answered: no longer counted in ServerState::work_in_flight.
+  void SolveEndedLocked();
   // Whether a step due at `due` (StepDue; none: no deadline) is solved on the thread that
   // has it (server/scheduling/solve_in_place.h), and whether it is short (a core-holding
   // thread may take it from the queue). Reads only atomics: callable with or without mu_.
@@ -102,17 +106,19 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   void Solve(v1::ControlRequest request, Clock::time_point queued_at, bool pump);
   // The strand could not hand a queued solve to the pool (full, shutting down): answer it.
   void FailQueuedSolve(std::uint64_t sequence, const absl::Status& refused);
+  // The answer to a message that failed with `status` (error_code, error_message).
+  static v1::ControlResponse ErrorResponse(std::uint64_t sequence, const grpc::Status& status);
   void QueueWriteLocked(const v1::ControlResponse& response);
   // Whether to start the next read now: not while the client leaves max_stream_answers
-  // answers unread (then reading_ is kPaused and OnWriteDone resumes). Called with mu_; a
-  // caller that then reads counts the read in reads_starting_ before it lets go of mu_.
+  // answers unread (StreamFlow::ShouldRead; counts the pauses). Called with mu_; a caller
+  // that then reads calls flow_.ReadDecided() before it lets go of mu_.
   bool ShouldReadLocked();
   // Starts the next write / finishes the stream if nothing is left. Called without mu_.
   void Pump();
   // gRPC's StartRead / StartWrite / Finish, each announced to ThreadSanitizer as a hand-over
   // to gRPC's threads (server/rpc/grpc_handover.h).
   // `after_solve`: the read starts after the solve of the step read before it (ReadTiming).
-  // The caller counted it in reads_starting_.
+  // The caller counted it (flow_.ReadDecided()).
   void ReadNext(bool after_solve = false);
   void Write(const grpc::ByteBuffer* bytes);
   void End(const grpc::Status& status);
@@ -127,7 +133,7 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
 
   ServerState* const state_;
   // Valid until OnDone; read only while the stream cannot finish (a read pending, the
-  // phase kAttaching or `solving_` set).
+  // phase kAttaching or a step being solved).
   grpc::CallbackServerContext* const context_;
   std::shared_ptr<ControlStream> grpc_reference_;  // set by Start, dropped by OnDone
   grpc::ByteBuffer read_buffer_;                   // raw: parsed by OnReadDone (server/rpc/raw_messages.h)
@@ -138,41 +144,19 @@ class ControlStream : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::Byt
   bool counted_for_principal_ = false;  // in state_->principal_streams (set by Begin)
   bool owned_session_closed_ = false;   // by CloseOwnedSession
 
-  // Where the stream is in its life.
-  enum class Phase {
-    kAwaitingFirst,  // the first message is being read (or looked up, in the reaction)
-    kAttaching,      // the first message's session is being built on the pool
-    kOpen,           // attached: steps are read, solved and answered
-    kEnding,         // no more work: queued answers are written, then Finish(final_status_)
-    kFinished,       // Finish was called
-  };
-  // Whether a read is pending.
-  enum class Reading {
-    kActive,  // a read is pending (or starts as soon as the current message is handled)
-    kPaused,  // max_stream_answers answers wait for the client: OnWriteDone resumes
-    kDone,    // the client half-closed or went away
-  };
+  using Flow = StreamFlow<v1::ControlRequest, grpc::ByteBuffer>;
 
   std::mutex mu_;
-  Phase phase_ = Phase::kAwaitingFirst;
-  Reading reading_ = Reading::kActive;
-  std::shared_ptr<SessionEntry> entry_;       // set by the first message
-  std::optional<v1::ControlRequest> parked_;  // the newest step not yet started
-  Clock::time_point parked_received_at_{};    // when parked_ arrived
-  Clock::time_point solving_received_at_{};   // when the step being solved arrived (its deadline counts from it)
+  // The phase, reads, parked and solved step, and queued answers; kEnding ends the stream
+  // with Finish(final_status_).
+  Flow flow_;
+  std::shared_ptr<SessionEntry> entry_;  // set by the first message
   // What handing an answer to gRPC takes (from the end of its solve to OnWriteDone, for
   // answers written at once), exponentially weighted: kept free of a step's deadline.
   std::atomic<double> send_cost_ms_{0.05};
   std::optional<Clock::time_point> timed_write_since_;  // the answer being timed, if any
   std::uint64_t held_not_logged_ = 0;                   // periods the client reported, not yet logged
   Clock::time_point held_logged_at_{};                  // the last such log line
-  bool solving_ = false;                                // a step is on the pool (in its session's strand)
-  std::deque<grpc::ByteBuffer> writes_;                 // serialized answers; front is being written when writing_
-  bool writing_ = false;
-  // Reads decided on (under mu_) but not started yet (ReadNext counts it down once its
-  // StartRead is issued): the stream must not finish in between, as no read may start
-  // after Finish.
-  int reads_starting_ = 0;
   ReadTiming read_timing_;
   bool read_after_solve_ = false;                    // the pending read was started after a solve
   Clock::time_point read_started_at_;                // when the pending read was started
