@@ -131,22 +131,31 @@ def paced_capacity(unpaced, server_cpus, client_cpus, seconds):
     share_low = paced_cpu_share(low, unpaced, server_cpus, client_cpus, seconds)
     share_high = paced_cpu_share(high, unpaced, server_cpus, client_cpus, seconds)
     slope = (share_high - share_low) / (high - low)
-    if slope <= 0.0:
-        sys.exit(f"deadline-sweep: the server's CPU share did not grow with the load "
-                 f"({share_low:.2f} at {low}, {share_high:.2f} at {high}); is the machine busy?")
-    full = high + (1.0 - share_high) / slope
+    full = high + (1.0 - share_high) / slope if slope > 0.0 else 0.0
+    if not high <= full <= 2.0:
+        # A machine busy with other work gives the server less than its CPU: the shares say
+        # nothing about its capacity then. The unpaced estimate stands, and the runs' own
+        # CPU shares show what the levels really loaded.
+        print(f"deadline-sweep: paced calibration unusable (server CPU {share_low:.0%} at {low:.0%}, "
+              f"{share_high:.0%} at {high:.0%}): is the machine busy? The levels are shares of the unpaced "
+              f"estimate", flush=True)
+        return dict(unpaced), {"low": [low, share_low], "high": [high, share_high], "usable": False}
     print(f"paced calibration: server CPU {share_low:.0%} at {low:.0%} and {share_high:.0%} at {high:.0%} "
           f"of the unpaced estimate: one full CPU at {full:.0%} of it", flush=True)
     return {name: rate * full for name, rate in unpaced.items()}, {"low": [low, share_low], "high": [high, share_high]}
 
 
-def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s):
+def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s, paced=True):
     unpaced = unpaced_capacity(server_cpus, client_cpus, calibrate_s)
     print(f"unpaced capacity (steps/s of each group's streams alone, as fast as answers come): "
           + ", ".join(f"{k} {v:.0f}" for k, v in unpaced.items()), flush=True)
-    capacity, paced_shares = paced_capacity(unpaced, server_cpus, client_cpus, 2 * calibrate_s)
-    print(f"capacity for the paced mix (steps/s of each group at one full CPU): "
-          + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
+    if paced:
+        capacity, paced_shares = paced_capacity(unpaced, server_cpus, client_cpus, 2 * calibrate_s)
+        print(f"capacity for the paced mix (steps/s of each group at one full CPU): "
+              + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
+    else:
+        capacity, paced_shares = dict(unpaced), None
+        print("levels are shares of the unpaced estimate (no paced calibration)", flush=True)
     runs = []
     for i, level in enumerate(levels):
         flag, periods = groups_at(level, capacity)
@@ -229,12 +238,15 @@ def main():
     parser.add_argument("--seconds", type=float, default=5.0, help="counted time per run")
     parser.add_argument("--repeat", type=int, default=1, help="run the whole sweep this many times")
     parser.add_argument("--json", help="write every figure to this file")
-    parser.add_argument("--quick", action="store_true", help="short runs at 0.3 and 1.2 (the ctest smoke)")
+    parser.add_argument("--quick", action="store_true",
+                        help="short runs at 0.3 and 1.2 of the unpaced estimate (the ctest smoke)")
     args = parser.parse_args()
     levels = [0.3, 1.2] if args.quick else [float(v) for v in args.levels.split(",")]
     seconds = 1.5 if args.quick else args.seconds
     server_cpus, client_cpus = cpus()
-    sweeps = [sweep(levels, seconds, server_cpus, client_cpus, 0.5 if args.quick else 2.0)
+    # The smoke checks mechanisms, not levels: it skips the paced calibration, which a
+    # machine busy with other tests would make meaningless anyway.
+    sweeps = [sweep(levels, seconds, server_cpus, client_cpus, 0.5 if args.quick else 2.0, paced=not args.quick)
               for _ in range(max(args.repeat, 1))]
     if len(sweeps) > 1:
         summarize(sweeps)
