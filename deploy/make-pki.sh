@@ -52,6 +52,12 @@ case "$action" in
     issue "$1" "$2" 'extendedKeyUsage=clientAuth' ;;
   token)
     [ $# -eq 2 ] || usage_error "token NAME PRINCIPAL"
+    # Reissued: the old token's line goes, so the old token stops authenticating.
+    if [ -f "$dir/$1.token" ] && [ -f "$dir/tokens" ]; then
+      old=$(cat "$dir/$1.token")
+      awk -v old="$old" '$1 != old' "$dir/tokens" >"$dir/tokens.new"
+      mv "$dir/tokens.new" "$dir/tokens"
+    fi
     openssl rand -hex 32 >"$dir/$1.token"
     printf '%s %s\n' "$(cat "$dir/$1.token")" "$2" >>"$dir/tokens" ;;
   subject)

@@ -61,8 +61,8 @@ struct SessionEntry {
   // Its thread's CPU time (ThreadCpuTime), which a shared core does not inflate: where its
   // next Control step is solved (ControlStream::SolvesHere); -1: not solved yet.
   std::atomic<double> last_solve_cpu_ms{-1.0};
-  // One message-passing pass of its last solve (wall time): the solver checks its time
-  // limit between passes, so a step's deadline leaves it this much room (step_solver.cc).
+  // One message-passing pass of its last solve (wall time): the margin a step's deadline
+  // leaves before its time limit (step_solver.cc).
   std::atomic<double> last_pass_ms{0.0};
   // The shortest pass of its solves so far (wall time; 0: none yet): a step left less time
   // than this is answered without a solve. The shortest, not the last: a pass slowed by a

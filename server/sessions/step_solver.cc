@@ -50,8 +50,7 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
 
   ApplyWarmStart(step.warm_start(), solver, &limits);
   // The step's deadline (step_deadline.h): the solve gets what is left of it, less the cost
-  // of sending the answer and one pass (the solver looks at its time limit between passes,
-  // so the last one may end a pass after it). One that could not start in time, or whose
+  // of sending the answer and a margin of one pass. One that could not start in time, or whose
   // time left is shorter than the session's shortest pass, is answered at once without a plan
   // (its update applied above, as for any answered step) unless the session wants it
   // solved late.
@@ -68,8 +67,8 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     }
     started_late = left_s <= 0.0;
     const double pass_s = entry.last_pass_ms.load(std::memory_order_relaxed) * 1e-3;
-    const bool cannot_finish_a_pass =
-        !started_late && left_s < entry.shortest_pass_ms.load(std::memory_order_relaxed) * 1e-3;
+    const double shortest_pass_s = entry.shortest_pass_ms.load(std::memory_order_relaxed) * 1e-3;
+    const bool cannot_finish_a_pass = !started_late && left_s < shortest_pass_s;
     if (cannot_finish_a_pass && !entry.timing.solve_late_steps) {
       AnswerCannotFinishAPass(*due, out);
       entry.Touch();
@@ -78,9 +77,10 @@ absl::Status SolveStep(SessionEntry& entry, const v1::Step& step, const CallCont
     // A session that wants late plans gets one here as for a step that started late: a
     // limit shorter than a pass would end the solve before its first.
     if (!started_late && !cannot_finish_a_pass) {
-      // A pass may start until one pass before the deadline (limits are checked between
-      // passes), so the first, which gives an anytime plan, always can.
-      const double limit_s = std::max(left_s - pass_s, 1e-6);
+      // A pass cut by the limit is discarded, and a plan needs one whole pass: the limit
+      // leaves the last pass's time as a margin, but never less than a pass (the time left
+      // is at least the shortest).
+      const double limit_s = std::max({left_s - pass_s, shortest_pass_s, 1e-6});
       limits.time_limit_seconds =
           limits.time_limit_seconds > 0.0 ? std::min(limits.time_limit_seconds, limit_s) : limit_s;
     }
