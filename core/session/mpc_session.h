@@ -11,6 +11,9 @@
 //
 // Thread safety: none; one thread uses a session at a time.
 
+#include <string>
+#include <string_view>
+
 #include "Eigen/Core"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -54,6 +57,23 @@ class MpcSession {
   // whether `solution` holds a plan of this solve for the current x[0]; if not, its
   // matrices are empty and the session stays usable.
   virtual absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) = 0;
+
+  // Snapshots (core/snapshot/state_archive.h): the session's current values (its problem
+  // after every update, x[0] included) and the warm start its next solve starts from. A
+  // session built from the same creation spec and restored from these bytes gives
+  // bit-identical plans with the same pass counts as the original would have.
+  // SaveState appends to `out`. RestoreState answers INVALID_ARGUMENT naming the field when
+  // the bytes do not fit this session (another spec, another format version, truncated or
+  // altered bytes); the session must then be discarded (it may be half restored).
+  // UNIMPLEMENTED for the kinds that cannot be snapshotted.
+  virtual absl::Status SaveState(std::string* out) {
+    (void)out;
+    return absl::UnimplementedError("this session kind has no snapshot");
+  }
+  virtual absl::Status RestoreState(std::string_view bytes) {
+    (void)bytes;
+    return absl::UnimplementedError("this session kind has no snapshot");
+  }
 };
 
 }  // namespace nupmpc::core
