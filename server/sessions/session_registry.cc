@@ -37,12 +37,13 @@ std::string SessionRegistry::NewId() {
   return id;
 }
 
-absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
-                                                                   SessionTiming timing, bool owned_by_stream,
-                                                                   SessionMemory memory, absl::string_view requested_id,
-                                                                   SessionOwner owner) {
+absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(
+    std::unique_ptr<core::MpcSession> solver, SessionTiming timing, bool owned_by_stream, SessionMemory memory,
+    absl::string_view requested_id, SessionOwner owner, std::shared_ptr<const v1::ProblemSpec> spec, bool restored) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owner = std::move(owner);
+  entry->spec = std::move(spec);
+  entry->restored = restored;
   entry->owned_by_stream = owned_by_stream;
   entry->timing = timing;
   entry->algorithm = solver->algorithm();
