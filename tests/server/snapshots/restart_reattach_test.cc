@@ -18,6 +18,7 @@
 #include "client/problem_file.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
+#include "loadtest/instances/session_kinds.h"
 #include "nupmpc/v1/nupmpc.grpc.pb.h"
 #include "tests/util/loopback_port.h"
 #include "tests/util/server_process.h"
@@ -80,43 +81,6 @@ v1::ProblemSpec Masses() {
   return problem.ok() ? problem->spec : v1::ProblemSpec();
 }
 
-struct Kind {
-  std::string name;
-  v1::ProblemSpec spec;
-};
-
-std::vector<Kind> Kinds() {
-  std::vector<Kind> kinds;
-  kinds.push_back({"convex", Masses()});
-  Kind differences{"input differences", Masses()};
-  for (std::uint32_t l = 0; l < differences.spec.model().num_inputs(); ++l) {
-    v1::ComponentPrior* rate = differences.spec.mutable_input_differences()->add_priors();
-    rate->set_kind(v1::PRIOR_KIND_BOX);
-    rate->add_lower(-0.1);
-    rate->add_upper(0.1);
-  }
-  kinds.push_back(differences);
-  Kind keep_out{"keep-out", Masses()};
-  keep_out.spec.mutable_keep_out()->set_first_output(0);
-  keep_out.spec.mutable_keep_out()->set_second_output(1);
-  v1::KeepOutRegion* region = keep_out.spec.mutable_keep_out()->add_regions();
-  region->set_centre_x(0.5);
-  region->set_centre_y(0.5);
-  region->set_half_axis_a(0.4);
-  region->set_slope(10);
-  kinds.push_back(keep_out);
-  Kind binary{"binary inputs", Masses()};
-  for (v1::ComponentPrior& input : *binary.spec.mutable_input_priors()) {
-    input.set_kind(v1::PRIOR_KIND_BINARY);
-    input.clear_lower();
-    input.clear_upper();
-    input.add_lower(-0.5);
-    input.add_upper(0.5);
-  }
-  kinds.push_back(binary);
-  return kinds;
-}
-
 // The plant moves to the plan's predicted x[1]: the next state both servers get.
 std::vector<double> NextState(const v1::SolveResult& result, int num_states) {
   return {result.states().begin() + num_states, result.states().begin() + 2 * num_states};
@@ -160,7 +124,7 @@ TEST_F(RestartReattachTest, EveryKindReattachesAfterSigtermWithTheNeverRestarted
   std::unique_ptr<ServerProcess> server = Start(port, /*with_state_dir=*/true);
   std::unique_ptr<ServerProcess> twin_server = Start(FreeLoopbackPort(), /*with_state_dir=*/false);
   const std::shared_ptr<grpc::Channel> twin_channel = OpenChannel(twin_server->target());
-  const std::vector<Kind> kinds = Kinds();
+  const std::vector<bench::SessionKind> kinds = bench::SessionKindsOf(Masses());
   constexpr int kStepsBefore = 4, kStepsAfter = 3;
 
   std::vector<std::unique_ptr<ControlStream>> streams, twins;
@@ -168,7 +132,7 @@ TEST_F(RestartReattachTest, EveryKindReattachesAfterSigtermWithTheNeverRestarted
   std::vector<std::vector<double>> states;
   {
     const std::shared_ptr<grpc::Channel> channel = OpenChannel(server->target());
-    for (const Kind& kind : kinds) {
+    for (const bench::SessionKind& kind : kinds) {
       const int m = static_cast<int>(kind.spec.model().num_states());
       streams.push_back(std::make_unique<ControlStream>(channel));
       twins.push_back(std::make_unique<ControlStream>(twin_channel));
