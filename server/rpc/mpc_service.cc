@@ -33,10 +33,8 @@ void SolveRestoring(UnaryCall<v1::SolveRequest, v1::SolveResponse>* call, const 
                             state->FindOrRestore(request->session_id(), caller));
     absl::Status solved = absl::AbortedError("session_id: the session was just restored and is busy; retry");
     SessionStrand::RunNowIfIdle(entry->strand, state->pool, [&] {
-      solved = entry->attached.load()
-                   ? absl::FailedPreconditionError(
-                         "session_id: a Control stream is attached to this session; send steps there")
-                   : SolveStep(*entry, request->step(), context, result);
+      solved = entry->UnaryStepsRefused();
+      if (solved.ok()) solved = SolveStep(*entry, request->step(), context, result);
     });
     return solved;
   });
@@ -99,9 +97,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
     call->Reply(entry.status());
     return call;
   }
-  if ((*entry)->attached.load()) {
-    call->Reply(
-        absl::FailedPreconditionError("session_id: a Control stream is attached to this session; send steps there"));
+  if (const absl::Status refused = (*entry)->UnaryStepsRefused(); !refused.ok()) {
+    call->Reply(refused);
     return call;
   }
   const SessionEntry* session = entry->get();

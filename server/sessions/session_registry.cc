@@ -29,6 +29,17 @@ void SessionEntry::Describe(v1::SessionInfo* out) const {
   out->set_attached(attached.load(std::memory_order_relaxed));
 }
 
+absl::Status SessionEntry::UnaryStepsRefused() const {
+  if (attached.load()) {
+    return absl::FailedPreconditionError("session_id: a Control stream is attached to this session; send steps there");
+  }
+  if (owned_by_stream) {
+    return absl::FailedPreconditionError(
+        "session_id: the session belongs to a Control stream; re-attach a Control stream to step it");
+  }
+  return absl::OkStatus();
+}
+
 std::string SessionRegistry::NewId() {
   // std::random_device reads the kernel's CSPRNG (getrandom) on Linux.
   static thread_local std::random_device device;

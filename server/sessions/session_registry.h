@@ -78,6 +78,10 @@ struct SessionEntry {
   void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }
   double idle_seconds() const;
   void Describe(v1::SessionInfo* out) const;  // fields readable without mu
+  // Why Solve and SolveFleet may not step it (FAILED_PRECONDITION): a Control stream is
+  // attached, or it belongs to one (a stream-owned session restored from a snapshot waits
+  // for its stream's reconnect); OK otherwise.
+  absl::Status UnaryStepsRefused() const;
   std::atomic<core::Algorithm> algorithm{core::Algorithm::kAuto};
 };
 
