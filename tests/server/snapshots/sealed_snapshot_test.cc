@@ -33,6 +33,12 @@ snapshot::v1::SessionSnapshot Example() {
   return s;
 }
 
+Caller Principal(const std::string& name) {
+  Caller caller;
+  caller.principal = name;
+  return caller;
+}
+
 SnapshotKey Key(char fill) { return *SnapshotKey::FromBytes(std::string(32, fill)); }
 
 TEST(SealedSnapshotTest, RoundTripsWithAndWithoutAKey) {
@@ -52,7 +58,9 @@ TEST(SealedSnapshotTest, NoFlippedByteOrTruncationGivesAnotherSnapshot) {
       altered[i] = static_cast<char>(altered[i] ^ 0x20);
       // Refused, or (a flip the framing absorbs, e.g. the flag true written as 33) the same snapshot.
       const absl::StatusOr<snapshot::v1::SessionSnapshot> unsealed = Unseal(altered, key, kMax);
-      if (unsealed.ok()) EXPECT_EQ(unsealed->SerializeAsString(), Example().SerializeAsString()) << "byte " << i;
+      if (unsealed.ok()) {
+        EXPECT_EQ(unsealed->SerializeAsString(), Example().SerializeAsString()) << "byte " << i;
+      }
       refused += unsealed.ok() ? 0 : 1;
       EXPECT_FALSE(Unseal(absl::string_view(sealed).substr(0, i), key, kMax).ok()) << "first " << i << " bytes";
     }
@@ -120,13 +128,13 @@ TEST_F(StateDirTest, BadFilesAreMovedAsideAtOpenAndGoodOnesClaimedOnceByTheirOwn
     EXPECT_FALSE(std::filesystem::exists(File(bad + ".snapshot"))) << bad;
   }
   // Another principal gets NOT_FOUND and the file stays; its owner gets it, once.
-  EXPECT_TRUE(absl::IsNotFound((*store)->Claim(id, Caller{.principal = "bob"}).status()));
+  EXPECT_TRUE(absl::IsNotFound((*store)->Claim(id, Principal("bob")).status()));
   EXPECT_TRUE(std::filesystem::exists(File(id + ".snapshot")));
-  absl::StatusOr<snapshot::v1::SessionSnapshot> claimed = (*store)->Claim(id, Caller{.principal = "alice"});
+  absl::StatusOr<snapshot::v1::SessionSnapshot> claimed = (*store)->Claim(id, Principal("alice"));
   ASSERT_TRUE(claimed.ok()) << claimed.status();
   EXPECT_EQ(claimed->core_state(), good.core_state());
   EXPECT_FALSE(std::filesystem::exists(File(id + ".snapshot")));
-  EXPECT_TRUE(absl::IsNotFound((*store)->Claim(id, Caller{.principal = "alice"}).status()));
+  EXPECT_TRUE(absl::IsNotFound((*store)->Claim(id, Principal("alice")).status()));
 }
 
 TEST_F(StateDirTest, ASnapshotOlderThanTheWindowIsRemovedNotRestored) {
