@@ -87,8 +87,7 @@ absl::StatusOr<snapshot::v1::SessionSnapshot> SnapshotStore::ReadChecked(const s
 }
 
 absl::Status SnapshotStore::Write(const snapshot::v1::SessionSnapshot& snapshot) {
-  const absl::Status written =
-      WriteOwnerOnlyFileAtomically(PathOf(snapshot.session_id()), Seal(snapshot, options_.key));
+  absl::Status written = WriteOwnerOnlyFileAtomically(PathOf(snapshot.session_id()), Seal(snapshot, options_.key));
   if (written.ok()) {
     std::lock_guard<std::mutex> lock(mu_);
     ++written_;
