@@ -115,11 +115,12 @@ absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
   if (!result.ok() && IsRetryable(result.status()) && !id_.empty()) {
     const absl::Status outage = RideOutOutage(
         reconnect_, result.status(),
-        [&](std::chrono::milliseconds timeout, bool* answered) -> absl::Status {
+        [&](std::chrono::milliseconds timeout, ReconnectAttempt* report, bool* answered) -> absl::Status {
           // A direct connection refused while its server restarted would wait out gRPC's
           // own back-off (seconds) before the next call may connect.
           grpc::experimental::ChannelResetConnectionBackoff(client_->channel_.get());
           if (absl::Status s = CreateLocked(timeout); !s.ok()) return s;
+          report->path = ReconnectPath::kRecreated;
           result = SolveLocked(step, timeout);
           *answered = result.ok() || !IsRetryable(result.status());
           // Not answered: the next attempt makes another session; do not leave this one

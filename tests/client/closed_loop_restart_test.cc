@@ -2,8 +2,9 @@
 // simulated masses_N30 plant through the real nupmpc-server binary, which is killed with
 // SIGKILL mid-run and started again on the same port 1 s (and 5 s) later. The run must
 // finish every step with exit 0 and its summary must report the reconnect and how long
-// the plant went without a fresh plan. And a step whose result carries no plan
-// (SolveResult.has_plan false) is never applied: the CLI holds the last input.
+// the plant went without a fresh plan, and that the session, asked for by its id first,
+// was re-created (the restarted server does not have it). And a step whose result carries
+// no plan (SolveResult.has_plan false) is never applied: the CLI holds the last input.
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -165,6 +166,11 @@ void ExpectRodeThrough(const CliRun& run, int steps, double down_s) {
   EXPECT_NE(run.stderr_text.find("the Control stream broke"), std::string::npos) << run.stderr_text;
   EXPECT_NE(run.stderr_text.find("reconnect attempt 1 "), std::string::npos) << run.stderr_text;
   EXPECT_NE(run.stderr_text.find("reconnected at attempt"), std::string::npos) << run.stderr_text;
+  // The session was asked for by its id first; a server restarted without a state
+  // directory does not have it (NOT_FOUND), so it was re-created from the spec: cold.
+  EXPECT_EQ(run.summary["reattached"], 0) << run.summary.dump();
+  EXPECT_EQ(run.summary["recreated"], 1) << run.summary.dump();
+  EXPECT_NE(run.stderr_text.find("session re-created (attach by id: NOT_FOUND"), std::string::npos) << run.stderr_text;
 }
 
 TEST(ClosedLoopRestart, ServerKilledAndBackAfter1s) {
