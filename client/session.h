@@ -19,8 +19,9 @@
 //   K = held_periods_to_reconnect, default max(3, ceil(1 s / P)),
 //
 // and then a background thread gets the session back (by its id, else re-created from its
-// spec: ReattachOrRecreate, client/reconnect.h), for as long as the caller keeps stepping: no overall budget, back-off as in ReconnectOptions but at most
-// 500 ms, each attempt cancelled after at most 1 s. Steps meanwhile return HELD at their
+// spec: ReattachOrRecreate, client/reconnect.h), for as long as the caller keeps stepping:
+// no overall budget, back-off as in ReconnectOptions but at most 500 ms, each attempt
+// cancelled after at most 1 s. Steps meanwhile return HELD at their
 // period. The slack: a step returns within P plus the time to wake its thread and copy the
 // result (well under a millisecond on an idle machine; tests allow 100 ms and more).
 //
