@@ -101,15 +101,37 @@ def reattach_or_recreate(session_id: str | None, attach_by_id: Callable[[], _Got
         try:
             got = attach_by_id()
         except NupmpcError as error:
-            note.attach_by_id = error.code.name
-            if not attach_by_id_missed(error):
-                raise
+            _attach_missed(error, note)
         else:
             note.path, note.attach_by_id = "reattached", "OK"
             return got
     got = recreate()
     note.path = "recreated"
     return got
+
+
+async def reattach_or_recreate_async(session_id: str | None, attach_by_id: Callable[[], Awaitable[_Got]],
+                                     recreate: Callable[[], Awaitable[_Got]], note: AttemptNote) -> _Got:
+    """reattach_or_recreate for asyncio: both are coroutine functions."""
+    note.path, note.attach_by_id = "none", None
+    if session_id:
+        try:
+            got = await attach_by_id()
+        except NupmpcError as error:
+            _attach_missed(error, note)
+        else:
+            note.path, note.attach_by_id = "reattached", "OK"
+            return got
+    got = await recreate()
+    note.path = "recreated"
+    return got
+
+
+def _attach_missed(error: NupmpcError, note: AttemptNote) -> None:
+    """Notes a failed attach by id; raises it again unless re-creating is the answer."""
+    note.attach_by_id = error.code.name
+    if not attach_by_id_missed(error):
+        raise error
 
 
 def count_reconnect(path: str, stats: ReconnectStats) -> None:
