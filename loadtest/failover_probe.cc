@@ -101,7 +101,8 @@ StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& 
       ++out.no_plan;
       continue;
     }
-    // The step resent after a re-creation is the one the rule is about: always checked.
+    // The step resent after a reconnect (re-attached or re-created) is the one the rule is
+    // about: always checked.
     const int reconnects = (*session)->reconnect_stats().reconnects;
     const bool resent = reconnects != reconnects_seen;
     reconnects_seen = reconnects;
@@ -146,6 +147,8 @@ absl::StatusOr<StreamsProbeReport> RunStreamsProbe(const ProbeWorkload& work, co
     report.no_plan += o.no_plan;
     for (const auto& [code, n] : o.errors) report.errors[code] += n;
     report.reconnects += o.reconnect.reconnects;
+    report.reattached += o.reconnect.reattached;
+    report.recreated += o.reconnect.recreated;
     report.longest_outage_s = std::max(report.longest_outage_s, o.reconnect.longest.count() / 1000.0);
     if (o.reconnect.reconnects > 0 || o.reconnect.attempts > 0 || o.failed > 0) {
       ++report.affected_streams;
@@ -208,6 +211,8 @@ std::string ToJson(const StreamsProbeReport& r) {
                       {"affected_streams", r.affected_streams},
                       {"max_failed_per_affected_stream", r.max_failed_per_affected},
                       {"reconnects", r.reconnects},
+                      {"reattached", r.reattached},
+                      {"recreated", r.recreated},
                       {"longest_outage_s", r.longest_outage_s},
                       {"verified", r.verified},
                       {"mismatched", r.mismatched},
