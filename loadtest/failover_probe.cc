@@ -194,7 +194,8 @@ absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work
     }
   }
   for (const std::unique_ptr<AddressedSession>& s : opened) {
-    report.recreated += s->reconnect_stats().reconnects;
+    report.reattached += s->reconnect_stats().reattached;
+    report.recreated += s->reconnect_stats().recreated;
     absl::StatusOr<v1::SessionInfo> info = client.GetSession(s->id());
     if (!info.ok() || info->solves() != static_cast<std::uint64_t>(solves_each)) ++report.miscounted;
   }
@@ -224,9 +225,9 @@ std::string ToJson(const StreamsProbeReport& r) {
 }
 
 std::string ToJson(const AddressedProbeReport& r) {
-  nlohmann::json j = {{"probe", "addressed"},      {"sessions", r.sessions}, {"solves", r.solves},
-                      {"failed", r.failed},        {"errors", r.errors},     {"recreated", r.recreated},
-                      {"miscounted", r.miscounted}};
+  nlohmann::json j = {{"probe", "addressed"},     {"sessions", r.sessions},    {"solves", r.solves},
+                      {"failed", r.failed},       {"errors", r.errors},        {"reattached", r.reattached},
+                      {"recreated", r.recreated}, {"miscounted", r.miscounted}};
   return j.dump();
 }
 

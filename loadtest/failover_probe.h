@@ -60,6 +60,7 @@ struct AddressedProbeReport {
   std::uint64_t solves = 0;  ///< answered
   std::uint64_t failed = 0;  ///< returned as errors
   std::map<std::string, std::uint64_t> errors;
+  int reattached = 0;  ///< sessions a failed call got back by their id (warm)
   int recreated = 0;   ///< sessions re-created (a call missed its session)
   int miscounted = 0;  ///< sessions whose server-side solve count is not R
 };
