@@ -119,7 +119,7 @@ absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
           // A direct connection refused while its server restarted would wait out gRPC's
           // own back-off (seconds) before the next call may connect.
           grpc::experimental::ChannelResetConnectionBackoff(client_->channel_.get());
-          const absl::Status back = ReattachOrRecreate(
+          absl::Status back = ReattachOrRecreate(
               // NOT_FOUND from the start: the replica the id leads to has neither the
               // session nor its snapshot, so asking again by the id cannot help.
               lost ? std::string() : id_,
