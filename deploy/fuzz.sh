@@ -7,13 +7,13 @@
 # violated property (tests/fuzz/fuzz_limits.h) is kept in build-asan/fuzz/findings/ and fails the
 # script. Prints per target: executions, coverage (edges), corpus size, findings.
 #   deploy/fuzz.sh [SECONDS] [TARGET...]
-#   targets: spec_solve_fuzzer step_fuzzer control_stream_fuzzer problem_file_fuzzer
+#   targets: spec_solve_fuzzer step_fuzzer control_stream_fuzzer problem_file_fuzzer snapshot_fuzzer
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds="${1:-60}"
 [ $# -gt 0 ] && shift
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(spec_solve_fuzzer step_fuzzer control_stream_fuzzer problem_file_fuzzer)
+[ ${#targets[@]} -eq 0 ] && targets=(spec_solve_fuzzer step_fuzzer control_stream_fuzzer problem_file_fuzzer snapshot_fuzzer)
 benchmarks="${NUPMPC_BENCHMARKS:-benchmarks}"
 deploy/install-deps.sh
 source deploy/sanitizer-symbolizer.sh

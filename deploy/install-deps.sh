@@ -11,6 +11,7 @@ packages=(
   libeigen3-dev libabsl-dev
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libspdlog-dev nlohmann-json3-dev
+  libssl-dev    # libcrypto: the session snapshots' integrity tags (server/snapshots/)
   libgtest-dev libgmock-dev libbenchmark-dev
   liblbfgs-dev coinor-libipopt-dev
   clang libclang-rt-14-dev

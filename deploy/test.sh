@@ -8,7 +8,7 @@
 #   AVX-512        deploy/test-avx512.sh          NUPMPC_AVX512=0 skips it
 #   ASan+UBSan     deploy/test-sanitizers.sh asan NUPMPC_SANITIZERS=0 skips the three
 #   fuzzing        deploy/test-sanitizers.sh fuzz   sanitizer stages (a quick local run:
-#                                                   30 s per target; NUPMPC_FUZZ_SECONDS)
+#                                                   24 s per target; NUPMPC_FUZZ_SECONDS)
 #   TSan           deploy/test-sanitizers.sh tsan
 # A stage skipped by design (the variables above; AVX-512 tests on a CPU without AVX-512,
 # which its script reports with exit code 77 and a "SKIPPED: reason" line) is SKIPPED and
@@ -89,7 +89,7 @@ else
 fi
 # The whole run must stay within CI's half hour: the fuzzing stage is a short smoke here
 # (deploy/fuzz.sh SECONDS runs longer campaigns).
-export NUPMPC_FUZZ_SECONDS="${NUPMPC_FUZZ_SECONDS:-30}"
+export NUPMPC_FUZZ_SECONDS="${NUPMPC_FUZZ_SECONDS:-24}"
 for s in "ASan+UBSan:asan" "fuzzing:fuzz" "TSan:tsan"; do
   if [ "${NUPMPC_SANITIZERS:-1}" = 0 ]; then
     skip "${s%%:*}" "NUPMPC_SANITIZERS=0"

@@ -67,6 +67,24 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
         CheckNotInUse(*metrics, AnyAddress::kAsGiven, absl::StrCat("--metrics_address ", options.metrics_address));
     if (!in_use.ok()) return in_use;
   }
+  if (!options.state_dir.empty()) {
+    SnapshotStoreOptions store;
+    store.dir = options.state_dir;
+    if (!options.snapshot_key_file.empty()) {
+      absl::StatusOr<SnapshotKey> key = SnapshotKey::FromFile(options.snapshot_key_file);
+      if (!key.ok()) return key.status();
+      store.key = *std::move(key);
+    }
+    // The spec (one request) and the core's state (within the per-session memory limit).
+    store.max_snapshot_bytes = static_cast<std::size_t>(options.max_message_bytes) +
+                               static_cast<std::size_t>(std::max<long long>(options.size_limits.max_session_bytes, 0));
+    store.reattach_window_s = options.reattach_window_s;
+    absl::StatusOr<std::unique_ptr<SnapshotStore>> opened = SnapshotStore::Open(std::move(store));
+    if (!opened.ok()) return opened.status();
+    state.snapshots = *std::move(opened);
+  } else if (!options.snapshot_key_file.empty()) {
+    return absl::InvalidArgumentError("--snapshot_key_file: needs --state_dir (the snapshots it seals)");
+  }
   s->service_ = std::make_unique<MpcServiceImpl>(s->state_.get());
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -182,6 +200,12 @@ void GrpcServer::Shutdown() {
       std::chrono::steady_clock::now() + std::chrono::duration<double>(state_->options.grace_period_s);
   while (state_->work_in_flight.load() > 0 && std::chrono::steady_clock::now() < grace_end) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  // Before the streams end (and their sessions with them): no step is accepted any more, so
+  // every idle session's snapshot is what its next step would start from.
+  if (state_->snapshots != nullptr) {
+    const int written = state_->WriteSnapshots();
+    spdlog::info("wrote {} session snapshots of {} to {}", written, state_->registry.size(), state_->snapshots->dir());
   }
   if (server_ != nullptr) {
     server_->Shutdown(std::chrono::system_clock::now());

@@ -125,6 +125,14 @@ std::string RenderPrometheusMetrics(const ServerState& state) {
   Counter(out, "nupmpc_client_held_periods_total",
           "Control periods clients held without an answer in time, as they reported them with their next step.",
           static_cast<double>(state.client_held_periods.load()));
+  out.Family("nupmpc_session_snapshots_total", "counter",
+             "Session snapshots (--state_dir): written on SIGTERM, restored when their client re-attached, failed "
+             "(claimed but not restorable: the client re-creates the session cold).");
+  for (const auto& [event, count] : {std::pair<const char*, std::uint64_t>{"written", state.snapshots_written.load()},
+                                     {"restored", state.snapshots_restored.load()},
+                                     {"failed", state.snapshots_failed.load()}}) {
+    out.Sample("nupmpc_session_snapshots_total", {{"event", event}}, static_cast<double>(count));
+  }
   Counter(out, "nupmpc_control_stream_read_pauses_total",
           "Times a Control stream stopped reading because its client left answers unread.",
           static_cast<double>(state.stream_read_pauses.load()));

@@ -36,6 +36,17 @@ ABSL_FLAG(int, max_message_bytes, 64 << 20, "largest request/response (env NUPMP
 ABSL_FLAG(int, max_horizon, 100000, "largest horizon N (env NUPMPC_MAX_HORIZON)");
 ABSL_FLAG(int, max_states, 1000, "largest state dimension (env NUPMPC_MAX_STATES)");
 ABSL_FLAG(int, max_iterations, 100000, "largest per-solve iteration cap (env NUPMPC_MAX_ITERATIONS)");
+ABSL_FLAG(std::string, state_dir, "",
+          "on SIGTERM/SIGINT, write every session's snapshot (spec, current values, warm start) to this directory "
+          "(created 0700); a server started on it, or sharing it, restores a session when its client re-attaches by "
+          "id; empty: sessions end with the process (env NUPMPC_STATE_DIR)");
+ABSL_FLAG(std::string, snapshot_key_file, "",
+          "a key (at least 32 bytes, chmod 600) the replicas sharing --state_dir share: snapshots are sealed with "
+          "HMAC-SHA256 and any other is refused; empty: a SHA-256 checksum only, for a directory only this server's "
+          "user can write (env NUPMPC_SNAPSHOT_KEY_FILE)");
+ABSL_FLAG(double, reattach_window_s, 300,
+          "a snapshot is restored only this long after it was written; older ones are removed "
+          "(env NUPMPC_REATTACH_WINDOW_S)");
 ABSL_FLAG(double, grace_period_s, 5, "on SIGTERM/SIGINT: time for in-flight solves (env NUPMPC_GRACE_PERIOD_S)");
 ABSL_FLAG(double, drain_delay_s, 0,
           "on SIGTERM/SIGINT: report NOT_SERVING on grpc.health.v1 this long while still serving, so load balancers "
@@ -169,6 +180,9 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                            "max_iterations",
                            "grace_period_s",
                            "drain_delay_s",
+                           "state_dir",
+                           "snapshot_key_file",
+                           "reattach_window_s",
                            "memory_budget_mb",
                            "max_session_memory_mb",
                            "max_pass_gflop",
@@ -238,6 +252,9 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
   o.max_streams_per_principal = absl::GetFlag(FLAGS_max_streams_per_principal);
   o.list_all_sessions = absl::GetFlag(FLAGS_list_all_sessions);
   o.slow_solve_ms = absl::GetFlag(FLAGS_slow_solve_ms);
+  o.state_dir = absl::GetFlag(FLAGS_state_dir);
+  o.snapshot_key_file = absl::GetFlag(FLAGS_snapshot_key_file);
+  o.reattach_window_s = absl::GetFlag(FLAGS_reattach_window_s);
   out.log_level = absl::GetFlag(FLAGS_log_level);
   out.log_format = absl::GetFlag(FLAGS_log_format);
   if (spdlog::level::from_str(out.log_level) == spdlog::level::off && out.log_level != "off") {
@@ -258,6 +275,7 @@ absl::StatusOr<ParsedFlags> ParseServerFlags(int argc, char** argv) {
                                 RequireAtLeast("max_iterations", o.size_limits.max_iterations, 1),
                                 RequireAtLeast("grace_period_s", o.grace_period_s, 0.0),
                                 RequireAtLeast("drain_delay_s", out.drain_delay_s, 0.0),
+                                RequireAtLeast("reattach_window_s", o.reattach_window_s, 0.0),
                                 RequireAtMost("drain_delay_s", out.drain_delay_s, 3600.0),
                                 RequireAtLeast("session_compact_idle_s", o.session_compact_idle_s, 0.0),
                                 RequireAtLeast("max_queue_wait_ms", o.max_queue_wait_ms, 0.0),

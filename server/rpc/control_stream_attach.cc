@@ -13,10 +13,13 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
   std::shared_ptr<SessionEntry> entry;
   switch (first.attach_case()) {
     case v1::ControlRequest::kSessionId: {
-      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->registry.Find(first.session_id(), caller_);
+      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->FindOrRestore(first.session_id(), caller_);
       if (!found.ok()) return found.status();
       entry = *std::move(found);
-      if (entry->owned_by_stream || entry->attached.exchange(true)) {
+      // A stream-owned session is attached only by its stream, except one restored from a
+      // snapshot: its stream ended with the server it lived on, and the reconnect of that
+      // stream's client takes it over (and owns it: it closes when this stream ends).
+      if ((entry->owned_by_stream && !entry->restored) || entry->attached.exchange(true)) {
         return absl::FailedPreconditionError(absl::StrCat("session_id ", QuoteSessionId(first.session_id()),
                                                           ": another Control stream is attached to it"));
       }
@@ -28,7 +31,8 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
       call.cancel = &cancelled_;
       absl::StatusOr<std::shared_ptr<SessionEntry>> added =
           CreateAndRegister(first.spec(), state_->options.size_limits, &state_->gp_models, &state_->budget,
-                            &state_->registry, call, /*owned_by_stream=*/true, /*requested_id=*/{}, OwnerFor(caller_));
+                            &state_->registry, call, /*owned_by_stream=*/true, /*requested_id=*/{}, OwnerFor(caller_),
+                            /*keep_spec=*/state_->snapshots != nullptr);
       if (!added.ok()) return added.status();
       entry = *std::move(added);
       entry->attached.store(true);
@@ -45,7 +49,9 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
 }
 
 void ControlStream::StartAttach(v1::ControlRequest first) {
-  if (first.attach_case() != v1::ControlRequest::kSpec) {  // a registry lookup: fine in the reaction
+  // A registry lookup is fine in the reaction; building a session (from a spec, or from
+  // its snapshot) goes to the pool.
+  if (first.attach_case() == v1::ControlRequest::kSessionId && !state_->MayRestore(first.session_id(), caller_)) {
     AttachAndContinue(std::move(first));
     return;
   }

@@ -43,9 +43,8 @@ class FleetRun : public std::enable_shared_from_this<FleetRun> {
     for (std::size_t i = 0; i < steps_; ++i) {
       absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
           state_->registry.Find(request_.steps(i).session_id(), caller);
-      if (entry.ok() && (*entry)->attached.load()) {
-        entry = absl::FailedPreconditionError(
-            "session_id: a Control stream is attached to this session; send its steps there");
+      if (entry.ok()) {
+        if (absl::Status refused = (*entry)->UnaryStepsRefused(); !refused.ok()) entry = std::move(refused);
       }
       if (!entry.ok()) {
         AnswerError(i, entry.status());

@@ -18,6 +18,29 @@
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
+namespace {
+
+// A Solve for a session the server holds only as a snapshot (--state_dir): restored on a
+// worker (building a session is no work for gRPC's threads), then solved there. The
+// restored session is new to the registry; should another call of it have got there in
+// between, this one is answered ABORTED (retryable) rather than waiting for it.
+void SolveRestoring(UnaryCall<v1::SolveRequest, v1::SolveResponse>* call, const Caller& caller) {
+  ServerState* state = call->state();
+  const v1::SolveRequest* request = &call->request();
+  v1::SolveResult* result = call->response()->mutable_result();
+  call->RunOnPool("Solve", result, [state, request, caller, result](const CallContext& context) {
+    NUPMPC_ASSIGN_OR_RETURN(const std::shared_ptr<SessionEntry> entry,
+                            state->FindOrRestore(request->session_id(), caller));
+    absl::Status solved = absl::AbortedError("session_id: the session was just restored and is busy; retry");
+    SessionStrand::RunNowIfIdle(entry->strand, state->pool, [&] {
+      solved = entry->UnaryStepsRefused();
+      if (solved.ok()) solved = SolveStep(*entry, request->step(), context, result);
+    });
+    return solved;
+  });
+}
+
+}  // namespace
 
 grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerContext* context, const Raw* raw_request,
                                                         Raw* raw_response) {
@@ -38,7 +61,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CreateSession(grpc::CallbackServerCont
       [state, request, response, owner = OwnerFor(CallerOf(*context, state_->auth.get()))](const CallContext& c) {
         absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
             CreateAndRegister(request->spec(), state->options.size_limits, &state->gp_models, &state->budget,
-                              &state->registry, c, /*owned_by_stream=*/false, request->session_id(), owner);
+                              &state->registry, c, /*owned_by_stream=*/false, request->session_id(), owner,
+                              /*keep_spec=*/state->snapshots != nullptr);
         if (!entry.ok()) return entry.status();
         response->set_session_id((*entry)->id);
         *response->mutable_dimensions() = (*entry)->dims;
@@ -63,15 +87,18 @@ grpc::ServerUnaryReactor* MpcServiceImpl::Solve(grpc::CallbackServerContext* con
                                                 Raw* raw_response) {
   auto* call = UnaryCall<v1::SolveRequest, v1::SolveResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
-      state_->registry.Find(call->request().session_id(), CallerOf(*context, state_->auth.get()));
+  const Caller caller = CallerOf(*context, state_->auth.get());
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(call->request().session_id(), caller);
+  if (!entry.ok() && state_->MayRestore(call->request().session_id(), caller)) {
+    SolveRestoring(call, caller);
+    return call;
+  }
   if (!entry.ok()) {
     call->Reply(entry.status());
     return call;
   }
-  if ((*entry)->attached.load()) {
-    call->Reply(
-        absl::FailedPreconditionError("session_id: a Control stream is attached to this session; send steps there"));
+  if (const absl::Status refused = (*entry)->UnaryStepsRefused(); !refused.ok()) {
+    call->Reply(refused);
     return call;
   }
   const SessionEntry* session = entry->get();
@@ -129,8 +156,13 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
       UnaryCall<v1::CloseSessionRequest, v1::CloseSessionResponse>::Start(state_, context, raw_request, raw_response);
   if (!call->Parsed()) return call;
   const std::string& id = call->request().session_id();
-  absl::StatusOr<std::shared_ptr<SessionEntry>> entry =
-      state_->registry.Find(id, CallerOf(*context, state_->auth.get()));
+  const Caller caller = CallerOf(*context, state_->auth.get());
+  absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(id, caller);
+  if (!entry.ok() && state_->MayRestore(id, caller)) {
+    // A session still in the state directory: closing it is discarding its snapshot.
+    call->Reply(state_->snapshots->Claim(id, caller).ok() ? absl::OkStatus() : entry.status());
+    return call;
+  }
   if (!entry.ok()) {
     call->Reply(entry.status());
     return call;

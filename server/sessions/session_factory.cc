@@ -71,12 +71,13 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::Proble
                                                                 GpModelCache* gp_models, MemoryBudget* budget,
                                                                 SessionRegistry* registry, const CallContext& call,
                                                                 bool owned_by_stream, absl::string_view requested_id,
-                                                                const SessionOwner& owner) {
+                                                                const SessionOwner& owner, bool keep_spec) {
   NUPMPC_RETURN_IF_ERROR(registry->CheckQuota(owner));
   NUPMPC_ASSIGN_OR_RETURN(BuiltSession built, BuildSession(spec, limits, gp_models, &call, budget));
   NUPMPC_RETURN_IF_ERROR(CheckCallStillWanted(call, "the session was built"));
+  std::shared_ptr<const v1::ProblemSpec> kept = keep_spec ? std::make_shared<const v1::ProblemSpec>(spec) : nullptr;
   return registry->Add(std::move(built.solver), built.timing, owned_by_stream, std::move(built.memory), requested_id,
-                       owner);
+                       owner, std::move(kept));
 }
 
 }  // namespace nupmpc::server

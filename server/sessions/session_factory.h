@@ -38,11 +38,12 @@ absl::StatusOr<BuiltSession> BuildSession(const v1::ProblemSpec& spec, const Siz
 // (under `requested_id` when not empty, see SessionRegistry::Add; owned by `owner`) unless
 // the call's deadline passed or its client cancelled meanwhile (nobody could reach a
 // session registered then). The owner's session quota is checked before the build too.
+// `keep_spec`: the session keeps a copy of its spec (SessionEntry::spec, for snapshots).
 absl::StatusOr<std::shared_ptr<SessionEntry>> CreateAndRegister(const v1::ProblemSpec& spec, const SizeLimits& limits,
                                                                 GpModelCache* gp_models, MemoryBudget* budget,
                                                                 SessionRegistry* registry, const CallContext& call,
                                                                 bool owned_by_stream, absl::string_view requested_id,
-                                                                const SessionOwner& owner);
+                                                                const SessionOwner& owner, bool keep_spec = false);
 
 }  // namespace nupmpc::server
 

@@ -29,6 +29,17 @@ void SessionEntry::Describe(v1::SessionInfo* out) const {
   out->set_attached(attached.load(std::memory_order_relaxed));
 }
 
+absl::Status SessionEntry::UnaryStepsRefused() const {
+  if (attached.load()) {
+    return absl::FailedPreconditionError("session_id: a Control stream is attached to this session; send steps there");
+  }
+  if (owned_by_stream) {
+    return absl::FailedPreconditionError(
+        "session_id: the session belongs to a Control stream; re-attach a Control stream to step it");
+  }
+  return absl::OkStatus();
+}
+
 std::string SessionRegistry::NewId() {
   // std::random_device reads the kernel's CSPRNG (getrandom) on Linux.
   static thread_local std::random_device device;
@@ -37,12 +48,13 @@ std::string SessionRegistry::NewId() {
   return id;
 }
 
-absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(std::unique_ptr<core::MpcSession> solver,
-                                                                   SessionTiming timing, bool owned_by_stream,
-                                                                   SessionMemory memory, absl::string_view requested_id,
-                                                                   SessionOwner owner) {
+absl::StatusOr<std::shared_ptr<SessionEntry>> SessionRegistry::Add(
+    std::unique_ptr<core::MpcSession> solver, SessionTiming timing, bool owned_by_stream, SessionMemory memory,
+    absl::string_view requested_id, SessionOwner owner, std::shared_ptr<const v1::ProblemSpec> spec, bool restored) {
   auto entry = std::make_shared<SessionEntry>();
   entry->owner = std::move(owner);
+  entry->spec = std::move(spec);
+  entry->restored = restored;
   entry->owned_by_stream = owned_by_stream;
   entry->timing = timing;
   entry->algorithm = solver->algorithm();

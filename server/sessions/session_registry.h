@@ -41,6 +41,10 @@ struct SessionEntry {
   bool owned_by_stream = false;
   SessionTiming timing;  ///< from the spec: time limit, period
   v1::Dimensions dims;   ///< fixed at creation: the caller's (MpcSession::dimensions)
+  // The spec it was created from, kept by a server that writes snapshots (--state_dir):
+  // a snapshot rebuilds the session from it (server/snapshots/). Null otherwise.
+  std::shared_ptr<const v1::ProblemSpec> spec;
+  bool restored = false;  ///< fixed at registration: restored from a snapshot
 
   std::unique_ptr<core::MpcSession> solver;  ///< strand; holds the session's problem
   bool compacted = false;                    ///< strand: solver scratch released while idle
@@ -74,6 +78,10 @@ struct SessionEntry {
   void Touch() { last_used.store(Clock::now().time_since_epoch().count(), std::memory_order_relaxed); }
   double idle_seconds() const;
   void Describe(v1::SessionInfo* out) const;  // fields readable without mu
+  // Why Solve and SolveFleet may not step it (FAILED_PRECONDITION): a Control stream is
+  // attached, or it belongs to one (a stream-owned session restored from a snapshot waits
+  // for its stream's reconnect); OK otherwise.
+  absl::Status UnaryStepsRefused() const;
   std::atomic<core::Algorithm> algorithm{core::Algorithm::kAuto};
 };
 
@@ -103,7 +111,9 @@ class SessionRegistry {
   // `requested_id` is taken.
   absl::StatusOr<std::shared_ptr<SessionEntry>> Add(std::unique_ptr<core::MpcSession> solver, SessionTiming timing,
                                                     bool owned_by_stream, SessionMemory memory = {},
-                                                    absl::string_view requested_id = {}, SessionOwner owner = {});
+                                                    absl::string_view requested_id = {}, SessionOwner owner = {},
+                                                    std::shared_ptr<const v1::ProblemSpec> spec = nullptr,
+                                                    bool restored = false);
   // The quota check of Add, for before the work of building a session.
   absl::Status CheckQuota(const SessionOwner& owner) const;
   // INVALID_ARGUMENT for malformed ids, NOT_FOUND for unknown (or closed, or expired) ones

@@ -49,6 +49,12 @@ struct ServerOptions {
   int max_streams_per_principal = 0;   ///< 0: only max_control_streams
   bool list_all_sessions = false;      ///< without authentication: ListSessions shows every connection's
   double slow_solve_ms = 0.0;          ///< solves slower than this are logged at warn; 0: none
+  // Session snapshots (server/snapshots/): written here on SIGTERM, claimed by the server a
+  // session's client comes back to within reattach_window_s; empty: none (sessions end
+  // with the process).
+  std::string state_dir;
+  std::string snapshot_key_file;  ///< the replicas' shared key; empty: SHA-256 checksums only
+  double reattach_window_s = 300.0;
   SizeLimits size_limits;
 };
 

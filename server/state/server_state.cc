@@ -2,6 +2,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/observability/log_context.h"
+#include "server/snapshots/session_snapshot.h"
 #include "spdlog/spdlog.h"
 
 namespace nupmpc::server {
@@ -63,6 +64,51 @@ std::optional<Clock::time_point> SteadyDeadline(const grpc::CallbackServerContex
   const auto deadline = context.deadline();
   if (deadline == std::chrono::system_clock::time_point::max()) return std::nullopt;
   return Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - std::chrono::system_clock::now());
+}
+
+bool ServerState::MayRestore(const std::string& id, const Caller& caller) const {
+  return snapshots != nullptr && absl::IsNotFound(registry.Find(id, caller).status());
+}
+
+absl::StatusOr<std::shared_ptr<SessionEntry>> ServerState::FindOrRestore(const std::string& id, const Caller& caller) {
+  absl::StatusOr<std::shared_ptr<SessionEntry>> found = registry.Find(id, caller);
+  if (snapshots == nullptr || !absl::IsNotFound(found.status())) return found;
+  absl::StatusOr<snapshot::v1::SessionSnapshot> snapshot = snapshots->Claim(id, caller);
+  if (!snapshot.ok()) return found;
+  absl::StatusOr<std::shared_ptr<SessionEntry>> restored =
+      RestoreSnapshot(*snapshot, options.size_limits, &gp_models, &budget, &registry);
+  const LogContext log_context(snapshot->session_id(), snapshot->owner_principal());
+  if (!restored.ok()) {
+    // Its client re-creates the session (cold), as without a snapshot.
+    spdlog::error("session {}: its snapshot could not be restored: {}", snapshot->session_id(),
+                  std::string(restored.status().message()));
+    snapshots_failed.fetch_add(1, std::memory_order_relaxed);
+    return found;
+  }
+  snapshots_restored.fetch_add(1, std::memory_order_relaxed);
+  spdlog::info("session {} restored from its snapshot ({} solves before)", snapshot->session_id(), snapshot->solves());
+  return restored;
+}
+
+int ServerState::WriteSnapshots() {
+  if (snapshots == nullptr) return 0;
+  int written = 0;
+  for (const std::shared_ptr<SessionEntry>& entry : registry.List()) {
+    const bool idle = SessionStrand::RunNowIfIdle(entry->strand, pool, [&] {
+      if (entry->closed) return;
+      absl::StatusOr<snapshot::v1::SessionSnapshot> snapshot = TakeSnapshot(*entry);
+      const absl::Status status = snapshot.ok() ? snapshots->Write(*snapshot) : snapshot.status();
+      const LogContext log_context(entry->id, entry->owner.principal);
+      if (status.ok()) {
+        ++written;
+      } else {
+        spdlog::error("session {}: no snapshot written: {}", entry->id, std::string(status.message()));
+      }
+    });
+    if (!idle) spdlog::warn("session {}: still solving, no snapshot written", entry->id);
+  }
+  snapshots_written.fetch_add(static_cast<std::uint64_t>(written), std::memory_order_relaxed);
+  return written;
 }
 
 }  // namespace nupmpc::server

@@ -20,6 +20,7 @@
 #include "server/scheduling/worker_pool.h"
 #include "server/sessions/memory_budget.h"
 #include "server/sessions/session_registry.h"
+#include "server/snapshots/snapshot_store.h"
 #include "server/state/server_options.h"
 
 namespace nupmpc::server {
@@ -40,9 +41,10 @@ struct ServerState {
   WorkerPool pool;
   Metrics metrics;
   PrincipalStreams principal_streams;
-  std::shared_ptr<TokenStore> tokens;   ///< --auth_tokens_file (null: none), re-read by the janitor
-  std::shared_ptr<AuthProcessor> auth;  ///< null: authentication off
-  GpModelCache gp_models;               ///< factorised GP models shared by the sessions that use them
+  std::shared_ptr<TokenStore> tokens;        ///< --auth_tokens_file (null: none), re-read by the janitor
+  std::shared_ptr<AuthProcessor> auth;       ///< null: authentication off
+  GpModelCache gp_models;                    ///< factorised GP models shared by the sessions that use them
+  std::unique_ptr<SnapshotStore> snapshots;  ///< --state_dir (null: none)
   // From SIGTERM on (the drain delay included): what grpc.health.v1 (NOT_SERVING),
   // nupmpc_draining and GetServerInfo.draining report, one truth for the three.
   std::atomic<bool> serving{true};
@@ -57,6 +59,11 @@ struct ServerState {
   /// Periods Control clients held without an answer in time, as they report them
   /// (ControlRequest.held_periods).
   std::atomic<std::uint64_t> client_held_periods{0};
+  // Session snapshots (--state_dir): written on SIGTERM, restored when their clients came
+  // back, and claimed but not restorable (their clients re-create them cold).
+  std::atomic<std::uint64_t> snapshots_written{0};
+  std::atomic<std::uint64_t> snapshots_restored{0};
+  std::atomic<std::uint64_t> snapshots_failed{0};
 
   // An absl::Status of `rpc` as a gRPC status, counted when it is an error.
   grpc::Status ToGrpc(Rpc rpc, const absl::Status& status);
@@ -64,6 +71,16 @@ struct ServerState {
   // (`session`: null for SolveOnce).
   void RecordSolve(const v1::SolveResult& result, const SessionEntry* session, double queue_wait_s, double latency_s);
   void FillLimits(v1::ServerLimits* out) const;
+
+  // The session `id` for `caller`: the registry's, or, when the server has a state
+  // directory holding its snapshot, that snapshot restored and registered (the work of
+  // creating the session: not on gRPC's threads). NOT_FOUND as Find otherwise.
+  absl::StatusOr<std::shared_ptr<SessionEntry>> FindOrRestore(const std::string& id, const Caller& caller);
+  // Whether FindOrRestore may have to restore (the registry does not hold `id`).
+  bool MayRestore(const std::string& id, const Caller& caller) const;
+  // The session snapshots of the sessions that are idle now, written to the state
+  // directory (on SIGTERM, once the work in flight is done); returns how many.
+  int WriteSnapshots();
 };
 
 // The call's deadline on the steady clock the solver measures (none if the client set none).

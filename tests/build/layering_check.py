@@ -26,7 +26,7 @@ import sys
 # shared gRPC helper nupmpc/grpc_handover.h.
 # The server's folders, lowest first (server/CMakeLists.txt says what each holds).
 SERVER_ROOMS = ["server/convert", "server/scheduling", "server/observability", "server/http", "server/auth",
-                "server/sessions", "server/state", "server/rpc", "server"]
+                "server/sessions", "server/snapshots", "server/state", "server/rpc", "server"]
 ROOMS = ["core/gp", "core/examples", "core/public/standalone", "core/public", "core", "cli", "proto", *SERVER_ROOMS, "client", "loadtest/instances",
          "loadtest/bench/gp", "loadtest/bench", "loadtest", "tests/fuzz", "tests"]
 # What a session is made of: the rooms below the state every RPC shares.
@@ -54,8 +54,9 @@ ALLOWED = {
     "server/http": {"server/http"},
     "server/auth": {"server/auth"},
     "server/sessions": SESSION_ROOMS,
-    "server/state": SESSION_ROOMS | {"server/state"},
-    "server/rpc": SESSION_ROOMS | {"server/state", "server/rpc"},
+    "server/snapshots": SESSION_ROOMS | {"server/snapshots"},
+    "server/state": SESSION_ROOMS | {"server/snapshots", "server/state"},
+    "server/rpc": SESSION_ROOMS | {"server/snapshots", "server/state", "server/rpc"},
     # The process: everything of the server, and the command line.
     "server": set(SERVER_ROOMS) | {"core/gp", "proto", "cli"} | PUBLIC_CORE,
     # The client library and the nupmpc CLI: proto + gRPC only, and the core's standalone

@@ -42,6 +42,7 @@ const Program kPrograms[] = {
     {"nupmpc-scaleout-probe", "--streams=<int>", "NUPMPC_SERVER"},
     {"nupmpc-loadtest-peer", "--echo_busy_us=<string>", ""},
     {"nupmpc-metrics-cost", "--sessions=<int>", ""},
+    {"nupmpc-snapshot-cost", "--sessions=<int>", ""},
     {"nupmpc-period-groups", "--seconds=<double>", "NUPMPC_SERVER"},
     {"nupmpc-gp-bench", "--sizes=<string>", ""},
     {"nupmpc-example-dac", "--out_dir=<string>", ""},

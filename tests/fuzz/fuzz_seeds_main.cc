@@ -1,8 +1,9 @@
 // nupmpc-fuzz-seeds DIR [INSTANCE.json...]: writes the seed corpora of the fuzz targets:
 // DIR/spec_solve (serialized ProblemSpecs: the fuzz seed problem and the given instances),
 // DIR/step (serialized Steps: states, prior updates, shifts, warm-start modes),
-// DIR/control_stream (request sequences of one Control stream, tests/fuzz/control_sequence.h) and
-// DIR/problem_file (the instances' and the seed problem's JSON text).
+// DIR/control_stream (request sequences of one Control stream, tests/fuzz/control_sequence.h),
+// DIR/problem_file (the instances' and the seed problem's JSON text) and DIR/snapshot (the
+// seed session's core state, core::MpcSession::SaveState, after 0 to 3 solves).
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -10,6 +11,9 @@
 
 #include "client/problem_file.h"
 #include "google/protobuf/util/json_util.h"
+#include "server/sessions/call_context.h"
+#include "server/sessions/session_factory.h"
+#include "server/sessions/step_solver.h"
 #include "tests/fuzz/control_sequence.h"
 #include "tests/fuzz/seed_problem.h"
 
@@ -63,6 +67,23 @@ void WriteControlSequences(const std::filesystem::path& dir) {
   Write(dir / "updates", nupmpc::fuzz::EncodeControlSequence(updates));
 }
 
+// The seed session's state as a fresh session and after each of three solves.
+void WriteSnapshotStates(const std::filesystem::path& dir) {
+  nupmpc::server::CallContext call;
+  absl::StatusOr<nupmpc::server::BuiltSession> built =
+      nupmpc::server::BuildSession(nupmpc::fuzz::SeedSpec(), nupmpc::server::SizeLimits(), nullptr, &call);
+  if (!built.ok()) return;
+  nupmpc::server::SessionEntry entry;
+  entry.solver = std::move(built->solver);
+  entry.timing = built->timing;
+  for (int k = 0; k < 4; ++k) {
+    std::string state;
+    if (entry.solver->SaveState(&state).ok()) Write(dir / ("after" + std::to_string(k)), state);
+    nupmpc::v1::SolveResult result;
+    (void)nupmpc::server::SolveStep(entry, nupmpc::fuzz::SeedStep(k), call, &result);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -71,7 +92,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const std::filesystem::path dir = argv[1];
-  for (const char* sub : {"spec_solve", "step", "control_stream", "problem_file"})
+  for (const char* sub : {"spec_solve", "step", "control_stream", "problem_file", "snapshot"})
     std::filesystem::create_directories(dir / sub);
   const nupmpc::v1::ProblemSpec seed = nupmpc::fuzz::SeedSpec();
   Write(dir / "spec_solve" / "seed", seed.SerializeAsString());
@@ -102,5 +123,6 @@ int main(int argc, char** argv) {
     Write(dir / "step" / ("update" + std::to_string(k)), update.SerializeAsString());
   }
   WriteControlSequences(dir / "control_stream");
+  WriteSnapshotStates(dir / "snapshot");
   return 0;
 }
