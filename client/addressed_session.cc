@@ -12,14 +12,11 @@ namespace nupmpc {
 namespace {
 
 // What a failed call means for the session: NOT_FOUND (the session is not where its id
-// now leads) is as good a reason to re-create it as a lost replica.
-absl::Status AsFailoverCause(const grpc::Status& s, const char* what) {
-  const auto code = static_cast<absl::StatusCode>(s.error_code());
-  if (code == absl::StatusCode::kNotFound) {
-    return absl::UnavailableError(
-        absl::StrCat(what, ": the session is not on the replica that answered (", s.error_message(), ")"));
-  }
-  return absl::Status(code, absl::StrCat(what, ": ", s.error_message()));
+// now leads, and no snapshot of it either) is as good a reason to re-create it as a lost
+// replica.
+absl::Status AsFailoverCause(const absl::Status& s) {
+  if (!absl::IsNotFound(s)) return s;
+  return absl::UnavailableError(absl::StrCat(s.message(), " (the session is not on the replica that answered)"));
 }
 
 // Closing is best effort for a replica that may be gone: never wait long.
@@ -86,7 +83,9 @@ absl::StatusOr<v1::SolveResult> AddressedSession::SolveLocked(const v1::Step& st
   RouteToSession(&context, id_);
   v1::SolveResponse response;
   const grpc::Status s = client_->stub().Solve(&context, request, &response);
-  if (!s.ok()) return AsFailoverCause(s, "Solve");
+  if (!s.ok()) {
+    return absl::Status(static_cast<absl::StatusCode>(s.error_code()), absl::StrCat("Solve: ", s.error_message()));
+  }
   return std::move(*response.mutable_result());
 }
 
@@ -112,19 +111,41 @@ absl::StatusOr<v1::SolveResult> AddressedSession::Step(const v1::Step& step) {
         "re-created, and its last state is not known for sure)");
   }
   absl::StatusOr<v1::SolveResult> result = SolveLocked(step, client_->default_deadline_);
-  if (!result.ok() && IsRetryable(result.status()) && !id_.empty()) {
+  const bool lost = absl::IsNotFound(result.status());
+  if (!result.ok() && (IsRetryable(result.status()) || lost) && !id_.empty()) {
     const absl::Status outage = RideOutOutage(
-        reconnect_, result.status(),
-        [&](std::chrono::milliseconds timeout, bool* answered) -> absl::Status {
+        reconnect_, lost ? AsFailoverCause(result.status()) : result.status(),
+        [&](std::chrono::milliseconds timeout, ReconnectAttempt* report, bool* answered) -> absl::Status {
           // A direct connection refused while its server restarted would wait out gRPC's
           // own back-off (seconds) before the next call may connect.
           grpc::experimental::ChannelResetConnectionBackoff(client_->channel_.get());
-          if (absl::Status s = CreateLocked(timeout); !s.ok()) return s;
-          result = SolveLocked(step, timeout);
-          *answered = result.ok() || !IsRetryable(result.status());
-          // Not answered: the next attempt makes another session; do not leave this one
-          // holding memory on its replica until it expires.
-          if (!*answered) (void)CloseById(id_);
+          absl::Status back = ReattachOrRecreate(
+              // NOT_FOUND from the start: the replica the id leads to has neither the
+              // session nor its snapshot, so asking again by the id cannot help.
+              lost ? std::string() : id_,
+              [&] {
+                // The step itself asks for the session by its id: a server that came back
+                // with it (restored from its snapshot) answers it, warm. An answer that is
+                // an error of the step's own also means the session was there.
+                result = SolveLocked(step, timeout);
+                const bool reached =
+                    result.ok() || (!IsRetryable(result.status()) && !AttachByIdMissed(result.status()));
+                return reached ? absl::OkStatus() : result.status();
+              },
+              [&] {
+                if (absl::Status s = CreateLocked(timeout); !s.ok()) return s;
+                result = SolveLocked(step, timeout);
+                if (result.ok() || (!IsRetryable(result.status()) && !absl::IsNotFound(result.status()))) {
+                  return absl::OkStatus();
+                }
+                // Not answered: the next attempt makes another session; do not leave this
+                // one holding memory on its replica until it expires.
+                (void)CloseById(id_);
+                return AsFailoverCause(result.status());
+              },
+              report);
+          if (!back.ok()) return back;
+          *answered = true;
           return result.status();
         },
         &stats_);

@@ -9,19 +9,22 @@
 //   auto session = nupmpc::AddressedSession::Create(&client, spec);
 //   auto result = (*session)->Step(step);        // Solve on the replica holding the session
 //
-// Failover: when a Solve fails with UNAVAILABLE (the replica or the connection is gone) or
-// NOT_FOUND (the balancer now sends the id to another replica, or the session expired),
-// the session is re-created from the spec it holds (kept current with every answered step
-// by ApplyStepToSpec, as nupmpc::Session does) under a new id, on whichever replica
-// answers, and the step is resent, with the back-off of ReconnectOptions
-// (client/reconnect.h). Step() thus returns that step's own result, or an error: never a
-// plan computed for another state. A new id rather than the old one, so that a replica
-// that comes back with a stale copy is never reached again. After a step that failed
-// (other than a refusal), the next step must carry its state: the server may have applied
-// the failed one, so the spec held may lag behind it.
+// Failover, with the back-off of ReconnectOptions (client/reconnect.h): when a Solve fails
+// with UNAVAILABLE (the replica or the connection is gone, or it drains), the step is
+// resent to the same id first: a replica that kept the session, or restored it from the
+// snapshot a drained or restarted one wrote (--state_dir), answers it warm (re-attached).
+// When that answers NOT_FOUND, or the first Solve did (the balancer now sends the id to a
+// replica that has neither the session nor its snapshot, or the session expired), the
+// session is re-created from the spec it holds (kept current with every answered step by
+// ApplyStepToSpec, as nupmpc::Session does) under a new id, on whichever replica answers,
+// and the step is resent there (re-created, cold). Step() thus returns that step's own
+// result, or an error: never a plan computed for another state. A new id rather than the
+// old one, so that a replica that comes back with a stale copy is never reached again.
+// After a step that failed (other than a refusal), the next step must carry its state: the
+// server may have applied the failed one, so the spec held may lag behind it.
 //
 // Solve calls have the client's default deadline (none by default: a solve may take long);
-// re-creations are bounded by ReconnectOptions.attempt_timeout, closes by 2 s.
+// the calls of a failover attempt by ReconnectOptions.attempt_timeout, closes by 2 s.
 
 #include <memory>
 #include <mutex>

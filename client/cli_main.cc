@@ -20,11 +20,13 @@
 // --period_ms P: a closed loop in real time. A step starts every P ms and returns by its
 // period: without an answer by then it is held (status "held"), and a late answer is
 // discarded; after K held periods in a row (K = max(3, 1 s / P)) the stream counts as
-// broken and is re-created in the background, for as long as the loop runs (back-off at
+// broken and is reconnected in the background, for as long as the loop runs (back-off at
 // most 500 ms, attempts of at most 1 s; client/session.h). Without a period, steps run as
-// fast as answers come, and a broken stream is re-attached with exponential back-off (50 ms
+// fast as answers come, and a broken stream is reconnected with exponential back-off (50 ms
 // doubling to --reconnect_max_backoff_ms, ±20 % jitter) for at most --reconnect_budget_s
-// per outage. Either way each reconnect attempt is logged on stderr.
+// per outage. Either way each reconnect attempt is logged on stderr, and the session is
+// re-attached by its id when the server still has it (or restored it), else re-created
+// from the spec (client/reconnect.h); the summary counts both ("reattached", "recreated").
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -179,8 +181,14 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
       std::fprintf(stderr, "nupmpc: the Control stream broke (%s); reconnecting\n", a.cause.ToString().c_str());
     }
     if (a.result.ok()) {
-      std::fprintf(stderr, "nupmpc: reconnected at attempt %d, %.3f s after the break; session re-created\n", a.attempt,
-                   1e-3 * static_cast<double>(a.elapsed.count()));
+      const std::string how = a.path == nupmpc::ReconnectPath::kReattached
+                                  ? "session re-attached by its id"
+                                  : absl::StrCat("session re-created",
+                                                 a.attach_by_id.has_value()
+                                                     ? absl::StrCat(" (attach by id: ", a.attach_by_id->ToString(), ")")
+                                                     : std::string());
+      std::fprintf(stderr, "nupmpc: reconnected at attempt %d, %.3f s after the break; %s\n", a.attempt,
+                   1e-3 * static_cast<double>(a.elapsed.count()), how.c_str());
     } else {
       std::fprintf(stderr, "nupmpc: reconnect attempt %d (after %lld ms back-off, %.3f s after the break): %s%s\n",
                    a.attempt, static_cast<long long>(a.waited.count()), 1e-3 * static_cast<double>(a.elapsed.count()),
@@ -257,6 +265,8 @@ int ClosedLoop(nupmpc::Client& client, const nupmpc::ProblemFile& problem, bool 
   nupmpc::ClosedLoopSummary summary = nupmpc::SummariseClosedLoop(record);
   const nupmpc::ReconnectStats reconnects = (*session)->reconnect_stats();
   summary.reconnects = reconnects.reconnects;
+  summary.reattached = reconnects.reattached;
+  summary.recreated = reconnects.recreated;
   summary.reconnect_attempts = reconnects.attempts;
   summary.reconnect_s = 1e-3 * static_cast<double>(reconnects.total.count());
   summary.longest_without_plan_s = longest_without_plan_s;

@@ -125,7 +125,8 @@ absl::StatusOr<std::unique_ptr<Session>> Client::OpenSession(const v1::ProblemSp
   std::unique_ptr<Session> session(new Session(this, spec, std::move(reconnect), period));
   {
     std::lock_guard<std::mutex> lock(session->mu_);
-    if (absl::Status s = session->ConnectLocked(session->reconnect_.attempt_timeout); !s.ok()) return s;
+    ReconnectAttempt first;  // no id yet: the session is created from the spec
+    if (absl::Status s = session->ConnectLocked(session->reconnect_.attempt_timeout, &first); !s.ok()) return s;
   }
   if (period.period.count() > 0) session->reconnector_ = std::thread([s = session.get()] { s->ReconnectLoop(); });
   return session;

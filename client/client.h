@@ -11,10 +11,11 @@
 // A Session survives a server restart, and the loss of its replica behind a balancer:
 // when its stream breaks (UNAVAILABLE, a cancellation it did not make, or a stream that
 // ended without a status, as a balancer ends those of a dead replica) it reconnects with exponential back-off and
-// jitter within a budget (ReconnectOptions, default 50 ms doubling to 2 s, ±20 %, 30 s), re-creates the session from
+// jitter within a budget (ReconnectOptions, default 50 ms doubling to 2 s, ±20 %, 30 s), attaches to its session by
+// id (a server that kept it, or restored it from a snapshot, hands it back warm), else re-creates the session from
 // the spec it holds (kept current with every answered step by ApplyStepToSpec, client/spec_update.h: state, references,
-// bounds, shifts, GP reference, Δu's u[-1]), and resends the step, so Step() returns that step's result (the warm start
-// is lost, nothing else). Only when the budget is spent does Step() fail, with UNAVAILABLE.
+// bounds, shifts, GP reference, Δu's u[-1]; the warm start is lost, nothing else), and resends the step, so Step()
+// returns that step's result. Only when the budget is spent does Step() fail, with UNAVAILABLE.
 // With a control period (OpenSession's ControlPeriod, client/session.h) a step instead
 // returns by its period, HELD (no plan) when the answer did not come in time, and the
 // session reconnects in the background for as long as the caller keeps stepping.

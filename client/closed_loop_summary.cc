@@ -83,8 +83,10 @@ std::string StoryText(const ClosedLoopSummary& s) {
         absl::StrCat(others, others == 1 ? " answer" : " answers", " carried no plan and the last input was held"));
   }
   if (s.reconnects > 0) {
-    parts.push_back(absl::StrFormat("the stream broke and the session was re-created %d time%s (%d attempts)",
-                                    s.reconnects, s.reconnects == 1 ? "" : "s", s.reconnect_attempts));
+    const auto times = [](int n) { return absl::StrCat(n, n == 1 ? " time" : " times"); };
+    parts.push_back(
+        absl::StrFormat("the stream broke and the session was re-attached %s and re-created %s (%d attempts)",
+                        times(s.reattached), times(s.recreated), s.reconnect_attempts));
   }
   if (s.late_answers > 0) {
     parts.push_back(
@@ -106,25 +108,27 @@ std::string SummaryText(const ClosedLoopSummary& s) {
       "summary: %d steps, %s\n"
       "  what happened        %s\n"
       "  without a plan       %s\n"
-      "  reconnects           %d (%d attempts, %.3f s), longest without a fresh plan %.3f s\n"
+      "  reconnects           %d (%d attempts, %.3f s; %d re-attached, %d re-created), longest without a fresh "
+      "plan %.3f s\n"
       "  solve time (server)  median %.4f ms, max %.4f ms\n"
       "  round trip           median %.4f ms, p90 %.4f ms\n"
       "  max violation        %.3g\n",
-      s.steps, convergence, StoryText(s), held, s.reconnects, s.reconnect_attempts, s.reconnect_s,
-      s.longest_without_plan_s, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms,
-      s.max_violation);
+      s.steps, convergence, StoryText(s), held, s.reconnects, s.reconnect_attempts, s.reconnect_s, s.reattached,
+      s.recreated, s.longest_without_plan_s, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms,
+      s.p90_round_trip_ms, s.max_violation);
 }
 
 std::string SummaryJson(const ClosedLoopSummary& s) {
   return absl::StrFormat(
       "{\"summary\":true,\"steps\":%d,\"all_converged\":%s,\"not_converged\":{%s},\"held_steps\":%d,"
-      "\"held\":{%s},\"reconnects\":%d,\"reconnect_attempts\":%d,\"reconnect_s\":%.6f,"
+      "\"held\":{%s},\"reconnects\":%d,\"reattached\":%d,\"recreated\":%d,\"reconnect_attempts\":%d,"
+      "\"reconnect_s\":%.6f,"
       "\"longest_without_plan_s\":%.6f,\"period_ms\":%.6g,\"late_answers\":%d,\"median_solve_ms\":%.6f,"
       "\"max_solve_ms\":%.6f,\"median_round_trip_ms\":%.6f,\"p90_round_trip_ms\":%.6f,\"max_violation\":%.6g}\n",
       s.steps, s.not_converged == 0 ? "true" : "false", ByStatusJson(s.not_converged_by_status), s.held,
-      ByStatusJson(s.held_by_status), s.reconnects, s.reconnect_attempts, s.reconnect_s, s.longest_without_plan_s,
-      s.period_ms, s.late_answers, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms, s.p90_round_trip_ms,
-      s.max_violation);
+      ByStatusJson(s.held_by_status), s.reconnects, s.reattached, s.recreated, s.reconnect_attempts, s.reconnect_s,
+      s.longest_without_plan_s, s.period_ms, s.late_answers, s.median_solve_ms, s.max_solve_ms, s.median_round_trip_ms,
+      s.p90_round_trip_ms, s.max_violation);
 }
 
 }  // namespace nupmpc

@@ -36,6 +36,9 @@ struct ClosedLoopSummary {
   // attempts and time, and the longest wall-clock time between two fresh plans (or from
   // the start to the first, or from the last to the end).
   int reconnects = 0, reconnect_attempts = 0;
+  // Of the reconnects: sessions attached again by their id (warm start kept) and sessions
+  // re-created from the spec (cold).
+  int reattached = 0, recreated = 0;
   double reconnect_s = 0.0, longest_without_plan_s = 0.0;
   // With a control period (0: none): answers that came after their period had ended
   // (discarded; their steps count among the held ones, status "held").

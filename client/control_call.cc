@@ -3,6 +3,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "client/session_routing.h"
 #include "nupmpc/grpc_handover.h"
 
 namespace nupmpc {
@@ -28,6 +29,9 @@ absl::Status BrokenControlStreamStatus(const grpc::Status& s) {
 
 ControlCall::ControlCall(std::shared_ptr<grpc::Channel> channel, const v1::ControlRequest& first)
     : channel_(std::move(channel)), stub_(v1::MpcService::NewStub(channel_)) {
+  // A stream attaching by id goes where the id's other calls go: a balancer that routes by
+  // the header sends it to the replica holding (or restoring) the session.
+  if (first.attach_case() == v1::ControlRequest::kSessionId) RouteToSession(&context_, first.session_id());
   stub_->async()->Control(&context_, this);
   // Writes start on the session's threads, outside gRPC's reactions: gRPC's contract for
   // that is a hold, without which the call may complete (and its stream object be freed)

@@ -29,7 +29,8 @@ std::chrono::milliseconds Backoff::Next() {
 }
 
 absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Status& first_cause,
-                              const std::function<absl::Status(std::chrono::milliseconds)>& attempt, int* attempts) {
+                              const std::function<absl::Status(std::chrono::milliseconds, ReconnectAttempt*)>& attempt,
+                              int* attempts) {
   using std::chrono::milliseconds;
   const auto now = [&] { return options.now ? options.now() : std::chrono::steady_clock::now(); };
   const auto sleep = [&](milliseconds d) {
@@ -53,7 +54,7 @@ absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Statu
     report.attempt = ++made;
     report.waited = wait;
     report.cause = last;
-    report.result = attempt(options.attempt_timeout);
+    report.result = attempt(options.attempt_timeout, &report);
     report.elapsed = elapsed();
     if (attempts != nullptr) *attempts = made;
     const bool retryable = IsRetryable(report.result);
@@ -74,23 +75,58 @@ absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Statu
                                              " ms); last error: ", last.ToString()));
 }
 
-absl::Status RideOutOutage(
-    const ReconnectOptions& options, const absl::Status& cause,
-    const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
-    ReconnectStats* stats) {
+bool AttachByIdMissed(const absl::Status& status) {
+  return absl::IsNotFound(status) || absl::IsFailedPrecondition(status);
+}
+
+absl::Status ReattachOrRecreate(const std::string& id, const std::function<absl::Status()>& attach_by_id,
+                                const std::function<absl::Status()>& recreate, ReconnectAttempt* report) {
+  report->path = ReconnectPath::kNone;
+  report->attach_by_id.reset();
+  if (!id.empty()) {
+    absl::Status attached = attach_by_id();
+    report->attach_by_id = attached;
+    if (attached.ok()) {
+      report->path = ReconnectPath::kReattached;
+      return attached;
+    }
+    if (!AttachByIdMissed(attached)) return attached;
+  }
+  absl::Status created = recreate();
+  if (created.ok()) report->path = ReconnectPath::kRecreated;
+  return created;
+}
+
+void CountReconnect(ReconnectPath path, ReconnectStats* stats) {
+  ++stats->reconnects;
+  if (path == ReconnectPath::kReattached) ++stats->reattached;
+  if (path == ReconnectPath::kRecreated) ++stats->recreated;
+}
+
+absl::Status RideOutOutage(const ReconnectOptions& options, const absl::Status& cause,
+                           const std::function<absl::Status(std::chrono::milliseconds, ReconnectAttempt*,
+                                                            bool* answered)>& reconnect_and_resend,
+                           ReconnectStats* stats) {
   const auto now = [&] { return options.now ? options.now() : std::chrono::steady_clock::now(); };
   const auto start = now();
   int attempts = 0;
   bool answered = false;
+  ReconnectPath path = ReconnectPath::kNone;
   absl::Status outage = RetryWithBackoff(
-      options, cause, [&](std::chrono::milliseconds timeout) { return recreate_and_resend(timeout, &answered); },
+      options, cause,
+      [&](std::chrono::milliseconds timeout, ReconnectAttempt* report) {
+        absl::Status s = reconnect_and_resend(timeout, report, &answered);
+        path = report->path;
+        return s;
+      },
       &attempts);
   const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(now() - start);
   stats->attempts += attempts;
   stats->total += took;
   stats->longest = std::max(stats->longest, took);
   if (answered) {
-    ++stats->reconnects;
+    // The attempt that got the answer is the last one made: its path is the outage's.
+    CountReconnect(path, stats);
     return absl::OkStatus();
   }
   if (IsRetryable(outage)) ++stats->failed_outages;

@@ -5,8 +5,8 @@
 // dropped connection): bounded retries with exponential back-off and jitter.
 //
 // When a step fails with a retryable code (IsRetryable: UNAVAILABLE, the code of a refused
-// or dropped connection and of a draining server), the session waits d_k and tries to
-// re-create its session, k = 0, 1, ..., where
+// or dropped connection and of a draining server), the session waits d_k and tries to get
+// its session back (ReattachOrRecreate below), k = 0, 1, ..., where
 //
 //   d_k = min(initial_backoff · multiplier^k, max_backoff) · U(1 − jitter, 1 + jitter),
 //
@@ -20,12 +20,20 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <random>
 #include <string>
 
 #include "absl/status/status.h"
 
 namespace nupmpc {
+
+// How an attempt got its session back.
+enum class ReconnectPath {
+  kNone,        // it did not (the attempt failed)
+  kReattached,  // attached by its id: the server kept it (or restored it): the warm start survives
+  kRecreated,   // created anew from the spec the client holds, under a new id: it starts cold
+};
 
 // One reconnect attempt, as reported to ReconnectOptions::on_attempt.
 struct ReconnectAttempt {
@@ -35,6 +43,10 @@ struct ReconnectAttempt {
   absl::Status cause;                    // what broke the stream (attempt 1) or the previous attempt
   absl::Status result;                   // this attempt: OK = reconnected
   bool gave_up = false;                  // the budget is spent (or the error is not retryable)
+  ReconnectPath path = ReconnectPath::kNone;
+  // The attach by the old id this attempt made first (OK: re-attached); nullopt: none was
+  // made (no id to attach to, or a client that only re-creates).
+  std::optional<absl::Status> attach_by_id;
 };
 
 struct ReconnectOptions {
@@ -76,32 +88,57 @@ class Backoff {
 
 // Runs `attempt` until it succeeds, fails with a non-retryable error, or the budget
 // (from now) is spent, sleeping the back-off between attempts; `first_cause` is the error
-// that started the outage. `attempt` gets options.attempt_timeout (to bound itself).
+// that started the outage. `attempt` gets options.attempt_timeout (to bound itself) and
+// the attempt's report, in which it may say how it went (path, attach_by_id) before the
+// report goes to options.on_attempt.
 // Returns OK, the non-retryable error, or UNAVAILABLE naming the attempts, the time spent
 // and the last error. `attempts` (optional) gets the number of attempts made.
 absl::Status RetryWithBackoff(const ReconnectOptions& options, const absl::Status& first_cause,
-                              const std::function<absl::Status(std::chrono::milliseconds)>& attempt,
+                              const std::function<absl::Status(std::chrono::milliseconds, ReconnectAttempt*)>& attempt,
                               int* attempts = nullptr);
+
+// Whether a failed attach by id says the session is not to be had by its id: NOT_FOUND (the
+// server neither holds it nor could restore it from a snapshot: it restarted without one,
+// the window passed, or another replica answered) or FAILED_PRECONDITION (another stream
+// holds it, e.g. the old one, which the server has not yet seen broken, or a server that
+// closes a stream's own session with its stream). Then waiting cannot help: re-create.
+bool AttachByIdMissed(const absl::Status& status);
+
+// One attempt to get a broken stream's session back. First `attach_by_id` (when `id` is not
+// empty): a server that kept the session, or restores it from the snapshot it wrote when
+// it drained, hands it back with its warm start (iterates, policy, u[-1]), so the next plan
+// continues the old one instead of starting cold, which for a non-convex prior may land in
+// another local optimum. Only when that attach missed (AttachByIdMissed) is the session
+// re-created by `recreate` from the spec the client holds. Any other error of the attach is
+// the attempt's (UNAVAILABLE: the back-off tries again, by id first again). Sets
+// report->path and report->attach_by_id.
+absl::Status ReattachOrRecreate(const std::string& id, const std::function<absl::Status()>& attach_by_id,
+                                const std::function<absl::Status()>& recreate, ReconnectAttempt* report);
 
 // What a session's reconnects cost so far (nupmpc::Session, AddressedSession).
 struct ReconnectStats {
-  int reconnects = 0;                    // outages ridden through (session re-created, step answered)
+  int reconnects = 0;                    // outages ridden through (session back, step answered)
+  int reattached = 0;                    // of them, sessions attached again by their id (warm)
+  int recreated = 0;                     // of them, sessions re-created from the spec (cold)
   int attempts = 0;                      // attempts made, successful or not
   int failed_outages = 0;                // outages that spent the budget (the step returned UNAVAILABLE)
   std::chrono::milliseconds total{0};    // from each break to its step's answer (or giving up)
   std::chrono::milliseconds longest{0};  // the longest such outage
 };
 
+// Books one reconnect that got its session back by `path` (and answered its step).
+void CountReconnect(ReconnectPath path, ReconnectStats* stats);
+
 // One outage of a session, from the error that broke a step (`cause`) to that step's
-// answer: RetryWithBackoff over `recreate_and_resend`, which re-creates the session and
-// resends the step, sets *answered once the server answered the resent step (with a
-// result or with an error of the step's own), and returns that call's status. Books the
-// outage into `stats`. Returns OK when the step was answered (the caller holds the
-// answer), else the error that ended the outage.
-absl::Status RideOutOutage(
-    const ReconnectOptions& options, const absl::Status& cause,
-    const std::function<absl::Status(std::chrono::milliseconds, bool* answered)>& recreate_and_resend,
-    ReconnectStats* stats);
+// answer: RetryWithBackoff over `reconnect_and_resend`, which gets the session back (and
+// says how in the report's path), resends the step, sets *answered once the server
+// answered the resent step (with a result or with an error of the step's own), and returns
+// that call's status. Books the outage into `stats`. Returns OK when the step was answered
+// (the caller holds the answer), else the error that ended the outage.
+absl::Status RideOutOutage(const ReconnectOptions& options, const absl::Status& cause,
+                           const std::function<absl::Status(std::chrono::milliseconds, ReconnectAttempt*,
+                                                            bool* answered)>& reconnect_and_resend,
+                           ReconnectStats* stats);
 
 }  // namespace nupmpc
 

@@ -82,30 +82,65 @@ int Session::late_answers() const {
   return late_answers_;
 }
 
-absl::StatusOr<std::shared_ptr<ControlCall>> Session::Attach(std::shared_ptr<grpc::Channel> channel,
-                                                             const v1::ProblemSpec& spec, std::uint64_t sequence,
-                                                             std::chrono::milliseconds timeout, std::string* id) {
-  v1::ControlRequest hello;
-  *hello.mutable_spec() = spec;
-  hello.set_sequence(sequence);
+namespace {
+
+// Opens a Control call whose first message is `hello` and waits until `deadline` for the
+// server's answer to it; sets *id.
+absl::StatusOr<std::shared_ptr<ControlCall>> OpenCall(std::shared_ptr<grpc::Channel> channel,
+                                                      const v1::ControlRequest& hello, Clock::time_point deadline,
+                                                      std::string* id) {
   auto call = std::make_shared<ControlCall>(std::move(channel), hello);
-  absl::StatusOr<std::optional<v1::ControlResponse>> response = call->WaitFor(sequence, Clock::now() + timeout, {});
+  absl::StatusOr<std::optional<v1::ControlResponse>> response = call->WaitFor(hello.sequence(), deadline, {});
   if (!response.ok()) return response.status();
-  if (!response->has_value()) {
-    return absl::UnavailableError(absl::StrCat("no session within the attempt timeout of ", timeout.count(), " ms"));
-  }
+  if (!response->has_value()) return absl::UnavailableError("no session within the attempt timeout");
   const v1::ControlResponse& answer = **response;
   if (answer.error_code() != 0) {
     return absl::Status(static_cast<absl::StatusCode>(answer.error_code()), answer.error_message());
   }
-  *id = answer.session_id();
+  // The server names the session in its answer; an attach by id names the one it asked for.
+  *id = answer.session_id().empty() ? hello.session_id() : answer.session_id();
   return call;
 }
 
-absl::Status Session::ConnectLocked(std::chrono::milliseconds timeout) {
-  absl::StatusOr<std::shared_ptr<ControlCall>> call = Attach(channel_, spec_, next_sequence_++, timeout, &id_);
+}  // namespace
+
+absl::StatusOr<std::shared_ptr<ControlCall>> Session::Attach(const std::shared_ptr<grpc::Channel>& channel,
+                                                             const std::string& old_id, const v1::ProblemSpec& spec,
+                                                             std::uint64_t sequence, Clock::time_point deadline,
+                                                             std::string* id, ReconnectAttempt* report) {
+  std::shared_ptr<ControlCall> call;
+  const auto open = [&](const v1::ControlRequest& hello) -> absl::Status {
+    absl::StatusOr<std::shared_ptr<ControlCall>> opened = OpenCall(channel, hello, deadline, id);
+    if (!opened.ok()) return opened.status();
+    call = *std::move(opened);
+    return absl::OkStatus();
+  };
+  const absl::Status s = ReattachOrRecreate(
+      old_id,
+      [&] {
+        v1::ControlRequest hello;  // attach-only: the unanswered step is resent on the call after this
+        hello.set_session_id(old_id);
+        hello.set_sequence(sequence);
+        return open(hello);
+      },
+      [&] {
+        v1::ControlRequest hello;
+        *hello.mutable_spec() = spec;
+        hello.set_sequence(sequence);
+        return open(hello);
+      },
+      report);
+  if (!s.ok()) return s;
+  return call;
+}
+
+absl::Status Session::ConnectLocked(std::chrono::milliseconds timeout, ReconnectAttempt* report) {
+  std::string id;
+  absl::StatusOr<std::shared_ptr<ControlCall>> call =
+      Attach(channel_, id_, spec_, next_sequence_++, Clock::now() + timeout, &id, report);
   if (!call.ok()) return call.status();
   call_ = *std::move(call);
+  id_ = std::move(id);
   return absl::OkStatus();
 }
 
@@ -191,15 +226,18 @@ absl::StatusOr<v1::SolveResult> Session::StepWaiting(const v1::Step& step) {
   const auto no_deadline = Clock::time_point::max();
   absl::StatusOr<std::optional<v1::SolveResult>> result = Exchange(step, no_deadline);
   if (!result.ok() && IsRetryable(result.status())) {
-    // The stream (or the server) went away: re-create the session from the spec and
-    // resend the step, with back-off, until the budget is spent.
+    // The stream (or the server) went away: get the session back (by its id, else
+    // re-created from the spec) and resend the step, with back-off, until the budget is
+    // spent. The step is resent once per attempt that got a session, on that session's
+    // new stream only, and its answer is matched by its new sequence number: the result
+    // returned is this step's.
     std::unique_lock<std::mutex> lock(mu_);
     call_.reset();
     const absl::Status outage = RideOutOutage(
         reconnect_, result.status(),
-        [&](std::chrono::milliseconds timeout, bool* answered) -> absl::Status {
+        [&](std::chrono::milliseconds timeout, ReconnectAttempt* report, bool* answered) -> absl::Status {
           RenewChannelLocked();
-          if (absl::Status s = ConnectLocked(timeout); !s.ok()) return s;
+          if (absl::Status s = ConnectLocked(timeout, report); !s.ok()) return s;
           lock.unlock();
           result = Exchange(step, no_deadline);
           lock.lock();
@@ -282,14 +320,15 @@ void Session::ReconnectLoop() {
     if (changed_.wait_for(lock, wait, [this] { return closing_; })) return;
     RenewChannelLocked();
     std::shared_ptr<grpc::Channel> channel = channel_;
+    const std::string old_id = id_;
     const v1::ProblemSpec spec = spec_;
     const std::uint64_t sequence = next_sequence_++;
     std::string id;
+    ReconnectAttempt report;
     lock.unlock();
     absl::StatusOr<std::shared_ptr<ControlCall>> call =
-        Attach(std::move(channel), spec, sequence, options.attempt_timeout, &id);
+        Attach(channel, old_id, spec, sequence, Clock::now() + options.attempt_timeout, &id, &report);
     lock.lock();
-    ReconnectAttempt report;
     report.attempt = ++attempt;
     report.waited = wait;
     report.cause = break_cause_;
@@ -300,7 +339,7 @@ void Session::ReconnectLoop() {
       call_ = *std::move(call);
       id_ = std::move(id);
       silent_periods_ = 0;
-      ++stats_.reconnects;
+      CountReconnect(report.path, &stats_);
       stats_.total += report.elapsed;
       stats_.longest = std::max(stats_.longest, report.elapsed);
       attempt = 0;

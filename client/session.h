@@ -18,9 +18,10 @@
 //
 //   K = held_periods_to_reconnect, default max(3, ceil(1 s / P)),
 //
-// and then a background thread re-creates the session from its spec, for as long as the
-// caller keeps stepping: no overall budget, back-off as in ReconnectOptions but at most
-// 500 ms, each attempt cancelled after at most 1 s. Steps meanwhile return HELD at their
+// and then a background thread gets the session back (by its id, else re-created from its
+// spec: ReattachOrRecreate, client/reconnect.h), for as long as the caller keeps stepping:
+// no overall budget, back-off as in ReconnectOptions but at most 500 ms, each attempt
+// cancelled after at most 1 s. Steps meanwhile return HELD at their
 // period. The slack: a step returns within P plus the time to wake its thread and copy the
 // result (well under a millisecond on an idle machine; tests allow 100 ms and more).
 //
@@ -62,6 +63,8 @@ struct ControlPeriod {
 
 class Session {
  public:
+  using Clock = ControlCall::Clock;
+
   ~Session();
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
@@ -76,6 +79,8 @@ class Session {
   absl::Status Close();
   std::string id() const;
   int reconnects() const;
+  // Reconnects, attempts, and how the session came back: re-attached (by its id, warm) or
+  // re-created (from the spec, cold).
   ReconnectStats reconnect_stats() const;
   // Steps returned HELD, in all and in a row now.
   int held_steps() const;
@@ -87,13 +92,16 @@ class Session {
   friend class Client;
   Session(Client* client, v1::ProblemSpec spec, ReconnectOptions reconnect, ControlPeriod period);
 
-  // Opens a Control call on `channel` that creates the session from `spec`, waiting at
-  // most `timeout` for the server's answer; sets *id.
-  static absl::StatusOr<std::shared_ptr<ControlCall>> Attach(std::shared_ptr<grpc::Channel> channel,
-                                                             const v1::ProblemSpec& spec, std::uint64_t sequence,
-                                                             std::chrono::milliseconds timeout, std::string* id);
-  // Attach on the current channel and make it the session's call.
-  absl::Status ConnectLocked(std::chrono::milliseconds timeout);
+  // A Control call on `channel` attached to a session: to `old_id` if not empty (the
+  // session kept its warm start), else, or when the server no longer has it, to one
+  // created from `spec` (ReattachOrRecreate, client/reconnect.h). Waits until `deadline`
+  // at most; sets *id and `report`'s path. Not under mu_ (no member is used).
+  static absl::StatusOr<std::shared_ptr<ControlCall>> Attach(const std::shared_ptr<grpc::Channel>& channel,
+                                                             const std::string& old_id, const v1::ProblemSpec& spec,
+                                                             std::uint64_t sequence, Clock::time_point deadline,
+                                                             std::string* id, ReconnectAttempt* report);
+  // Attach on the current channel (to id_, if any) and make it the session's call.
+  absl::Status ConnectLocked(std::chrono::milliseconds timeout, ReconnectAttempt* report);
   // A channel of its own for the next attempt (see Step in session.cc). Under mu_.
   void RenewChannelLocked();
   // Sends `step` on the current call and waits for its answer until `deadline`: the

@@ -101,7 +101,8 @@ StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& 
       ++out.no_plan;
       continue;
     }
-    // The step resent after a re-creation is the one the rule is about: always checked.
+    // The step resent after a reconnect (re-attached or re-created) is the one the rule is
+    // about: always checked.
     const int reconnects = (*session)->reconnect_stats().reconnects;
     const bool resent = reconnects != reconnects_seen;
     reconnects_seen = reconnects;
@@ -146,6 +147,8 @@ absl::StatusOr<StreamsProbeReport> RunStreamsProbe(const ProbeWorkload& work, co
     report.no_plan += o.no_plan;
     for (const auto& [code, n] : o.errors) report.errors[code] += n;
     report.reconnects += o.reconnect.reconnects;
+    report.reattached += o.reconnect.reattached;
+    report.recreated += o.reconnect.recreated;
     report.longest_outage_s = std::max(report.longest_outage_s, o.reconnect.longest.count() / 1000.0);
     if (o.reconnect.reconnects > 0 || o.reconnect.attempts > 0 || o.failed > 0) {
       ++report.affected_streams;
@@ -191,7 +194,8 @@ absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work
     }
   }
   for (const std::unique_ptr<AddressedSession>& s : opened) {
-    report.recreated += s->reconnect_stats().reconnects;
+    report.reattached += s->reconnect_stats().reattached;
+    report.recreated += s->reconnect_stats().recreated;
     absl::StatusOr<v1::SessionInfo> info = client.GetSession(s->id());
     if (!info.ok() || info->solves() != static_cast<std::uint64_t>(solves_each)) ++report.miscounted;
   }
@@ -208,6 +212,8 @@ std::string ToJson(const StreamsProbeReport& r) {
                       {"affected_streams", r.affected_streams},
                       {"max_failed_per_affected_stream", r.max_failed_per_affected},
                       {"reconnects", r.reconnects},
+                      {"reattached", r.reattached},
+                      {"recreated", r.recreated},
                       {"longest_outage_s", r.longest_outage_s},
                       {"verified", r.verified},
                       {"mismatched", r.mismatched},
@@ -219,9 +225,9 @@ std::string ToJson(const StreamsProbeReport& r) {
 }
 
 std::string ToJson(const AddressedProbeReport& r) {
-  nlohmann::json j = {{"probe", "addressed"},      {"sessions", r.sessions}, {"solves", r.solves},
-                      {"failed", r.failed},        {"errors", r.errors},     {"recreated", r.recreated},
-                      {"miscounted", r.miscounted}};
+  nlohmann::json j = {{"probe", "addressed"},     {"sessions", r.sessions},    {"solves", r.solves},
+                      {"failed", r.failed},       {"errors", r.errors},        {"reattached", r.reattached},
+                      {"recreated", r.recreated}, {"miscounted", r.miscounted}};
   return j.dump();
 }
 

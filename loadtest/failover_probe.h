@@ -42,7 +42,9 @@ struct StreamsProbeReport {
   std::map<std::string, std::uint64_t> errors;  ///< by code name
   int affected_streams = 0;                     ///< streams that re-created their session or had a failed step
   std::uint64_t max_failed_per_affected = 0;
-  int reconnects = 0;  ///< sessions re-created, over all streams
+  int reconnects = 0;  ///< sessions got back after a broken stream, over all streams
+  int reattached = 0;  ///< of them, attached again by their id (warm start kept)
+  int recreated = 0;   ///< of them, re-created from the spec (cold)
   double longest_outage_s = 0.0;
   std::uint64_t verified = 0;    ///< plans compared with the core
   std::uint64_t mismatched = 0;  ///< of those, differing by more than 1e-9 (relative)
@@ -58,6 +60,7 @@ struct AddressedProbeReport {
   std::uint64_t solves = 0;  ///< answered
   std::uint64_t failed = 0;  ///< returned as errors
   std::map<std::string, std::uint64_t> errors;
+  int reattached = 0;  ///< sessions a failed call got back by their id (warm)
   int recreated = 0;   ///< sessions re-created (a call missed its session)
   int miscounted = 0;  ///< sessions whose server-side solve count is not R
 };

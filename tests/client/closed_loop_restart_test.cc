@@ -1,9 +1,11 @@
 // `nupmpc closed-loop` rides through a server restart: the real CLI binary drives a
 // simulated masses_N30 plant through the real nupmpc-server binary, which is killed with
-// SIGKILL mid-run and started again on the same port 1 s (and 5 s) later. The run must
+// SIGKILL mid-run and started again on the same port 1 s (and 5 s) later (and once with
+// SIGTERM and a state directory, which hands the session over warm). The run must
 // finish every step with exit 0 and its summary must report the reconnect and how long
-// the plant went without a fresh plan. And a step whose result carries no plan
-// (SolveResult.has_plan false) is never applied: the CLI holds the last input.
+// the plant went without a fresh plan, and that the session, asked for by its id first,
+// was re-created (after SIGKILL the restarted server does not have it). And a step whose result carries
+// no plan (SolveResult.has_plan false) is never applied: the CLI holds the last input.
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -31,11 +33,20 @@ namespace {
 
 std::string Target(int port) { return "127.0.0.1:" + std::to_string(port); }
 
-// nupmpc-server with one worker on 127.0.0.1:port; killed (SIGKILL) when destroyed.
-std::unique_ptr<ServerProcess> StartServer(int port) {
-  return std::make_unique<ServerProcess>(NUPMPC_SERVER_BINARY, port,
-                                         std::vector<std::string>{"--log_level=warn", "--threads=1"});
+// nupmpc-server with one worker on 127.0.0.1:port and `extra` flags; killed (SIGKILL)
+// when destroyed.
+std::unique_ptr<ServerProcess> StartServer(int port, const std::vector<std::string>& extra = {}) {
+  std::vector<std::string> flags = {"--log_level=warn", "--threads=1"};
+  flags.insert(flags.end(), extra.begin(), extra.end());
+  return std::make_unique<ServerProcess>(NUPMPC_SERVER_BINARY, port, flags);
 }
+
+// How the server goes away mid-run: SIGKILL (a crash), or SIGTERM (a drain, which with a
+// --state_dir among `flags` writes the sessions' snapshots); `flags` go to both processes.
+struct Restart {
+  int signal = SIGKILL;
+  std::vector<std::string> flags;
+};
 
 // masses_N30 as a ProblemSpec file: no recorded states, so the CLI simulates the plant
 // with the inputs it applies. `initial_state` replaces x[0] when given.
@@ -126,18 +137,22 @@ CliRun RunCli(int port, const std::string& spec, std::vector<std::string> flags,
 // again on the same port, and lets the run finish. On a thread of its own, so that this
 // reader keeps draining the pipe meanwhile: a CLI blocked writing to a full pipe would see
 // the break only after the restart, and reconnect at its first attempt.
-CliRun RunThroughRestart(std::chrono::milliseconds down_for, int steps, int kill_at) {
+CliRun RunThroughRestart(std::chrono::milliseconds down_for, int steps, int kill_at, const Restart& how = {}) {
   const int port = FreeLoopbackPort();
-  auto server = StartServer(port);
+  auto server = StartServer(port, how.flags);
   EXPECT_TRUE(WaitUntilServing(Target(port)));
   const std::string spec = WriteSpec("masses_N30_spec.json");
   std::thread restarter;
   CliRun run = RunCli(port, spec, {"--steps=" + std::to_string(steps), "--reconnect_budget_s=25"}, [&](int step) {
     if (restarter.joinable() || step < kill_at) return;
     restarter = std::thread([&] {
-      server->Kill();
+      if (how.signal == SIGKILL) {
+        server->Kill();
+      } else {
+        EXPECT_EQ(server->StopWith(how.signal), 0) << "the server did not drain and exit cleanly";
+      }
       std::this_thread::sleep_for(down_for);
-      server = StartServer(port);
+      server = StartServer(port, how.flags);
     });
   });
   EXPECT_TRUE(restarter.joinable()) << "the run ended before step " << kill_at;
@@ -165,6 +180,11 @@ void ExpectRodeThrough(const CliRun& run, int steps, double down_s) {
   EXPECT_NE(run.stderr_text.find("the Control stream broke"), std::string::npos) << run.stderr_text;
   EXPECT_NE(run.stderr_text.find("reconnect attempt 1 "), std::string::npos) << run.stderr_text;
   EXPECT_NE(run.stderr_text.find("reconnected at attempt"), std::string::npos) << run.stderr_text;
+  // The session was asked for by its id first; a server restarted without a state
+  // directory does not have it (NOT_FOUND), so it was re-created from the spec: cold.
+  EXPECT_EQ(run.summary["reattached"], 0) << run.summary.dump();
+  EXPECT_EQ(run.summary["recreated"], 1) << run.summary.dump();
+  EXPECT_NE(run.stderr_text.find("session re-created (attach by id: NOT_FOUND"), std::string::npos) << run.stderr_text;
 }
 
 TEST(ClosedLoopRestart, ServerKilledAndBackAfter1s) {
@@ -177,6 +197,26 @@ TEST(ClosedLoopRestart, ServerKilledAndBackAfter5s) {
   const CliRun run = RunThroughRestart(std::chrono::milliseconds(5000), /*steps=*/400, /*kill_at=*/100);
   ExpectRodeThrough(run, 400, 5.0);
   std::printf("5 s outage: %s (%.2f s in all)\n", run.summary.dump().c_str(), run.took.count());
+}
+
+// SIGTERM with a state directory (bumpless hand-over): the draining server writes the
+// session's snapshot and the restarted one restores it when the CLI's reconnect attaches by
+// its id, so the session comes back re-attached (warm), not re-created, and every step is
+// done.
+TEST(ClosedLoopRestart, SigtermWithAStateDirectoryReattachesTheSession) {
+  const std::filesystem::path state_dir = ScratchPath("state_dir");
+  std::filesystem::remove_all(state_dir);
+  const CliRun run =
+      RunThroughRestart(std::chrono::milliseconds(500), /*steps=*/400, /*kill_at=*/100,
+                        Restart{SIGTERM, {absl::StrCat("--state_dir=", state_dir.string()), "--grace_period_s=2"}});
+  std::filesystem::remove_all(state_dir);
+  EXPECT_EQ(run.exit_code, 0) << run.stderr_text;
+  ASSERT_EQ(static_cast<int>(run.steps.size()), 400) << run.stderr_text;
+  EXPECT_EQ(run.summary["reconnects"], 1) << run.summary.dump();
+  EXPECT_EQ(run.summary["reattached"], 1) << run.summary.dump() << "\n" << run.stderr_text;
+  EXPECT_EQ(run.summary["recreated"], 0) << run.summary.dump();
+  EXPECT_EQ(run.summary["held_steps"], 0) << run.summary.dump();
+  EXPECT_NE(run.stderr_text.find("session re-attached by its id"), std::string::npos) << run.stderr_text;
 }
 
 // The budget bounds the wait: with the server gone for good, the CLI gives up after about

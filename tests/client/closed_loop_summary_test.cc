@@ -49,13 +49,15 @@ TEST(ClosedLoopSummary, CountsStepsThatDidNotConvergeByStatus) {
             "summary: 4 steps, 3 not converged (iteration_limit 2, time_limit 1)\n"
             "  what happened        every step got its plan\n"
             "  without a plan       0 steps\n"
-            "  reconnects           0 (0 attempts, 0.000 s), longest without a fresh plan 0.000 s\n"
+            "  reconnects           0 (0 attempts, 0.000 s; 0 re-attached, 0 re-created), longest without a fresh "
+            "plan 0.000 s\n"
             "  solve time (server)  median 4.5000 ms, max 9.0000 ms\n"
             "  round trip           median 5.5000 ms, p90 10.0000 ms\n"
             "  max violation        0.5\n");
   EXPECT_EQ(SummaryJson(s),
             "{\"summary\":true,\"steps\":4,\"all_converged\":false,\"not_converged\":{\"iteration_limit\":2,"
-            "\"time_limit\":1},\"held_steps\":0,\"held\":{},\"reconnects\":0,\"reconnect_attempts\":0,"
+            "\"time_limit\":1},\"held_steps\":0,\"held\":{},\"reconnects\":0,\"reattached\":0,\"recreated\":0,"
+            "\"reconnect_attempts\":0,"
             "\"reconnect_s\":0.000000,\"longest_without_plan_s\":0.000000,\"period_ms\":0,\"late_answers\":0,"
             "\"median_solve_ms\":4.500000,\"max_solve_ms\":9.000000,\"median_round_trip_ms\":5.500000,"
             "\"p90_round_trip_ms\":10.000000,\"max_violation\":0.5}\n");
@@ -73,17 +75,21 @@ TEST(ClosedLoopSummary, StepsWithoutAPlanAreHeldAndCountedByStatus) {
   EXPECT_EQ(s.not_converged, 3);
   EXPECT_THAT(s.not_converged_by_status, ElementsAre(Pair("numerical_error", 2), Pair("time_limit", 1)));
   EXPECT_DOUBLE_EQ(s.max_violation, 0.25);  // only plans that were applied
-  s.reconnects = 1;
+  s.reconnects = 3;
+  s.reattached = 2;
+  s.recreated = 1;
   s.reconnect_attempts = 6;
   s.reconnect_s = 1.5;
   s.longest_without_plan_s = 1.75;
-  EXPECT_THAT(
-      SummaryText(s),
-      ::testing::HasSubstr("  without a plan       2 steps (numerical_error 2), last input held\n"
-                           "  reconnects           1 (6 attempts, 1.500 s), longest without a fresh plan 1.750 s\n"));
-  EXPECT_THAT(SummaryJson(s), ::testing::HasSubstr("\"held_steps\":2,\"held\":{\"numerical_error\":2},\"reconnects\":1,"
-                                                   "\"reconnect_attempts\":6,\"reconnect_s\":1.500000,"
-                                                   "\"longest_without_plan_s\":1.750000"));
+  EXPECT_THAT(SummaryText(s),
+              ::testing::HasSubstr(
+                  "  without a plan       2 steps (numerical_error 2), last input held\n"
+                  "  reconnects           3 (6 attempts, 1.500 s; 2 re-attached, 1 re-created), longest without "
+                  "a fresh plan 1.750 s\n"));
+  EXPECT_THAT(SummaryJson(s),
+              ::testing::HasSubstr("\"held_steps\":2,\"held\":{\"numerical_error\":2},\"reconnects\":3,"
+                                   "\"reattached\":2,\"recreated\":1,\"reconnect_attempts\":6,\"reconnect_s\":1.500000,"
+                                   "\"longest_without_plan_s\":1.750000"));
 }
 
 TEST(ClosedLoopSummary, PeriodsWithoutAnAnswerAreHeldAndToldInWords) {
@@ -100,13 +106,15 @@ TEST(ClosedLoopSummary, PeriodsWithoutAnAnswerAreHeldAndToldInWords) {
   EXPECT_THAT(s.held_by_status, ElementsAre(Pair("held", 3), Pair("superseded", 1)));
   s.period_ms = 50;
   s.reconnects = 1;
+  s.recreated = 1;
   s.reconnect_attempts = 2;
   s.late_answers = 1;
   s.longest_without_plan_s = 0.2;
   EXPECT_THAT(SummaryText(s),
               ::testing::HasSubstr("  what happened        3 periods of 50 ms passed without an answer and the last "
                                    "input was held; 1 answer carried no plan and the last input was held; the "
-                                   "stream broke and the session was re-created 1 time (2 attempts); 1 late answer "
+                                   "stream broke and the session was re-attached 0 times and re-created 1 time (2 "
+                                   "attempts); 1 late answer "
                                    "was discarded; the longest time without a fresh plan was 0.200 s\n"));
   // Periods without an answer had no solve and no round trip: the medians are the answers'.
   EXPECT_DOUBLE_EQ(s.median_round_trip_ms, 2.0);

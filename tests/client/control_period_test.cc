@@ -15,156 +15,18 @@
 
 #include "client/client.h"
 #include "gtest/gtest.h"
-#include "nupmpc/grpc_handover.h"
+#include "tests/client/scripted_control.h"
 
 namespace nupmpc {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 using std::chrono::milliseconds;
+using testing::ScriptedControl;
 
 // Tests allow this much beyond the period: a loaded two-core machine may be slow to wake a
 // thread, and what is checked is that a step does not wait for its answer, not how fast.
 constexpr milliseconds kSlack(400);
-
-// A Control service whose answers the test scripts: each step is answered after
-// delay(attach number, the step's state[0]), or never for a negative delay, as SUPERSEDED
-// when superseded(attach, x0) says so; an answer's objective is the step's state[0], so a
-// test sees which step a result belongs to.
-class ScriptedControl final : public v1::MpcService::CallbackService {
- public:
-  std::function<milliseconds(int attach, double x0)> delay = [](int, double) { return milliseconds(0); };
-  std::function<bool(int attach, double x0)> superseded = [](int, double) { return false; };
-
-  int attaches() const {
-    std::lock_guard<std::mutex> lock(mu_);
-    return static_cast<int>(attach_specs_.size());
-  }
-  v1::ProblemSpec attach_spec(int k) const {
-    std::lock_guard<std::mutex> lock(mu_);
-    return attach_specs_.at(k);
-  }
-
-  grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(
-      grpc::CallbackServerContext* /*context*/) override {
-    return new Stream(this);
-  }
-
- private:
-  class Stream : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
-   public:
-    explicit Stream(ScriptedControl* service) : service_(service) {
-      std::lock_guard<std::mutex> lock(mu_);
-      HandToGrpc(this);
-      StartRead(&request_);
-    }
-    ~Stream() override {
-      std::vector<std::thread> answerers;
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        answerers.swap(answerers_);
-      }
-      for (std::thread& t : answerers) t.join();
-    }
-
-    void OnReadDone(bool ok) override {
-      TakeFromGrpc(this);
-      if (!ok) {
-        FinishOnce(grpc::Status::OK);
-        return;
-      }
-      // Under the stream's lock: gRPC hands the reactions from thread to thread through its
-      // own synchronisation, which ThreadSanitizer does not see.
-      std::lock_guard<std::mutex> lock(mu_);
-      v1::ControlResponse response;
-      response.set_sequence(request_.sequence());
-      if (request_.has_spec()) {
-        std::lock_guard<std::mutex> service_lock(service_->mu_);
-        service_->attach_specs_.push_back(request_.spec());
-        attach_ = static_cast<int>(service_->attach_specs_.size());
-        response.set_session_id("scripted");
-        AnswerLocked(response, milliseconds(0));
-      } else {
-        const double x0 = request_.step().state(0);
-        if (service_->superseded(attach_, x0)) {
-          response.mutable_result()->set_status(v1::SOLVE_STATUS_SUPERSEDED);
-        } else {
-          response.mutable_result()->set_status(v1::SOLVE_STATUS_CONVERGED);
-          response.mutable_result()->set_has_plan(true);
-          response.mutable_result()->set_objective(x0);
-          response.mutable_result()->add_inputs(x0);
-        }
-        const milliseconds delay = service_->delay(attach_, x0);
-        if (delay.count() >= 0) AnswerLocked(response, delay);
-      }
-      request_.Clear();
-      if (finished_) return;
-      HandToGrpc(this);
-      StartRead(&request_);
-    }
-    void OnWriteDone(bool /*ok*/) override {
-      TakeFromGrpc(this);
-      std::lock_guard<std::mutex> lock(mu_);
-      writing_ = false;
-      if (!queue_.empty() && !finished_) WriteNextLocked();
-    }
-    void OnDone() override {
-      TakeFromGrpc(this);
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        done_ = true;
-      }
-      done_changed_.notify_all();
-      // The answerer threads may still be sleeping: let them end before this is freed.
-      std::thread([this] { delete this; }).detach();
-    }
-    void OnCancel() override {
-      TakeFromGrpc(this);
-      FinishOnce(grpc::Status::CANCELLED);
-    }
-
-   private:
-    void FinishOnce(const grpc::Status& status) {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (finished_) return;
-      finished_ = true;
-      HandToGrpc(this);
-      Finish(status);
-    }
-    // Writes `response` after `delay` (one write at a time, in order of their times). Under mu_.
-    void AnswerLocked(v1::ControlResponse response, milliseconds delay) {
-      answerers_.emplace_back([this, response = std::move(response), delay] {
-        std::unique_lock<std::mutex> lock(mu_);
-        if (done_changed_.wait_for(lock, delay, [this] { return done_; })) return;
-        if (finished_) return;
-        queue_.push_back(response);
-        if (!writing_) WriteNextLocked();
-      });
-    }
-    void WriteNextLocked() {
-      writing_ = true;
-      writing_response_ = queue_.front();
-      queue_.erase(queue_.begin());
-      HandToGrpc(this);
-      StartWrite(&writing_response_);
-    }
-
-    ScriptedControl* service_;
-    v1::ControlRequest request_;
-    int attach_ = 0;
-    std::vector<std::thread> answerers_;
-    std::mutex mu_;
-    std::condition_variable done_changed_;
-    bool done_ = false;
-    bool finished_ = false;
-    bool writing_ = false;
-    std::vector<v1::ControlResponse> queue_;
-    v1::ControlResponse writing_response_;
-  };
-
-  mutable std::mutex mu_;
-  std::vector<v1::ProblemSpec> attach_specs_;
-};
 
 class ControlPeriodTest : public ::testing::Test {
  protected:
@@ -235,6 +97,7 @@ TEST_F(ControlPeriodTest, KHeldPeriodsInARowRecreateTheSessionFromTheSpecTheAnsw
   };
   auto session = client_->OpenSession(spec_, {}, ControlPeriod{.period = period, .held_periods_to_reconnect = kHeld});
   ASSERT_TRUE(session.ok()) << session.status();
+  const std::string first_id = (*session)->id();
 
   // Held steps until the stream counts as broken and a new one is up: each returns by its
   // period, and the loop keeps stepping as a controller would.
@@ -252,6 +115,15 @@ TEST_F(ControlPeriodTest, KHeldPeriodsInARowRecreateTheSessionFromTheSpecTheAnsw
   EXPECT_EQ(result->objective(), x0) << "the first answer after the reconnect is not for its own step";
   EXPECT_EQ((*session)->reconnects(), 1);
   ASSERT_EQ(service_.attaches(), 2);
+  // The session was asked for by its id first; this server does not hand it back, so it
+  // was re-created.
+  const std::vector<ScriptedControl::Attach> log = service_.attach_log();
+  ASSERT_EQ(log.size(), 3u);
+  EXPECT_EQ(log[1].session_id, first_id);
+  EXPECT_FALSE(log[1].accepted);
+  EXPECT_NE((*session)->id(), first_id);
+  EXPECT_EQ((*session)->reconnect_stats().recreated, 1);
+  EXPECT_EQ((*session)->reconnect_stats().reattached, 0);
   // State 1's answer came late on the first stream: the server had applied it, so the
   // session was re-created from it; the later steps were never answered, so not from them.
   EXPECT_EQ(service_.attach_spec(1).initial_state().mean(0), 1.0);

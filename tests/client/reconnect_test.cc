@@ -1,9 +1,11 @@
 // The back-off schedule of a Session's reconnects (client/reconnect.h), on a fake clock:
-// growth, cap, jitter range, the budget, and which errors are retried at all.
+// growth, cap, jitter range, the budget, which errors are retried at all, and which way an
+// attempt gets the session back (re-attached by its id, or re-created).
 #include "client/reconnect.h"
 
 #include <algorithm>
 #include <chrono>
+#include <string>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -81,7 +83,7 @@ TEST(RetryWithBackoff, RetriesUnavailableUntilItSucceeds) {
   int attempts = 0;
   const absl::Status s = RetryWithBackoff(
       options, absl::UnavailableError("stream broke"),
-      [&](milliseconds timeout) {
+      [&](milliseconds timeout, ReconnectAttempt*) {
         EXPECT_EQ(timeout, options.attempt_timeout);
         return ++calls < 4 ? absl::UnavailableError("connection refused") : absl::OkStatus();
       },
@@ -109,7 +111,7 @@ TEST(RetryWithBackoff, StopsAtTheBudgetShorteningTheLastWait) {
   int attempts = 0;
   const absl::Status s = RetryWithBackoff(
       options, absl::UnavailableError("stream broke"),
-      [&](milliseconds) {
+      [&](milliseconds, ReconnectAttempt*) {
         time.now += milliseconds(5);  // each refused connect takes a little time
         return absl::UnavailableError("connection refused");
       },
@@ -137,10 +139,11 @@ TEST(RetryWithBackoff, DoesNotRetryWhatRetryingCannotFix) {
   for (const absl::Status& error : {absl::InvalidArgumentError("bad spec"), absl::ResourceExhaustedError("full"),
                                     absl::PermissionDeniedError("no")}) {
     calls = 0;
-    const absl::Status s = RetryWithBackoff(options, absl::UnavailableError("stream broke"), [&](milliseconds) {
-      ++calls;
-      return error;
-    });
+    const absl::Status s =
+        RetryWithBackoff(options, absl::UnavailableError("stream broke"), [&](milliseconds, ReconnectAttempt*) {
+          ++calls;
+          return error;
+        });
     EXPECT_EQ(s, error);
     EXPECT_EQ(calls, 1);
   }
@@ -156,13 +159,129 @@ TEST(RetryWithBackoff, AZeroBudgetMakesNoAttempt) {
   FakeTime time;
   time.Install(&options);
   int calls = 0;
-  const absl::Status s = RetryWithBackoff(options, absl::UnavailableError("stream broke"), [&](milliseconds) {
-    ++calls;
-    return absl::OkStatus();
-  });
+  const absl::Status s =
+      RetryWithBackoff(options, absl::UnavailableError("stream broke"), [&](milliseconds, ReconnectAttempt*) {
+        ++calls;
+        return absl::OkStatus();
+      });
   EXPECT_TRUE(absl::IsUnavailable(s));
   EXPECT_EQ(calls, 0);
   EXPECT_TRUE(time.sleeps.empty());
+}
+
+// The decision of one attempt (ReattachOrRecreate): what the attach by id answered decides
+// whether the session is re-created, and the report says which way it went.
+struct ScriptedAttempt {
+  absl::Status attach, create;
+  int attaches = 0, creates = 0;
+  absl::Status Run(const std::string& id, ReconnectAttempt* report) {
+    return ReattachOrRecreate(
+        id,
+        [&] {
+          ++attaches;
+          return attach;
+        },
+        [&] {
+          ++creates;
+          return create;
+        },
+        report);
+  }
+};
+
+TEST(ReattachOrRecreate, ASessionHandedBackIsReattachedWithoutRecreating) {
+  ScriptedAttempt a{absl::OkStatus(), absl::OkStatus()};
+  ReconnectAttempt report;
+  EXPECT_TRUE(a.Run("id", &report).ok());
+  EXPECT_EQ(a.attaches, 1);
+  EXPECT_EQ(a.creates, 0);
+  EXPECT_EQ(report.path, ReconnectPath::kReattached);
+  ASSERT_TRUE(report.attach_by_id.has_value());
+  EXPECT_TRUE(report.attach_by_id->ok());
+}
+
+TEST(ReattachOrRecreate, NotFoundOrHeldElsewhereRecreatesInTheSameAttempt) {
+  for (const absl::Status& missed : {absl::NotFoundError("no such session"),
+                                     absl::FailedPreconditionError("another Control stream is attached to it")}) {
+    ScriptedAttempt a{missed, absl::OkStatus()};
+    ReconnectAttempt report;
+    EXPECT_TRUE(a.Run("id", &report).ok());
+    EXPECT_EQ(a.attaches, 1);
+    EXPECT_EQ(a.creates, 1);
+    EXPECT_EQ(report.path, ReconnectPath::kRecreated);
+    EXPECT_EQ(report.attach_by_id, missed);
+    // A re-creation that fails is the attempt's error; nothing came back.
+    ScriptedAttempt refused{missed, absl::UnavailableError("connection refused")};
+    EXPECT_TRUE(absl::IsUnavailable(refused.Run("id", &report)));
+    EXPECT_EQ(report.path, ReconnectPath::kNone);
+  }
+}
+
+TEST(ReattachOrRecreate, OtherErrorsAreTheAttemptsAndRecreateNothing) {
+  // UNAVAILABLE: the server (or the one the id routes to) is not there yet; the back-off
+  // tries the id again. The others: re-creating would be refused the same way.
+  for (const absl::Status& error : {absl::UnavailableError("restarting"), absl::PermissionDeniedError("no"),
+                                    absl::UnauthenticatedError("no token")}) {
+    ScriptedAttempt a{error, absl::OkStatus()};
+    ReconnectAttempt report;
+    EXPECT_EQ(a.Run("id", &report), error);
+    EXPECT_EQ(a.creates, 0);
+    EXPECT_EQ(report.path, ReconnectPath::kNone);
+  }
+  EXPECT_TRUE(AttachByIdMissed(absl::NotFoundError("x")));
+  EXPECT_TRUE(AttachByIdMissed(absl::FailedPreconditionError("x")));
+  EXPECT_FALSE(AttachByIdMissed(absl::UnavailableError("x")));
+  EXPECT_FALSE(AttachByIdMissed(absl::OkStatus()));
+}
+
+TEST(ReattachOrRecreate, WithoutAnIdItCreates) {
+  ScriptedAttempt a{absl::OkStatus(), absl::OkStatus()};
+  ReconnectAttempt report;
+  EXPECT_TRUE(a.Run("", &report).ok());
+  EXPECT_EQ(a.attaches, 0);
+  EXPECT_EQ(a.creates, 1);
+  EXPECT_EQ(report.path, ReconnectPath::kRecreated);
+  EXPECT_FALSE(report.attach_by_id.has_value());
+}
+
+// An outage on a fake clock: the server is down for two attempts (UNAVAILABLE), then
+// answers the attach by id as the test says; the step is resent only by the attempt that
+// got the session back, and the outage is booked by how it came back.
+TEST(RideOutOutage, BooksReattachedAndRecreatedAndResendsOnlyWhenTheSessionIsBack) {
+  for (const bool kept : {true, false}) {
+    ReconnectOptions options;
+    options.jitter = 0.0;
+    FakeTime time;
+    time.Install(&options);
+    std::vector<ReconnectAttempt> reported;
+    options.on_attempt = [&](const ReconnectAttempt& a) { reported.push_back(a); };
+    ReconnectStats stats;
+    int calls = 0, resent = 0;
+    const absl::Status s = RideOutOutage(
+        options, absl::UnavailableError("the Control stream broke"),
+        [&](milliseconds, ReconnectAttempt* report, bool* answered) {
+          ++calls;
+          const absl::Status attach = calls < 3 ? absl::UnavailableError("connection refused")
+                                      : kept    ? absl::OkStatus()
+                                                : absl::NotFoundError("no such session");
+          absl::Status back = ReattachOrRecreate(
+              "id", [&] { return attach; }, [] { return absl::OkStatus(); }, report);
+          if (!back.ok()) return back;
+          ++resent;
+          *answered = true;
+          return absl::OkStatus();
+        },
+        &stats);
+    EXPECT_TRUE(s.ok()) << s;
+    EXPECT_EQ(resent, 1);
+    EXPECT_EQ(stats.attempts, 3);
+    EXPECT_EQ(stats.reconnects, 1);
+    EXPECT_EQ(stats.reattached, kept ? 1 : 0);
+    EXPECT_EQ(stats.recreated, kept ? 0 : 1);
+    ASSERT_EQ(reported.size(), 3u);
+    EXPECT_EQ(reported[0].path, ReconnectPath::kNone);
+    EXPECT_EQ(reported[2].path, kept ? ReconnectPath::kReattached : ReconnectPath::kRecreated);
+  }
 }
 
 }  // namespace

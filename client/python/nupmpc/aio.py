@@ -22,9 +22,10 @@ from nupmpc._proto import pb, pb_grpc
 from nupmpc.arrays import ArrayLike
 from nupmpc.client import ProblemLike, _Connection, spec_of
 from nupmpc.errors import NupmpcError, Unavailable, error_from_code, error_from_rpc
-from nupmpc.reconnect import ReconnectOptions, ReconnectStats, is_retryable, ride_out_outage_async
+from nupmpc.reconnect import AttemptNote, ReconnectOptions, ReconnectStats, is_retryable, reattach_or_recreate_async, \
+    ride_out_outage_async
 from nupmpc.result import Plan
-from nupmpc.control_call import broken_stream_error
+from nupmpc.control_call import SESSION_HEADER, broken_stream_error
 from nupmpc.spec_update import apply_step_to_spec
 from nupmpc.step import Bounds, Dims, StepModel, WarmStart, build_step, dims_of
 
@@ -131,9 +132,15 @@ class AsyncSession:
         reply: pb.ControlResponse = response
         return reply
 
-    async def _connect(self, timeout_s: float) -> None:
-        call = pb_grpc.MpcServiceStub(self._channel).Control()
-        hello = pb.ControlRequest(spec=self._spec, sequence=self._next_sequence())
+    async def _connect(self, timeout_s: float, session_id: str | None = None) -> None:
+        """A Control call attached to `session_id` (routed by it), or to a session it
+        creates from the spec."""
+        if session_id:
+            call = pb_grpc.MpcServiceStub(self._channel).Control(metadata=((SESSION_HEADER, session_id),))
+            hello = pb.ControlRequest(session_id=session_id, sequence=self._next_sequence())
+        else:
+            call = pb_grpc.MpcServiceStub(self._channel).Control()
+            hello = pb.ControlRequest(spec=self._spec, sequence=self._next_sequence())
         try:
             response = await asyncio.wait_for(self._exchange(call, hello, "attach"), timeout_s)
         except asyncio.TimeoutError:
@@ -146,7 +153,7 @@ class AsyncSession:
             call.cancel()
             raise error_from_code(response.error_code, response.error_message)
         self._call = call
-        self.id = response.session_id
+        self.id = response.session_id or session_id
 
     def _tear_down(self) -> None:
         if self._call is not None:
@@ -190,16 +197,22 @@ class AsyncSession:
                 if not is_retryable(error):
                     raise
                 self._tear_down()
+                note = AttemptNote()
 
                 async def attempt(timeout_s: float) -> pb.SolveResult:
                     if self._own_channel:
                         await self._channel.close()
                     self._channel = self._client.new_channel(own_subchannel=True)
                     self._own_channel = True
-                    await self._connect(timeout_s)
+                    # By its id first (warm), else re-created from the spec (cold), in one
+                    # attempt's time.
+                    deadline = time.monotonic() + timeout_s
+                    await reattach_or_recreate_async(
+                        self.id, lambda: self._connect(timeout_s, self.id),
+                        lambda: self._connect(max(deadline - time.monotonic(), 0.0)), note)
                     return await self._step_once(step)
 
-                result = await ride_out_outage_async(self._options, error, attempt, self.stats)
+                result = await ride_out_outage_async(self._options, error, attempt, self.stats, note)
             round_trip_ms = (time.perf_counter() - start) * 1e3
             apply_step_to_spec(step, result, self._spec)
         return Plan.from_result(result, self._dims, round_trip_ms)

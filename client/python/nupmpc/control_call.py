@@ -17,6 +17,8 @@ from nupmpc._proto import pb, pb_grpc
 from nupmpc.errors import CallStatus, NupmpcError, Unavailable, error_from_code, error_from_rpc
 
 _END = object()
+# The header a balancer routes calls addressed by a session id by (client/session_routing.h).
+SESSION_HEADER = "x-nupmpc-session"
 # What the reader thread puts in the inbox: a response, or (_END, the call's error or None).
 _Item = Union[pb.ControlResponse, tuple[object, Optional[grpc.RpcError]]]
 
@@ -79,11 +81,14 @@ class _Stream:
     so a stalled network never blocks a step), responses read by a thread of its own into
     an inbox, so that a step can stop waiting at its deadline."""
 
-    def __init__(self, channel: grpc.Channel) -> None:
+    def __init__(self, channel: grpc.Channel, session_id: str | None = None) -> None:
         self._requests = _NewestRequest()
         self._inbox: queue.Queue[_Item] = queue.Queue()
         self.ended = False
-        self.call = pb_grpc.MpcServiceStub(channel).Control(self._requests)
+        # A stream attaching by id carries the id in the routing header, so a balancer sends
+        # it where the id's other calls go: the replica holding (or restoring) the session.
+        metadata = ((SESSION_HEADER, session_id),) if session_id else None
+        self.call = pb_grpc.MpcServiceStub(channel).Control(self._requests, metadata=metadata)
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
@@ -129,11 +134,15 @@ class _Stream:
         self.call.cancel()
 
 
-def attach(channel: grpc.Channel, spec: pb.ProblemSpec, sequence: int, timeout_s: float) -> tuple[_Stream, str]:
-    """A stream on `channel` that created the session from `spec`, and the session's id;
-    cancelled and Unavailable when the server has not answered within timeout_s."""
-    stream = _Stream(channel)
-    stream.send(pb.ControlRequest(spec=spec, sequence=sequence))
+def attach(channel: grpc.Channel, spec: pb.ProblemSpec, sequence: int, timeout_s: float,
+           session_id: str | None = None) -> tuple[_Stream, str]:
+    """A stream on `channel` attached to the session `session_id` when given, else to one
+    it created from `spec`, and the session's id; cancelled and Unavailable when the server
+    has not answered within timeout_s."""
+    stream = _Stream(channel, session_id)
+    hello = pb.ControlRequest(session_id=session_id, sequence=sequence) if session_id else \
+        pb.ControlRequest(spec=spec, sequence=sequence)
+    stream.send(hello)
     try:
         response = stream.receive("attach", time.monotonic() + timeout_s)
     except NupmpcError:
@@ -145,4 +154,4 @@ def attach(channel: grpc.Channel, spec: pb.ProblemSpec, sequence: int, timeout_s
     if response.error_code != 0:
         stream.cancel()
         raise error_from_code(response.error_code, response.error_message)
-    return stream, response.session_id
+    return stream, response.session_id or session_id or ""

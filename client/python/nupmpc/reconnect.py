@@ -4,10 +4,14 @@ C++ client (client/reconnect.h):
 
     d_k = min(initial_backoff · multiplier^k, max_backoff) · U(1 − jitter, 1 + jitter)
 
-waits between attempts to re-create the session, until one succeeds or the `budget`
+waits between attempts to get the session back, until one succeeds or the `budget`
 (from the failure) is spent: no attempt starts after it (the last wait is shortened to
 end at it), each attempt is cancelled after `attempt_timeout`, and then the step fails
 with Unavailable. Only UNAVAILABLE is retried; other errors are returned at once.
+
+Each attempt asks for the session by its id first (reattach_or_recreate): a server that
+kept it, or restored it from its snapshot, hands it back warm; only NOT_FOUND or
+FAILED_PRECONDITION make the attempt re-create it from the spec (cold).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import grpc
 from nupmpc.errors import NupmpcError, Unavailable
 
 _Answer = TypeVar("_Answer")
+_Got = TypeVar("_Got")
 
 
 @dataclass
@@ -49,11 +54,22 @@ class ReconnectAttempt:
     cause: Exception
     error: Optional[Exception]  # None: reconnected
     gave_up: bool
+    path: str = "none"  # how the session came back: "reattached", "recreated" or "none"
+    attach_by_id: Optional[str] = None  # the attach by id's outcome (a gRPC code name); None: none made
+
+
+@dataclass
+class AttemptNote:
+    """What one attempt says about itself, filled in by reattach_or_recreate."""
+    path: str = "none"
+    attach_by_id: Optional[str] = None
 
 
 @dataclass
 class ReconnectStats:
     reconnects: int = 0      # outages ridden through
+    reattached: int = 0      # of them, sessions attached again by their id (warm)
+    recreated: int = 0       # of them, sessions re-created from the spec (cold)
     attempts: int = 0
     failed_outages: int = 0  # outages that spent the budget
     total_s: float = 0.0
@@ -64,6 +80,67 @@ class ReconnectStats:
 
 def is_retryable(error: BaseException | None) -> bool:
     return isinstance(error, NupmpcError) and error.code == grpc.StatusCode.UNAVAILABLE
+
+
+def attach_by_id_missed(error: BaseException) -> bool:
+    """Whether a failed attach by id says the session is not to be had by its id: the
+    server neither holds it nor could restore it (NOT_FOUND), or another stream holds it
+    (FAILED_PRECONDITION). Waiting cannot help then: re-create it."""
+    return isinstance(error, NupmpcError) and error.code in (grpc.StatusCode.NOT_FOUND,
+                                                             grpc.StatusCode.FAILED_PRECONDITION)
+
+
+def reattach_or_recreate(session_id: str | None, attach_by_id: Callable[[], _Got], recreate: Callable[[], _Got],
+                         note: AttemptNote) -> _Got:
+    """One attempt to get a broken stream's session back: `attach_by_id` when there is an
+    id (the warm start survives), `recreate` only when that attach missed
+    (attach_by_id_missed). Any other error is the attempt's (UNAVAILABLE: retried by the
+    back-off, by id first again). Fills `note`."""
+    note.path, note.attach_by_id = "none", None
+    if session_id:
+        try:
+            got = attach_by_id()
+        except NupmpcError as error:
+            _attach_missed(error, note)
+        else:
+            note.path, note.attach_by_id = "reattached", "OK"
+            return got
+    got = recreate()
+    note.path = "recreated"
+    return got
+
+
+async def reattach_or_recreate_async(session_id: str | None, attach_by_id: Callable[[], Awaitable[_Got]],
+                                     recreate: Callable[[], Awaitable[_Got]], note: AttemptNote) -> _Got:
+    """reattach_or_recreate for asyncio: both are coroutine functions."""
+    note.path, note.attach_by_id = "none", None
+    if session_id:
+        try:
+            got = await attach_by_id()
+        except NupmpcError as error:
+            _attach_missed(error, note)
+        else:
+            note.path, note.attach_by_id = "reattached", "OK"
+            return got
+    got = await recreate()
+    note.path = "recreated"
+    return got
+
+
+def _attach_missed(error: NupmpcError, note: AttemptNote) -> None:
+    """Notes a failed attach by id; raises it again unless re-creating is the answer."""
+    note.attach_by_id = error.code.name
+    if not attach_by_id_missed(error):
+        raise error
+
+
+def count_reconnect(path: str, stats: ReconnectStats) -> None:
+    """Books one reconnect that got its session back by `path` (and answered its step)."""
+    stats.reconnects += 1
+    if path == "reattached":
+        stats.reattached += 1
+    elif path == "recreated":
+        stats.recreated += 1
 
 
 class Backoff:
@@ -99,13 +176,14 @@ class _Outage:
     def next_wait(self) -> float:
         return min(self.backoff.next(), max(self.options.budget_s - self.elapsed(), 0.0))
 
-    def record(self, wait: float, error: NupmpcError | None) -> bool:
+    def record(self, wait: float, error: NupmpcError | None, note: AttemptNote) -> bool:
         """Books one attempt; returns True when the loop should stop."""
         self.made += 1
         elapsed = self.elapsed()
         retryable = is_retryable(error)
         gave_up = error is not None and (not retryable or elapsed >= self.options.budget_s)
-        report = ReconnectAttempt(self.made, wait, elapsed, self.cause, error, gave_up)
+        report = ReconnectAttempt(self.made, wait, elapsed, self.cause, error, gave_up,
+                                  note.path if error is None else "none", note.attach_by_id)
         self.stats.attempt_log.append(report)
         if self.options.on_attempt:
             self.options.on_attempt(report)
@@ -121,9 +199,10 @@ class _Outage:
         self.stats.longest_s = max(self.stats.longest_s, took)
         return took
 
-    def answered(self) -> None:
+    def answered(self, note: AttemptNote) -> None:
         self._finish()
-        self.stats.reconnects += 1
+        # The attempt that got the answer is the last one: its path is the outage's.
+        count_reconnect(note.path, self.stats)
 
     def failed(self, error: NupmpcError | None) -> NupmpcError:
         """The error to raise: `error` itself, or Unavailable once the budget is spent."""
@@ -135,11 +214,13 @@ class _Outage:
         return error
 
 
-def ride_out_outage(options: ReconnectOptions, cause: Exception, recreate_and_resend: Callable[[float], _Answer],
-                    stats: ReconnectStats) -> _Answer:
-    """Retries `recreate_and_resend(timeout_s)` (re-create the session, resend the step;
+def ride_out_outage(options: ReconnectOptions, cause: Exception, reconnect_and_resend: Callable[[float], _Answer],
+                    stats: ReconnectStats, note: AttemptNote | None = None) -> _Answer:
+    """Retries `reconnect_and_resend(timeout_s)` (get the session back, resend the step;
     returns the answer or raises) with back-off; returns the answer, or raises the error
-    that ended the outage (Unavailable once the budget is spent)."""
+    that ended the outage (Unavailable once the budget is spent). `note` is what each
+    attempt fills in (reattach_or_recreate) to say how it got its session back."""
+    note = note or AttemptNote(path="recreated")  # a caller that only re-creates
     outage = _Outage(options, cause, stats)
     sleep = options.sleep or time.sleep
     error = None
@@ -148,22 +229,23 @@ def ride_out_outage(options: ReconnectOptions, cause: Exception, recreate_and_re
         if wait > 0:
             sleep(wait)
         try:
-            answer = recreate_and_resend(options.attempt_timeout_s)
+            answer = reconnect_and_resend(options.attempt_timeout_s)
         except NupmpcError as e:
             error = e
-            if outage.record(wait, e):
+            if outage.record(wait, e, note):
                 break
             continue
-        outage.record(wait, None)
-        outage.answered()
+        outage.record(wait, None, note)
+        outage.answered(note)
         return answer
     raise outage.failed(error)
 
 
 async def ride_out_outage_async(options: ReconnectOptions, cause: Exception,
-                                recreate_and_resend: Callable[[float], Awaitable[_Answer]],
-                                stats: ReconnectStats) -> _Answer:
-    """ride_out_outage for asyncio: `recreate_and_resend` is a coroutine function."""
+                                reconnect_and_resend: Callable[[float], Awaitable[_Answer]],
+                                stats: ReconnectStats, note: AttemptNote | None = None) -> _Answer:
+    """ride_out_outage for asyncio: `reconnect_and_resend` is a coroutine function."""
+    note = note or AttemptNote(path="recreated")
     outage = _Outage(options, cause, stats)
     error = None
     while outage.elapsed() < options.budget_s:
@@ -171,13 +253,13 @@ async def ride_out_outage_async(options: ReconnectOptions, cause: Exception,
         if wait > 0:
             await asyncio.sleep(wait)
         try:
-            answer = await recreate_and_resend(options.attempt_timeout_s)
+            answer = await reconnect_and_resend(options.attempt_timeout_s)
         except NupmpcError as e:
             error = e
-            if outage.record(wait, e):
+            if outage.record(wait, e, note):
                 break
             continue
-        outage.record(wait, None)
-        outage.answered()
+        outage.record(wait, None, note)
+        outage.answered(note)
         return answer
     raise outage.failed(error)

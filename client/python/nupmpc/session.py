@@ -3,8 +3,9 @@ quiet network failures. The semantics of the C++ client (client/session.h):
 
 Without a period, a step waits for its answer. When its stream breaks (UNAVAILABLE, a
 cancellation it did not make, a stream that ended without a status or without an error)
-the step re-creates the session from the spec it holds (kept current with every answered
-step, nupmpc.spec_update) with back-off (nupmpc.reconnect) and resends itself, so step()
+the step gets its session back with back-off (nupmpc.reconnect): attached again by its id
+when the server kept or restored it (warm), else re-created from the spec it holds (kept
+current with every answered step, nupmpc.spec_update; cold), and resends itself, so step()
 returns that step's plan; only a spent budget makes it raise Unavailable.
 
 With a control period P (`period=` in seconds), step() returns by P after it was called,
@@ -12,8 +13,8 @@ whatever the network does: with the plan if the answer came, else a Plan with `h
 True (status HELD, no plan: hold the last input or apply a fallback). A late answer is
 never returned for a later step (answers are matched by sequence number); it only keeps
 the spec current. After K held steps in a row (K = max(3, ceil(1 s / P)) unless given)
-the stream counts as broken, as it does when it ends, and a background thread re-creates
-the session for as long as the caller keeps stepping: no overall budget, back-off at most
+the stream counts as broken, as it does when it ends, and a background thread gets the
+session back the same way for as long as the caller keeps stepping: no overall budget, back-off at most
 0.5 s, each attempt cancelled after at most 1 s; steps meanwhile are held. The slack: a
 step returns within P plus the time to wake its thread (tests allow 100 ms and more).
 """
@@ -33,8 +34,8 @@ from nupmpc._proto import pb
 from nupmpc.arrays import ArrayLike
 from nupmpc.control_call import _Stream, attach
 from nupmpc.errors import NupmpcError, Unavailable, error_from_code
-from nupmpc.reconnect import Backoff, ReconnectAttempt, ReconnectOptions, ReconnectStats, is_retryable, \
-    ride_out_outage
+from nupmpc.reconnect import AttemptNote, Backoff, ReconnectAttempt, ReconnectOptions, ReconnectStats, \
+    count_reconnect, is_retryable, reattach_or_recreate, ride_out_outage
 from nupmpc.result import Plan, held_result
 from nupmpc.spec_update import apply_step_to_spec
 from nupmpc.step import Bounds, Dims, StepModel, WarmStart, build_step, dims_of
@@ -217,10 +218,15 @@ class Session:
         with self._cond:
             self._drop_stream()
 
-        def recreate_and_resend(timeout_s: float) -> pb.SolveResult:
+        note = AttemptNote()
+
+        def reconnect_and_resend(timeout_s: float) -> pb.SolveResult:
             with self._cond:
                 self._renew_channel()
-                self._stream, self.id = attach(self._channel, self._spec, self._next_sequence(), timeout_s)
+                self._stream, self.id = self._attach(self._channel, self.id, self._spec, self._next_sequence(),
+                                                     timeout_s, note)
+            # Resent once per attempt that got a session, on its new stream only; the answer
+            # is matched by the new sequence number, so the plan returned is this step's.
             try:
                 return self._exchange(step, None)
             except NupmpcError as e:
@@ -228,7 +234,19 @@ class Session:
                     with self._cond:
                         self._drop_stream()
                 raise
-        return ride_out_outage(self._options, cause, recreate_and_resend, self.stats)
+        return ride_out_outage(self._options, cause, reconnect_and_resend, self.stats, note)
+
+    @staticmethod
+    def _attach(channel: grpc.Channel, session_id: str | None, spec: pb.ProblemSpec, sequence: int,
+                timeout_s: float, note: AttemptNote) -> tuple[_Stream, str]:
+        """A stream attached to `session_id` (warm), or, when the server no longer has it,
+        to a session created from `spec`; both within one timeout. Fills `note`."""
+        deadline = time.monotonic() + timeout_s
+        return reattach_or_recreate(
+            session_id,
+            lambda: attach(channel, spec, sequence, timeout_s, session_id=session_id),
+            lambda: attach(channel, spec, sequence, max(deadline - time.monotonic(), 0.0)),
+            note)
 
     def _drop_stream(self) -> None:
         if self._stream is not None:
@@ -299,11 +317,12 @@ class Session:
                 if self._cond.wait_for(lambda: self._closing, timeout=wait):
                     return
                 self._renew_channel()
-                channel, spec, sequence = self._channel, pb.ProblemSpec(), self._next_sequence()
+                channel, spec, sequence, old_id = self._channel, pb.ProblemSpec(), self._next_sequence(), self.id
                 spec.CopyFrom(self._spec)
+                note = AttemptNote()
                 self._cond.release()
                 try:
-                    stream, session_id = attach(channel, spec, sequence, options.attempt_timeout_s)
+                    stream, session_id = self._attach(channel, old_id, spec, sequence, options.attempt_timeout_s, note)
                     error = None
                 except Exception as e:  # noqa: BLE001 - a channel closed under it too: the thread must live on
                     stream, error = None, e if isinstance(e, NupmpcError) else Unavailable(f"reconnect attempt: {e}")
@@ -316,13 +335,14 @@ class Session:
                 if error is None and not self._closing:
                     self._stream, self.id = stream, session_id
                     self._silent_periods, attempt = 0, 0
-                    self.stats.reconnects += 1
+                    count_reconnect(note.path, self.stats)
                     self.stats.total_s += elapsed
                     self.stats.longest_s = max(self.stats.longest_s, elapsed)
                     self._cond.notify_all()
                 elif stream is not None:
                     stream.cancel()
-                report = ReconnectAttempt(attempt, wait, elapsed, self._break_cause, error, False)
+                report = ReconnectAttempt(attempt, wait, elapsed, self._break_cause, error, False,
+                                          note.path if error is None else "none", note.attach_by_id)
                 self.stats.attempt_log.append(report)
                 if error is not None:
                     self._break_cause = error

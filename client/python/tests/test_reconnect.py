@@ -4,7 +4,8 @@ tests/client/reconnect_test.cc, so both clients ride out an outage the same way.
 import pytest
 
 import nupmpc
-from nupmpc.reconnect import Backoff, ReconnectOptions, ReconnectStats, is_retryable, ride_out_outage
+from nupmpc.reconnect import AttemptNote, Backoff, ReconnectOptions, ReconnectStats, attach_by_id_missed, \
+    is_retryable, reattach_or_recreate, ride_out_outage
 
 
 class FakeTime:
@@ -98,3 +99,90 @@ def test_a_zero_budget_makes_no_attempt():
         ride_out_outage(ReconnectOptions(budget_s=0.0, now=time.now, sleep=time.sleep), nupmpc.Unavailable("x"),
                         lambda t: calls.append(t), ReconnectStats())
     assert calls == [] and time.sleeps == []
+
+
+class ScriptedAttempt:
+    """An attempt whose attach by id and re-creation answer as the test says (an exception
+    is raised, anything else returned), counting the calls."""
+
+    def __init__(self, attach, create="created"):
+        self.attach, self.create = attach, create
+        self.attaches = self.creates = 0
+
+    def _attach(self):
+        self.attaches += 1
+        if isinstance(self.attach, Exception):
+            raise self.attach
+        return self.attach
+
+    def _create(self):
+        self.creates += 1
+        if isinstance(self.create, Exception):
+            raise self.create
+        return self.create
+
+    def run(self, session_id, note):
+        return reattach_or_recreate(session_id, self._attach, self._create, note)
+
+
+def test_a_session_handed_back_is_reattached_without_recreating():
+    attempt, note = ScriptedAttempt("attached"), AttemptNote()
+    assert attempt.run("id", note) == "attached"
+    assert (attempt.attaches, attempt.creates) == (1, 0)
+    assert (note.path, note.attach_by_id) == ("reattached", "OK")
+
+
+@pytest.mark.parametrize("missed", [nupmpc.NotFound("no such session"),
+                                    nupmpc.FailedPrecondition("another Control stream is attached to it")])
+def test_not_found_or_held_elsewhere_recreates_in_the_same_attempt(missed):
+    attempt, note = ScriptedAttempt(missed), AttemptNote()
+    assert attempt.run("id", note) == "created"
+    assert (attempt.attaches, attempt.creates) == (1, 1)
+    assert (note.path, note.attach_by_id) == ("recreated", missed.code.name)
+    # A re-creation that fails is the attempt's error; nothing came back.
+    refused = ScriptedAttempt(missed, nupmpc.Unavailable("connection refused"))
+    with pytest.raises(nupmpc.Unavailable):
+        refused.run("id", note)
+    assert note.path == "none"
+
+
+@pytest.mark.parametrize("error", [nupmpc.Unavailable("restarting"), nupmpc.PermissionDenied("no"),
+                                   nupmpc.Unauthenticated("no token")])
+def test_other_errors_are_the_attempts_and_recreate_nothing(error):
+    attempt, note = ScriptedAttempt(error), AttemptNote()
+    with pytest.raises(type(error)):
+        attempt.run("id", note)
+    assert attempt.creates == 0 and note.path == "none"
+    assert not attach_by_id_missed(error)
+    assert attach_by_id_missed(nupmpc.NotFound("x")) and attach_by_id_missed(nupmpc.FailedPrecondition("x"))
+
+
+def test_without_an_id_it_creates():
+    attempt, note = ScriptedAttempt("attached"), AttemptNote()
+    assert attempt.run(None, note) == "created"
+    assert (attempt.attaches, attempt.creates, note.path, note.attach_by_id) == (0, 1, "recreated", None)
+
+
+@pytest.mark.parametrize("kept", [True, False])
+def test_an_outage_is_booked_by_how_the_session_came_back(kept):
+    """Down for two attempts, then the attach by id answers as `kept` says: the step is
+    resent only by the attempt that got the session back."""
+    time = FakeTime()
+    reported = []
+    options = ReconnectOptions(jitter=0.0, now=time.now, sleep=time.sleep, on_attempt=reported.append)
+    note, stats = AttemptNote(), ReconnectStats()
+    calls, resent = [0], [0]
+
+    def attempt(timeout_s):
+        calls[0] += 1
+        attach = nupmpc.Unavailable("connection refused") if calls[0] < 3 else \
+            "attached" if kept else nupmpc.NotFound("no such session")
+        ScriptedAttempt(attach).run("id", note)
+        resent[0] += 1
+        return "answer"
+
+    assert ride_out_outage(options, nupmpc.Unavailable("stream broke"), attempt, stats, note) == "answer"
+    assert resent[0] == 1 and stats.attempts == 3 and stats.reconnects == 1
+    assert (stats.reattached, stats.recreated) == ((1, 0) if kept else (0, 1))
+    assert [r.path for r in reported] == ["none", "none", "reattached" if kept else "recreated"]
+    assert reported[0].attach_by_id == "UNAVAILABLE"

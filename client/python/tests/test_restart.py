@@ -35,6 +35,11 @@ def test_a_session_rides_through_a_server_restart(masses, reference):
             assert session.reconnects == 1
             assert session.id != first_id  # re-created under a new id
             assert attempts[0].error is not None and attempts[-1].error is None  # refused while down, then back
+            # Asked for by its id first: the restarted server (no state directory) does not
+            # have it, so it was re-created from the spec.
+            assert (session.stats.reattached, session.stats.recreated) == (0, 1)
+            assert attempts[-1].path == "recreated" and attempts[-1].attach_by_id == "NOT_FOUND"
+            assert attempts[0].path == "none" and attempts[0].attach_by_id == "UNAVAILABLE"
             assert session.stats.failed_outages == 0
             session.close()
     finally:
@@ -73,10 +78,13 @@ def test_an_asyncio_session_rides_through_a_server_restart(masses, reference):
                 np.testing.assert_array_equal(plan.x[0], x)
                 assert abs(plan.objective - j_star[t]) <= 1e-6 * abs(j_star[t]), t
             await session.close()
-            return session.reconnects
+            return session.stats
 
     try:
-        assert asyncio.run(run()) == 1
+        stats = asyncio.run(run())
+        # Asked for by its id first (the restarted server does not have it), re-created.
+        assert (stats.reconnects, stats.reattached, stats.recreated) == (1, 0, 1)
+        assert stats.attempt_log[-1].path == "recreated" and stats.attempt_log[-1].attach_by_id == "NOT_FOUND"
     finally:
         server.stop()
 

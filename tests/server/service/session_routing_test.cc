@@ -69,6 +69,8 @@ TEST_F(ServiceTest, AnAddressedSessionRecreatesALostSessionForTheStateItSent) {
   ASSERT_TRUE(answered.ok()) << answered.status();
   ASSERT_TRUE(HasPlan(*answered));
   EXPECT_EQ((*session)->reconnect_stats().reconnects, 1);
+  EXPECT_EQ((*session)->reconnect_stats().recreated, 1);
+  EXPECT_EQ((*session)->reconnect_stats().reattached, 0);
   EXPECT_NE((*session)->id(), lost_id);
   EXPECT_EQ(client_->GetSession(lost_id).status().code(), absl::StatusCode::kNotFound);
 
