@@ -61,6 +61,9 @@ void IbffdPolicy::PersistState(StateArchive& archive) {
   archive.Flag("policy_released", policy_released_);
   archive.EnumeratorField("policy_region", policy_region_, Region::kBelow, Region::kAbove);
   archive.Integer("policy_shifts", policy_shifts_, 0, kMaxShifts);
+  // Read by IFFBDD's first polish call of a solve, before this solve's first pass of the
+  // sub-problem writes it: the last solve's verdict carries over.
+  archive.Flag("outputs_outside", outputs_outside_);
   // A live policy's gains and offsets, as computed (after new weights a recomputation
   // would give other gains: the original goes on with these).
   if (has_policy_) {
