@@ -38,6 +38,7 @@ class Iake final : public OuterIteration, public InputPinning {
   void ReleaseInputPins() override;
   void ReleaseWorkspace() override;
   void AcquireWorkspace(const Problem& problem) override;
+  void PersistState(StateArchive& archive, const Problem& problem) override;
 
  private:
   double EffectiveSlope(const ScalarPrior& prior) const {

@@ -37,6 +37,7 @@ class Ibffd final : public ActiveSetIteration {
   void AdoptCarriedRegionsForPolish() override;
   void ReleaseWorkspace() override { policy_.ReleaseWorkspace(); }
   void AcquireWorkspace(const Problem& /*problem*/) override { policy_.AcquireWorkspace(); }
+  void PersistState(StateArchive& archive, const Problem& problem) override;
 
  private:
   double InitialSlope(const ScalarPrior& prior) const;

@@ -60,13 +60,16 @@ void IbffdPolicy::ReleaseWorkspace() {
 }
 
 void IbffdPolicy::AcquireWorkspace() {
-  if (xi_step_.size() == 0) {
-    W_step_.setZero(PackedSymmetricSize(graph_.M), graph_.N + 1);
-    xi_step_.setZero(graph_.M, graph_.N + 1);
-    input_gain_.setZero(graph_.M + 2, static_cast<Eigen::Index>(graph_.N) * graph_.L);
-    x_pred_.setZero(graph_.M, graph_.N + 1);
-  }
+  AllocateWorkspace();
   if (policy_released_) RecomputePolicy();
+}
+
+void IbffdPolicy::AllocateWorkspace() {
+  if (xi_step_.size() != 0) return;
+  W_step_.setZero(PackedSymmetricSize(graph_.M), graph_.N + 1);
+  xi_step_.setZero(graph_.M, graph_.N + 1);
+  input_gain_.setZero(graph_.M + 2, static_cast<Eigen::Index>(graph_.N) * graph_.L);
+  x_pred_.setZero(graph_.M, graph_.N + 1);
 }
 
 void IbffdPolicy::RecomputePolicy() {

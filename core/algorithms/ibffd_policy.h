@@ -13,6 +13,8 @@
 
 namespace nupmpc::core {
 
+class StateArchive;  // core/snapshot/state_archive.h
+
 // IBFFD's passes over one factor graph ([LL-BFFD] Alg. 1; nup-algorithms.md §8) and the
 // policy they carry: the backward information filter over the inputs' factors, then
 // forward deciding of every scalar input from its extrinsic message with the exact
@@ -89,6 +91,9 @@ class IbffdPolicy {
   void ReleaseWorkspace();
   // Gets them back and recomputes a released policy (a backward pass; polls the interrupt).
   void AcquireWorkspace();
+  // Snapshots (core/snapshot/algorithm_state.cc): the policy, live or released, and
+  // whether the workspace is held.
+  void PersistState(StateArchive& archive);
 
   // What of the policy survives this object (Iffbdd drops its input polish while idle and
   // rebuilds it): the regions its filter integrated and the shifts since.
@@ -137,6 +142,8 @@ class IbffdPolicy {
   template <typename XT>
   double OutputsOutside(int n, const XT& x) const;
   void ShiftPolicy(int steps);
+  // The per-step messages' storage (AcquireWorkspace without recomputing the policy).
+  void AllocateWorkspace();
   // The backward filter over policy_region_, shifted policy_shifts_ times.
   void RecomputePolicy();
 

@@ -72,6 +72,7 @@ class Iffbdd final : public ActiveSetIteration, private IffbddInteriorPoint::Pas
   double largest_dual() const override { return largest_dual_; }
   void ReleaseWorkspace() override;
   void AcquireWorkspace(const Problem& problem) override;
+  void PersistState(StateArchive& archive, const Problem& problem) override;
 
  private:
   // kNewton: the exact solution of the pass's Gaussian factors (rows' values into

@@ -51,6 +51,9 @@ class IffbddInputPolish {
   void Shift();
   void Release();
   void Acquire(const Problem& problem, Interrupt* interrupt);
+  // Snapshots (core/snapshot/algorithm_state.cc): the carried policy, live or released.
+  // Its workspace must already be held or released as in the saved one (Iffbdd's).
+  void PersistState(StateArchive& archive);
 
   // Starts a polish on the sub-problem from `region`'s input rows (active() only).
   void Start(const std::vector<Region>& region, bool carried);

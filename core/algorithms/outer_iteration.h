@@ -12,6 +12,8 @@
 
 namespace nupmpc::core {
 
+class StateArchive;  // core/snapshot/state_archive.h
+
 // Sequential rounding of binary inputs (SolverOptions.discrete_fixing_passes): pins input
 // scalar `index` (n·L + l) to `value` in the following passes, and releases all pins. Only
 // IAKE runs binary priors, so only it offers pins (OuterIteration::input_pinning()).
@@ -100,6 +102,13 @@ class OuterIteration {
   // the iteration loop; Iterate() and Polish() need it.
   virtual void AcquireWorkspace(const Problem& problem) = 0;
 
+  // Snapshots (core/snapshot/algorithm_state.cc): saves or restores what the next solves
+  // read of the carried state, and whether the workspace is held (a released one is
+  // rebuilt from the carried state on acquiring: a restore releases too, so the rebuild
+  // happens as in the original). A restore comes after Refresh(problem) with the
+  // session's restored values, so it overwrites what Refresh derives from them.
+  virtual void PersistState(StateArchive& archive, const Problem& problem) = 0;
+
  protected:
   // Whether the interrupt has fired (the pass under way is incomplete).
   bool Interrupted() const { return interrupt_ != nullptr && interrupt_->fired(); }
@@ -118,6 +127,9 @@ class ActiveSetIteration : public OuterIteration {
   int decided_scalars() const override { return static_cast<int>(region_.size()); }
 
  protected:
+  // Snapshots: the regions carried from the last solve (the polish ones are per pass).
+  void PersistRegions(StateArchive& archive);
+
   std::vector<Region> region_, polish_region_;  ///< one per decided scalar
   bool has_regions_ = false;
 };

@@ -19,6 +19,8 @@
 // GP is the model. Apply() takes a new state (the window) and reference, nothing else.
 
 #include <memory>
+#include <string>
+#include <string_view>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
@@ -52,6 +54,11 @@ class GpMpcSession final : public core::MpcSession {
   // the exact GP. limits.max_iterations caps the SCP iterations.
   absl::StatusOr<core::SolveSummary> Solve(const core::SolveLimits& limits, core::Solution* solution) override;
 
+  // The past window and the reference (restored through Apply()), whether a solve ran,
+  // and the SCP's warm state (gp_session_state.cc). The model is the creation spec's.
+  absl::Status SaveState(std::string* out) override;
+  absl::Status RestoreState(std::string_view bytes) override;
+
   const GpModel& model() const { return *model_; }
   const GpMpcProblem& gp_problem() const { return problem_; }
 
@@ -60,6 +67,9 @@ class GpMpcSession final : public core::MpcSession {
   // The reference r[t..t+H-1] as problem() states it.
   void ReadReference(Eigen::VectorXd* reference) const;
   void FillSolution(const ScpPlan& plan, core::Solution* solution) const;
+  // Snapshots: both directions; `scp` holds the SCP's bytes, `window` and `reference` the
+  // values Apply() takes.
+  void PersistState(core::StateArchive& archive, std::string& scp, Eigen::VectorXd& window, Eigen::VectorXd& reference);
 
   std::shared_ptr<const GpModel> model_;  // the SCP keeps a pointer to it
   GpMpcProblem problem_;

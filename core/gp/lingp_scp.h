@@ -28,12 +28,15 @@
 // reports the final plan's constraints under the exact GP.
 
 #include <memory>
+#include <string>
+#include <string_view>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/gp/gp_model.h"
 #include "core/gp/narx.h"
 #include "core/session/session.h"
+#include "core/snapshot/state_archive.h"
 
 namespace nupmpc::gp {
 
@@ -109,6 +112,9 @@ class LinGpScp {
                                    const core::SolveLimits* limits = nullptr);
   void ShiftWarmStart();
   void ResetWarmStart() { has_warm_ = false; }
+  // Snapshots (gp_session_state.cc): the warm plan and the subproblem session's state.
+  absl::Status SaveState(std::string* out);
+  absl::Status RestoreState(std::string_view bytes);
 
   // ϕ of inputs under the exact GP (for baselines and tests); also fills means/sigmas.
   double ExactMerit(const Eigen::VectorXd& inputs, ScpPlan* evaluated, double* objective, double* max_violation) const;
@@ -127,6 +133,8 @@ class LinGpScp {
   void ProjectToInputConstraints(Eigen::VectorXd* inputs) const;
   double UpperBound(int k) const;
   double LowerBound(int k) const;
+  // Snapshots: both directions; `inner` holds the subproblem session's bytes.
+  void PersistState(core::StateArchive& archive, std::string& inner);
 
   const GpModel* model_;
   GpMpcProblem p_;

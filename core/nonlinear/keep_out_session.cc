@@ -18,6 +18,23 @@ void ShiftRowsUp(Eigen::MatrixXd* m) {
   for (Eigen::Index r = 0; r + 1 < rows; ++r) m->row(r) = m->row(r + 1);
 }
 
+// A matrix that is either empty (no plan yet) or rows × cols.
+void PersistOptionalMatrix(StateArchive& archive, const char* present_name, const char* name, Eigen::MatrixXd& m,
+                           Eigen::Index rows, Eigen::Index cols) {
+  bool present = m.size() != 0;
+  archive.Flag(present_name, present);
+  if (!archive.ok()) return;
+  if (archive.restoring()) {
+    if (!present) {
+      m.resize(0, 0);
+      return;
+    }
+    if (!archive.Reserve(name, static_cast<std::size_t>(rows * cols) * sizeof(double))) return;
+    m.setZero(rows, cols);
+  }
+  if (present) archive.Field(name, m);
+}
+
 }  // namespace
 
 KeepOutSession::KeepOutSession(KeepOut keep_out, std::unique_ptr<SequentialSolver> solver,
@@ -168,6 +185,47 @@ absl::StatusOr<SolveSummary> KeepOutSession::Solve(const SolveLimits& limits, So
     }
   }
   return summary;
+}
+
+absl::Status KeepOutSession::SaveState(std::string* out) {
+  std::string planner, linearised;
+  NUPMPC_RETURN_IF_ERROR(free_planner_->SaveState(&planner));
+  NUPMPC_RETURN_IF_ERROR(solver_->SaveState(&linearised));
+  StateWriter writer(out);
+  PersistState(writer, planner, linearised);
+  return writer.status();
+}
+
+absl::Status KeepOutSession::RestoreState(std::string_view bytes) {
+  std::string planner, linearised;
+  StateReader reader(bytes);
+  PersistState(reader, planner, linearised);
+  NUPMPC_RETURN_IF_ERROR(reader.status());
+  const auto named = [](const char* part, const absl::Status& status) {
+    return status.code() == absl::StatusCode::kInvalidArgument
+               ? absl::InvalidArgumentError(absl::StrCat("keep_out.", part, ": ", status.message()))
+               : status;
+  };
+  // The plant's values first (validated as an update's), then the linearisation's base
+  // from them, as Apply() does, with the current x[0] (which Apply() sets alone).
+  if (absl::Status s = free_planner_->RestoreState(planner); !s.ok()) return named("free_planner", s);
+  NUPMPC_RETURN_IF_ERROR(solver_->SetBase(free_planner_->problem()));
+  NUPMPC_RETURN_IF_ERROR(solver_->SetInitialState(free_planner_->problem().initial_mean));
+  if (absl::Status s = solver_->RestoreState(linearised); !s.ok()) return named("linearised", s);
+  return absl::OkStatus();
+}
+
+void KeepOutSession::PersistState(StateArchive& archive, std::string& planner, std::string& linearised) {
+  archive.BeginSection("keep_out");
+  // Bounded by the input itself (the reader checks what is left before copying).
+  archive.Blob("free_planner", planner, std::numeric_limits<std::size_t>::max());
+  archive.Blob("linearised", linearised, std::numeric_limits<std::size_t>::max());
+  archive.Flag("has_plan", has_plan_);
+  // The linearisation point (its outputs are recomputed by every linearisation).
+  const Problem& p = free_planner_->problem();
+  PersistOptionalMatrix(archive, "has_guess_states", "guess_states", guess_.states, p.horizon + 1, p.num_states);
+  PersistOptionalMatrix(archive, "has_guess_inputs", "guess_inputs", guess_.inputs, p.horizon, p.num_inputs);
+  archive.EndSection();
 }
 
 }  // namespace nupmpc::core

@@ -9,12 +9,15 @@
 // outputs only; the region outputs are internal.
 
 #include <memory>
+#include <string>
+#include <string_view>
 
 #include "absl/status/statusor.h"
 #include "core/nonlinear/keep_out.h"
 #include "core/nonlinear/sequential_solver.h"
 #include "core/session/mpc_session.h"
 #include "core/session/session.h"
+#include "core/snapshot/state_archive.h"
 
 namespace nupmpc::core {
 
@@ -46,6 +49,11 @@ class KeepOutSession final : public MpcSession {
   // converged but the linearisations did not settle within the sequential options' cap.
   absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) override;
 
+  // The plant's values (the free planner's snapshot), the linearised session's, and the
+  // next linearisation point.
+  absl::Status SaveState(std::string* out) override;
+  absl::Status RestoreState(std::string_view bytes) override;
+
  private:
   KeepOutSession(KeepOut keep_out, std::unique_ptr<SequentialSolver> solver, std::unique_ptr<Session> free_planner,
                  int max_iterations);
@@ -55,6 +63,9 @@ class KeepOutSession final : public MpcSession {
   // True when it planned; false (with the free planner's summary in `stopped`) when the
   // limits stopped it before a first plan.
   absl::StatusOr<bool> PlanWithoutRegions(const SolveLimits& limits, SolveSummary* stopped);
+  // Snapshots: both directions; the inner sessions' bytes travel in `planner` and
+  // `linearised`.
+  void PersistState(StateArchive& archive, std::string& planner, std::string& linearised);
 
   KeepOut keep_out_;
   bool all_regions_hard_ = true;

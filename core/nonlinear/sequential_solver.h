@@ -18,6 +18,8 @@
 // (core/nonlinear/keep_out.h).
 
 #include <memory>
+#include <string>
+#include <string_view>
 
 #include "absl/status/statusor.h"
 #include "core/options.h"
@@ -122,6 +124,11 @@ class SequentialSolver {
   absl::Status SetBase(const Problem& base);  // see Linearisation::SetBase
   void ShiftWarmStart() { session_->ShiftWarmStart(); }
   void ReleaseWorkspace() { session_->ReleaseWorkspace(); }
+  // Snapshots: the inner session's (its last linearised problem and the NUP state the next
+  // Solve()'s first linearisation continues). The linearisation's own problem needs none:
+  // SetBase and SetInitialState give it, and every linearisation rewrites the rest.
+  absl::Status SaveState(std::string* out) { return session_->SaveState(out); }
+  absl::Status RestoreState(std::string_view bytes) { return session_->RestoreState(bytes); }
   Algorithm algorithm() const { return session_->algorithm(); }
 
   const Problem& linearised_problem() const { return problem_; }

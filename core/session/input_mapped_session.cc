@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -124,6 +125,40 @@ absl::StatusOr<SolveSummary> InputMappedSession::Solve(const SolveLimits& limits
   plan->outputs = plan->outputs.leftCols(dimensions_.num_outputs).eval();
   plan->states = plan->states.leftCols(dimensions_.num_states).eval();
   return summary;
+}
+
+absl::Status InputMappedSession::SaveState(std::string* out) {
+  std::string inner;
+  NUPMPC_RETURN_IF_ERROR(inner_->SaveState(&inner));
+  StateWriter writer(out);
+  PersistState(writer, inner);
+  return writer.status();
+}
+
+absl::Status InputMappedSession::RestoreState(std::string_view bytes) {
+  std::string inner;
+  StateReader reader(bytes);
+  PersistState(reader, inner);
+  NUPMPC_RETURN_IF_ERROR(reader.status());
+  const absl::Status restored = inner_->RestoreState(inner);
+  if (restored.ok() || restored.code() != absl::StatusCode::kInvalidArgument) return restored;
+  return absl::InvalidArgumentError(absl::StrCat("input_mapped.inner: ", restored.message()));
+}
+
+void InputMappedSession::PersistState(StateArchive& archive, std::string& inner) {
+  archive.BeginSection("input_mapped");
+  bool differences = map_.differences;
+  archive.Flag("differences", differences);
+  if (archive.restoring() && archive.ok() && differences != map_.differences) {
+    return archive.Fail("differences", "this session maps its inputs otherwise");
+  }
+  if (map_.differences) {
+    archive.Field("previous_input", map_.previous_input);
+    archive.Field("applied_previous_input", applied_previous_input_);
+  }
+  // Bounded by the input itself (the reader checks what is left before copying).
+  archive.Blob("inner", inner, std::numeric_limits<std::size_t>::max());
+  archive.EndSection();
 }
 
 }  // namespace nupmpc::core

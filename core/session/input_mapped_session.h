@@ -9,12 +9,15 @@
 // (for that step only), else the first input of the last plan (or the spec's at creation).
 
 #include <memory>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/model/multilevel_inputs.h"
 #include "core/session/mpc_session.h"
+#include "core/snapshot/state_archive.h"
 
 namespace nupmpc::core {
 
@@ -54,11 +57,18 @@ class InputMappedSession final : public MpcSession {
   // next solve's u[-1].
   absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) override;
 
+  // u[-1] (the next step's default and the one the inner problem holds now) and the inner
+  // session's own snapshot.
+  absl::Status SaveState(std::string* out) override;
+  absl::Status RestoreState(std::string_view bytes) override;
+
  private:
   InputMappedSession(std::unique_ptr<MpcSession> inner, InputMap map, Dimensions dimensions);
   // The inner x[0]: [x[0]; u[-1]] with input differences, else x[0].
   void WriteInnerState(const Eigen::VectorXd& x0, const Eigen::VectorXd& previous_input);
   absl::Status CheckPreviousInput(const StepUpdate& update) const;
+  // Snapshots: both directions; `inner` holds the inner session's bytes.
+  void PersistState(StateArchive& archive, std::string& inner);
   // Input differences: entries that undo a shift's move of u[0]'s prior onto u[-1].
   void KeepFixedInputFree(StepUpdate* inner) const;
 

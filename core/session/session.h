@@ -3,6 +3,8 @@
 
 #include <chrono>
 #include <memory>
+#include <string>
+#include <string_view>
 
 #include "Eigen/Core"
 #include "absl/status/status.h"
@@ -20,6 +22,7 @@
 namespace nupmpc::core {
 
 class OuterIteration;  // core/algorithms/outer_iteration.h: the algorithm behind the session
+class StateArchive;    // core/snapshot/state_archive.h
 
 // A problem of fixed shape, the algorithm's workspace, and the warm-start state carried
 // from one solve to the next (acados' memory/workspace split; OSQP's three update levels):
@@ -66,6 +69,11 @@ class Session final : public MpcSession {
   absl::StatusOr<SolveSummary> Solve(const SolveLimits& limits, Solution* solution) override;
   absl::StatusOr<SolveSummary> Solve(Solution* solution) { return Solve(SolveLimits{}, solution); }
 
+  // The problem's values, the carried iterate and the algorithm's carried state
+  // (session_state.cc).
+  absl::Status SaveState(std::string* out) override;
+  absl::Status RestoreState(std::string_view bytes) override;
+
  private:
   // The session's side of the discrete search and the elastic fallback (session.cc).
   class Hooks;
@@ -86,6 +94,12 @@ class Session final : public MpcSession {
   // After an algorithm call: whether the interrupt fired inside it (the pass is
   // incomplete: its iterate is discarded, the carried state is reset after the solve).
   bool PassInterrupted(SolveSummary* summary);
+  // Snapshots (session_state.cc): both directions in one function.
+  void PersistState(StateArchive& archive);
+  // A restore's problem values, adopted as an update's are (validated; the algorithm
+  // refreshed, or rebuilt when the values need another one or the model's storage
+  // changed). On error the session's values are unchanged.
+  absl::Status AdoptRestoredValues(Problem values);
 
   Problem problem_;
   // Apply()'s scratch: the candidate priors are written here and swapped into problem_;
