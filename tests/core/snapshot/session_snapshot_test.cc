@@ -134,9 +134,9 @@ TEST(SessionSnapshot, RandomOutboxRestoresBitIdentically) {
   const bench::BenchmarkInstance inst = LoadInstanceOrDie("random_outbox_M40_K20_L20_N1000_s1");
   const SessionFactory make = SessionsOf(inst.problem, {});
   ASSERT_TRUE(make);
-  OracleRun run = LoopOf(inst, 5);
+  OracleRun run = LoopOf(inst, 4);  // N = 1000, M = 40: a few steps (about 25 s under ASan)
   run.snapshot_before = {1, 2};
-  EXPECT_EQ(ExpectRestoredTwinsMatch(make, run, "random_outbox"), 6);
+  EXPECT_EQ(ExpectRestoredTwinsMatch(make, run, "random_outbox"), 5);
 }
 
 TEST(SessionSnapshot, ACompactedSessionRestoresIntoAFreshOne) {
