@@ -65,7 +65,8 @@ class MpcSession {
   // SaveState appends to `out`. RestoreState answers INVALID_ARGUMENT naming the field when
   // the bytes do not fit this session (another spec, another format version, truncated or
   // altered bytes); the session must then be discarded (it may be half restored).
-  // UNIMPLEMENTED for the kinds that cannot be snapshotted.
+  // Every kind the service builds implements them; the defaults (UNIMPLEMENTED) are for
+  // kinds added later.
   virtual absl::Status SaveState(std::string* out) {
     (void)out;
     return absl::UnimplementedError("this session kind has no snapshot");

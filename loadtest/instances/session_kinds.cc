@@ -8,10 +8,8 @@ std::vector<SessionKind> SessionKindsOf(const v1::ProblemSpec& base) {
 
   SessionKind differences{"input differences", base};
   for (std::uint32_t l = 0; l < base.model().num_inputs(); ++l) {
-    v1::ComponentPrior* rate = differences.spec.mutable_input_differences()->add_priors();
-    rate->set_kind(v1::PRIOR_KIND_BOX);
-    rate->add_lower(-0.1);
-    rate->add_upper(0.1);
+    v1::ComponentPrior* moves = differences.spec.mutable_input_differences()->add_priors();
+    moves->add_weight(1.0);
   }
   kinds.push_back(differences);
 
@@ -37,6 +35,7 @@ std::vector<SessionKind> SessionKindsOf(const v1::ProblemSpec& base) {
     input.add_lower(lower);
     input.add_upper(upper);
   }
+  binary.spec.mutable_options()->set_max_iterations(300);
   kinds.push_back(binary);
   return kinds;
 }

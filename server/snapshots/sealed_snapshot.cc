@@ -63,6 +63,7 @@ absl::StatusOr<snapshot::v1::SessionSnapshot> Unseal(absl::string_view bytes, co
     return absl::InvalidArgumentError(
         absl::StrCat("snapshot: ", bytes.size(), " bytes, more than the ", max_bytes, " a session may take"));
   }
+  if (bytes.empty()) return absl::InvalidArgumentError("snapshot: empty (a write that never finished?)");
   snapshot::v1::SealedSnapshot sealed;
   if (!sealed.ParseFromArray(bytes.data(), static_cast<int>(bytes.size()))) {
     return absl::InvalidArgumentError("snapshot: not a sealed session snapshot");
