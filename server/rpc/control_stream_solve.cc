@@ -10,8 +10,14 @@ namespace nupmpc::server {
 
 std::optional<v1::ControlRequest> ControlStream::EnqueueStepLocked(v1::ControlRequest request) {
   if (state_->draining.load()) {
-    QueueWriteLocked(ErrorResponse(
-        request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
+    // With a state directory the step is not answered: the stream ends once its session's
+    // snapshot is written (GrpcServer::Shutdown), and the client resends the step to the
+    // replica that restores the session. Answered now, the client would ask for its session
+    // before the snapshot exists, and re-create it cold.
+    if (state_->snapshots == nullptr) {
+      QueueWriteLocked(ErrorResponse(
+          request.sequence(), state_->ToGrpc(Rpc::kControl, absl::UnavailableError("the server is shutting down"))));
+    }
     return std::nullopt;
   }
   if (const std::optional<v1::ControlRequest> replaced = flow_.Park(std::move(request), Clock::now())) {
