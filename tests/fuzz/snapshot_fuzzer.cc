@@ -11,8 +11,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
-#include <string_view>
+#include <string>
 
+#include "absl/strings/string_view.h"
 #include "server/sessions/call_context.h"
 #include "server/sessions/session_factory.h"
 #include "server/sessions/step_solver.h"
@@ -22,7 +23,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using nupmpc::server::SnapshotKey;
-  const std::string_view bytes(reinterpret_cast<const char*>(data), size);
+  const absl::string_view bytes(reinterpret_cast<const char*>(data), size);
   constexpr std::size_t kMaxBytes = 1 << 20;
   (void)nupmpc::server::Unseal(bytes, SnapshotKey(), kMaxBytes);
 
@@ -31,7 +32,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   snapshot.set_format_version(nupmpc::server::kSnapshotFormatVersion);
   snapshot.set_session_id("0123456789abcdef0123456789abcdef");
   *snapshot.mutable_spec() = nupmpc::fuzz::SeedSpec();
-  snapshot.set_core_state(bytes);
+  snapshot.set_core_state(std::string(bytes));
   absl::StatusOr<nupmpc::snapshot::v1::SessionSnapshot> unsealed =
       nupmpc::server::Unseal(nupmpc::server::Seal(snapshot, key), key, 2 * kMaxBytes);
   if (!unsealed.ok()) nupmpc::fuzz::Violated("a sealed snapshot is refused");
