@@ -267,7 +267,8 @@ print(f"== scaleout: drain moved the sessions of {sys.argv[2]} streams: {d['reat
 for kind, how in sorted(d["first_steps_after_move"].items()):
     for way, f in how.items():
         print(f"==   {kind:17s} {way}: {f['moved']} moved, {f['same_as_twin']} equal to the twin, passes "
-              f"{f['passes']} (twin {f['twin_passes']}; a cold re-create would take {f['cold_passes']})")
+              f"{f['passes']} (twin {f['twin_passes']}); a cold re-create would take {f['cold_passes']} passes "
+              f"and give the twin's plan {f['cold_same_as_twin']} times")
 PY
 start_replica r2
 

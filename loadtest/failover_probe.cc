@@ -129,6 +129,7 @@ StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& 
       absl::StatusOr<TwinSession> cold = TwinSession::Create(carried);
       absl::StatusOr<v1::SolveResult> cold_result = cold.ok() ? cold->Step(step) : cold.status();
       if (cold_result.ok()) first.cold_passes = cold_result->iterations();
+      first.cold_same_as_twin = cold_result.ok() && expected.ok() && SamePlan(*cold_result, *expected);
       first.same_as_twin = same;
       out.first_steps.push_back(first);
     }
@@ -242,14 +243,19 @@ absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work
 }
 
 // One entry per move (the first step after it), and per kind and way back: how many moved,
-// how many plans equalled the twin's, and the passes summed (server, twin, cold re-create).
+// how many plans equalled the twin's (the server's, and a cold re-create's), and the passes
+// summed (server, twin, cold re-create).
 nlohmann::json FirstStepsJson(const std::vector<FirstStepAfterMove>& steps) {
   nlohmann::json by = nlohmann::json::object();
   for (const FirstStepAfterMove& f : steps) {
     nlohmann::json& k = by[f.kind][f.reattached ? "reattached" : "recreated"];
-    if (k.is_null()) k = {{"moved", 0}, {"same_as_twin", 0}, {"passes", 0}, {"twin_passes", 0}, {"cold_passes", 0}};
+    if (k.is_null()) {
+      k = {{"moved", 0},  {"same_as_twin", 0}, {"cold_same_as_twin", 0},
+           {"passes", 0}, {"twin_passes", 0},  {"cold_passes", 0}};
+    }
     k["moved"] = k["moved"].get<int>() + 1;
     k["same_as_twin"] = k["same_as_twin"].get<int>() + (f.same_as_twin ? 1 : 0);
+    k["cold_same_as_twin"] = k["cold_same_as_twin"].get<int>() + (f.cold_same_as_twin ? 1 : 0);
     k["passes"] = k["passes"].get<unsigned>() + f.passes;
     k["twin_passes"] = k["twin_passes"].get<unsigned>() + f.twin_passes;
     k["cold_passes"] = k["cold_passes"].get<unsigned>() + f.cold_passes;

@@ -48,6 +48,7 @@ struct FirstStepAfterMove {
   unsigned twin_passes = 0;  ///< the never-moved twin's (a re-created session's twin is re-created too)
   unsigned cold_passes = 0;  ///< what a cold re-create takes for the same state
   bool same_as_twin = false;
+  bool cold_same_as_twin = false;  ///< would a cold re-create have given the twin's plan (a non-convex one may not)
 };
 
 struct StreamsProbeReport {
