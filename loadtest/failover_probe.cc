@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -56,6 +57,14 @@ double DifferenceFromCore(const v1::ProblemSpec& spec, const std::vector<double>
     difference = std::max(difference, std::abs(result.inputs(i) - core_value));
   }
   return difference / largest;
+}
+
+// The largest |u - u'| over two plans' inputs (infinite when their sizes differ).
+double LargestInputDifference(const v1::SolveResult& a, const v1::SolveResult& b) {
+  if (a.inputs_size() != b.inputs_size()) return std::numeric_limits<double>::infinity();
+  double largest = 0.0;
+  for (int i = 0; i < a.inputs_size(); ++i) largest = std::max(largest, std::abs(a.inputs(i) - b.inputs(i)));
+  return largest;
 }
 
 struct StreamOutcome {
@@ -130,6 +139,8 @@ StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& 
       absl::StatusOr<v1::SolveResult> cold_result = cold.ok() ? cold->Step(step) : cold.status();
       if (cold_result.ok()) first.cold_passes = cold_result->iterations();
       first.cold_same_as_twin = cold_result.ok() && expected.ok() && SamePlan(*cold_result, *expected);
+      first.cold_difference = cold_result.ok() && expected.ok() ? LargestInputDifference(*cold_result, *expected)
+                                                                : std::numeric_limits<double>::infinity();
       first.same_as_twin = same;
       out.first_steps.push_back(first);
     }
@@ -243,19 +254,20 @@ absl::StatusOr<AddressedProbeReport> RunAddressedProbe(const ProbeWorkload& work
 }
 
 // One entry per move (the first step after it), and per kind and way back: how many moved,
-// how many plans equalled the twin's (the server's, and a cold re-create's), and the passes
-// summed (server, twin, cold re-create).
+// how many plans equalled the twin's (the server's, and a cold re-create's), how far a cold
+// re-create's inputs were from the twin's at most, and the passes summed (server, twin, cold).
 nlohmann::json FirstStepsJson(const std::vector<FirstStepAfterMove>& steps) {
   nlohmann::json by = nlohmann::json::object();
   for (const FirstStepAfterMove& f : steps) {
     nlohmann::json& k = by[f.kind][f.reattached ? "reattached" : "recreated"];
     if (k.is_null()) {
-      k = {{"moved", 0},  {"same_as_twin", 0}, {"cold_same_as_twin", 0},
+      k = {{"moved", 0},  {"same_as_twin", 0}, {"cold_same_as_twin", 0}, {"cold_max_difference", 0.0},
            {"passes", 0}, {"twin_passes", 0},  {"cold_passes", 0}};
     }
     k["moved"] = k["moved"].get<int>() + 1;
     k["same_as_twin"] = k["same_as_twin"].get<int>() + (f.same_as_twin ? 1 : 0);
     k["cold_same_as_twin"] = k["cold_same_as_twin"].get<int>() + (f.cold_same_as_twin ? 1 : 0);
+    k["cold_max_difference"] = std::max(k["cold_max_difference"].get<double>(), f.cold_difference);
     k["passes"] = k["passes"].get<unsigned>() + f.passes;
     k["twin_passes"] = k["twin_passes"].get<unsigned>() + f.twin_passes;
     k["cold_passes"] = k["cold_passes"].get<unsigned>() + f.cold_passes;

@@ -49,6 +49,7 @@ struct FirstStepAfterMove {
   unsigned cold_passes = 0;  ///< what a cold re-create takes for the same state
   bool same_as_twin = false;
   bool cold_same_as_twin = false;  ///< would a cold re-create have given the twin's plan (a non-convex one may not)
+  double cold_difference = 0.0;    ///< max |u - u_twin| of a cold re-create's plan
 };
 
 struct StreamsProbeReport {
