@@ -268,7 +268,7 @@ for kind, how in sorted(d["first_steps_after_move"].items()):
     for way, f in how.items():
         print(f"==   {kind:17s} {way}: {f['moved']} moved, {f['same_as_twin']} equal to the twin, passes "
               f"{f['passes']} (twin {f['twin_passes']}); a cold re-create would take {f['cold_passes']} passes, "
-              f"its plan bit-identical to the twin's {f['cold_same_as_twin']} times, max |u - u_twin| "
+              f"the twin's plan and passes {f['cold_same_as_twin']} times, max |u - u_twin| "
               f"{f['cold_max_difference']:.3g}")
 PY
 start_replica r2
