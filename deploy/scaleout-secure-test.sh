@@ -284,6 +284,6 @@ out=$(cat "$work/failover.json")
 say "failover and rotation: $out"
 "$py" -c "import json,sys; d=json.loads(sys.argv[1])
 sys.exit(0 if d['affected_streams'] >= 1 and d['failed_steps'] == 0 and d['mismatched'] == 0 and d['verified'] > 0
-         else 1)" "$out" ||
-  fail "a step failed, no stream was affected, or a plan differs from the core's: $out"
+         and d['twin_mismatched'] == 0 and d['recreated'] >= 1 else 1)" "$out" ||
+  fail "a step failed, no stream was affected or re-created, or a plan differs from the core's or its twin's: $out"
 say "all checks passed"
