@@ -19,6 +19,8 @@
 #                 0 failed steps, sampled plans equal to cold solves; then the replicas'
 #                 and the balancer's certificates are replaced (the replicas re-read theirs,
 #                 the balancer reloads): no stream fails, new connections get the new ones.
+#   The replicas share a state directory and snapshot key, as deploy/scaleout-test.sh's (whose
+#   drain phase proves the move); a kill -9 writes no snapshot, so sessions come back cold.
 #
 #   deploy/scaleout-secure-test.sh [--quick]     (--quick: short phases, as the ctest entry)
 set -euo pipefail
@@ -83,11 +85,15 @@ as_alice=(--tls_ca_file "$pki/ca.pem" --tls_cert_file "$pki/alice.pem" --tls_key
 call() { PYTHONPATH="client/python:$stubs" "$py" deploy/haproxy/secure-call.py --ca "$pki/ca.pem" "$@"; }
 cert_of() { echo --cert "$pki/$1.pem" --key "$pki/$1.pem.key"; }
 
+# The replicas' shared state directory and snapshot key (server/README.md).
+mkdir -m 700 "$work/state"
+(umask 077 && openssl rand 32 > "$work/snapshot.key")
 start_replica() {  # rN: TLS, mTLS, tokens, trusting the balancer's certificate
   local name=$1
   "$bin/nupmpc-server" --address "127.0.0.1:${port[$name]}" --metrics_address "127.0.0.1:${metrics_port[$name]}" \
     --tls_cert_file "$pki/replica.pem" --tls_key_file "$pki/replica.pem.key" --tls_client_ca_file "$pki/ca.pem" \
     --tls_reload_interval_s 1 --auth_tokens_file "$pki/tokens" --trusted_balancer_subject "$balancer_subject" \
+    --state_dir "$work/state" --snapshot_key_file "$work/snapshot.key" \
     --log_level warn --grace_period_s 2 >>"$work/$name.log" 2>&1 &
   pid[$name]=$!
   # Ready as Kubernetes would probe it: the metrics port's /readyz.
@@ -278,6 +284,6 @@ out=$(cat "$work/failover.json")
 say "failover and rotation: $out"
 "$py" -c "import json,sys; d=json.loads(sys.argv[1])
 sys.exit(0 if d['affected_streams'] >= 1 and d['failed_steps'] == 0 and d['mismatched'] == 0 and d['verified'] > 0
-         else 1)" "$out" ||
-  fail "a step failed, no stream was affected, or a plan differs from the core's: $out"
+         and d['twin_mismatched'] == 0 and d['recreated'] >= 1 else 1)" "$out" ||
+  fail "a step failed, no stream was affected or re-created, or a plan differs from the core's or its twin's: $out"
 say "all checks passed"

@@ -9,10 +9,18 @@
 #   2. addressed: 50 sessions made with client-drawn ids, each solved 20 times by id
 #                 through the balancer: every call reaches its session;
 #   3. failover:  kill -9 of one replica under 24 streams: each affected stream re-creates
-#                 its session elsewhere and no step fails (the one in flight is resent);
-#                 sampled plans equal the core's own solve of the same state to 1e-9;
-#   4. drain:     SIGTERM to one replica (--drain_delay_s): the balancer takes it out,
-#                 no step fails;
+#                 its session elsewhere, cold (a crash writes no snapshot), and no step fails
+#                 (the one in flight is resent); sampled plans equal the core's own solve of
+#                 the same state to 1e-9;
+#   4. drain:     SIGTERM to one replica (--drain_delay_s) under 24 streams of four session
+#                 kinds: the balancer takes it out, no step fails, and the sessions move: the
+#                 replicas share a state directory and snapshot key, the drained one writes
+#                 its sessions' snapshots, and each of its streams re-attaches by id on
+#                 another replica, which restores the session (none is re-created);
+#
+#   In phases 3-5 every stream of nupmpc-scaleout-probe keeps a never-moved twin session in
+#   the probe's process: each answered plan equals the twin's, bit for bit (inputs) with the
+#   same pass count (a re-created session's twin is re-created too).
 #   5. scale-up:  a fourth replica and a balancer reload: new streams reach it;
 #   6. compose:   (full run, where podman and the images are) deploy/compose/smoke.sh, the
 #                 secure stack and its --plaintext loopback/dev variant.
@@ -62,10 +70,15 @@ declare -A port=([r1]=$p1 [r2]=$p2 [r3]=$p3 [r4]=$p4) metrics_port=([r1]=$m1 [r2
 # check 2s: 3 s when a check hangs), so that a drained replica is seen DOWN before it exits
 # even on a loaded machine; it answers NOT_SERVING at once, so it is out after about 1 s.
 drain_delay_s=5
+# The replicas' shared state directory and snapshot key: a drained replica's sessions are
+# restored by whichever replica its clients' reconnects reach (server/README.md).
+mkdir -m 700 "$work/state"
+(umask 077 && openssl rand 32 > "$work/snapshot.key")
 start_replica() {  # name
   local name=$1
   "$bin/nupmpc-server" --address "127.0.0.1:${port[$name]}" --metrics_address "127.0.0.1:${metrics_port[$name]}" \
-    --log_level warn --drain_delay_s "$drain_delay_s" --grace_period_s 2 >>"$work/$name.log" 2>&1 &
+    --log_level warn --drain_delay_s "$drain_delay_s" --grace_period_s 2 \
+    --state_dir "$work/state" --snapshot_key_file "$work/snapshot.key" >>"$work/$name.log" 2>&1 &
   pid[$name]=$!
   local started=$(date +%s.%N)
   for _ in $(seq 100); do
@@ -194,8 +207,10 @@ check "$out" 'd["failed"] == 0 and d["recreated"] == 0 and d["miscounted"] == 0 
   "a call addressed by session id missed its session"
 
 # 3. Failover: kill -9 one replica under load.
+# Streams of every session kind (loadtest/instances/session_kinds.h), so that a failover or
+# a drain meets each.
 probe=("$bin/nupmpc-scaleout-probe" --server "$lb" --instance "$instance" --probe streams --streams "$streams"
-       --verify_every 10)
+       --verify_every 10 --kinds "convex,input differences,keep-out,binary inputs")
 "${probe[@]}" --duration_s "$((phase_s + 4))" > "$work/failover.json" 2>"$work/probe.log" &
 probe_pid=$!
 sleep "$("$py" -c "print($phase_s / 3)")"
@@ -211,6 +226,8 @@ say "failover: $out"
 # library resends the step a dead replica swallowed, so normally none fails (the figure).
 check "$out" 'd["affected_streams"] >= 1 and d["max_failed_per_affected_stream"] <= 1 and d["mismatched"] == 0 and d["verified"] > 0' \
   "failover: a stream failed more than one step, or a plan differs from the core's"
+check "$out" 'd["recreated"] >= 1 and d["reattached"] == 0 and d["twin_mismatched"] == 0 and d["twin_compared"] > 0' \
+  "failover: a session came back other than re-created cold, or a plan differs from its (re-created) twin's"
 start_replica r1
 wait_up r1 r2 r3
 
@@ -221,6 +238,7 @@ wait_up r1 r2 r3
 probe_pid=$!
 sleep "$("$py" -c "print($phase_s / 3)")"
 wait_streams_on r2
+held=$(field r2 3)
 kill -TERM "${pid[r2]}"
 drain_start=$(date +%s.%N)
 for _ in $(seq 100); do [ "$(field r2 2)" = UP ] || break; sleep 0.05; done
@@ -235,6 +253,24 @@ wait "${pid[r2]}" || fail "replica r2 did not exit 0 after SIGTERM"
 out=$(cat "$work/drain.json")
 say "drain: $out"
 check "$out" 'd["failed_steps"] == 0 and d["mismatched"] == 0 and d["affected_streams"] >= 1' "drain: a step failed"
+# Bumpless: every stream r2 held got its session back by id, none cold, and every plan
+# (the first after the move included) equals the never-moved twin's.
+check "$out" "d['reattached'] >= $held and d['recreated'] == 0" \
+  "drain: r2 held $held streams, not all of them re-attached (or a session was re-created)"
+check "$out" 'd["twin_mismatched"] == 0 and d["twin_compared"] > 0' "drain: a plan differs from its never-moved twin's"
+"$py" - "$out" "$held" <<'PY'
+import json, sys
+d = json.loads(sys.argv[1])
+print(f"== scaleout: drain moved the sessions of {sys.argv[2]} streams: {d['reattached']} re-attached, "
+      f"{d['recreated']} re-created, {d['failed_steps']} failed steps, {d['twin_compared']} plans compared with "
+      f"never-moved twins, {d['twin_mismatched']} differing; first step after the move, per kind:")
+for kind, how in sorted(d["first_steps_after_move"].items()):
+    for way, f in how.items():
+        print(f"==   {kind:17s} {way}: {f['moved']} moved, {f['same_as_twin']} equal to the twin, passes "
+              f"{f['passes']} (twin {f['twin_passes']}); a cold re-create would take {f['cold_passes']} passes, "
+              f"the twin's plan and passes {f['cold_same_as_twin']} times, max |u - u_twin| "
+              f"{f['cold_max_difference']:.3g}")
+PY
 start_replica r2
 
 # 5. Scale-up: a fourth replica, a balancer reload, new streams.
@@ -246,7 +282,7 @@ out=$("$bin/nupmpc-scaleout-probe" --server "$lb" --instance "$instance" --probe
 got=$(( $(field r4 4) - before_r4 ))
 say "scale-up: replica r4 got $got of 8 new streams; $out"
 [ "$got" -gt 0 ] || fail "scale-up: the new replica got no stream"
-check "$out" 'd["failed_steps"] == 0' "scale-up: a step failed"
+check "$out" 'd["failed_steps"] == 0 and d["twin_mismatched"] == 0' "scale-up: a step failed, or a plan differs from its twin's"
 
 # 6. The same in containers (full run only, where podman and the images are here): the
 #    compose stack's smoke test (podman kube play).

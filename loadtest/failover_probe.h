@@ -6,7 +6,10 @@
 //  * streams: C Control streams step through an instance's closed-loop states for a
 //    while; replicas may die or drain meanwhile. Per stream: steps answered, steps failed
 //    (returned to the caller as errors) and sessions re-created; and a sample of plans
-//    checked against the core solving the same state from scratch.
+//    checked against the core solving the same state from scratch. Streams take the
+//    workload's session kinds in turn, and each keeps a never-moved twin in this process
+//    (loadtest/twin_session.h): every answered plan is compared with the twin's, so a
+//    session moved by a drain must continue exactly as if it had stayed.
 //  * addressed: S sessions created with client-drawn ids and each solved R times by id:
 //    every call must reach its session (no re-creation, each session counts R solves).
 
@@ -17,21 +20,36 @@
 
 #include "absl/status/statusor.h"
 #include "client/channel_security.h"
+#include "loadtest/instances/session_kinds.h"
 #include "nupmpc/v1/nupmpc.pb.h"
 
 namespace nupmpc::loadtest {
 
 struct ProbeWorkload {
   std::string target;
-  ChannelSecurity security;  ///< TLS, client certificate, bearer token; none by default
-  v1::ProblemSpec spec;
+  ChannelSecurity security;                 ///< TLS, client certificate, bearer token; none by default
+  v1::ProblemSpec spec;                     ///< the addressed probe's sessions
   std::vector<std::vector<double>> states;  ///< cycled through
+  std::vector<bench::SessionKind> kinds;    ///< streams probe: stream i is of kind i mod size (empty: spec, "convex")
 };
 
 struct StreamsProbeConfig {
   int streams = 24;
   double duration_s = 20.0;
-  int verify_every = 25;  ///< every k-th answered step of a stream is checked (0: none), and every resent one
+  // Every k-th answered convex step is checked against the core (0: none), and every resent one.
+  int verify_every = 25;
+};
+
+// The first answered step after a stream got its session back.
+struct FirstStepAfterMove {
+  std::string kind;
+  bool reattached = false;   ///< by its id (restored from a snapshot); false: re-created cold
+  unsigned passes = 0;       ///< the server's
+  unsigned twin_passes = 0;  ///< the never-moved twin's (a re-created session's twin is re-created too)
+  unsigned cold_passes = 0;  ///< what a cold re-create takes for the same state
+  bool same_as_twin = false;
+  bool cold_same_as_twin = false;  ///< would a cold re-create have given the twin's plan (a non-convex one may not)
+  double cold_difference = 0.0;    ///< max |u - u_twin| of a cold re-create's plan
 };
 
 struct StreamsProbeReport {
@@ -49,6 +67,9 @@ struct StreamsProbeReport {
   std::uint64_t verified = 0;    ///< plans compared with the core
   std::uint64_t mismatched = 0;  ///< of those, differing by more than 1e-9 (relative)
   double max_plan_difference = 0.0;
+  std::uint64_t twin_compared = 0;    ///< answered steps compared with the stream's twin
+  std::uint64_t twin_mismatched = 0;  ///< of those, a different plan or pass count
+  std::vector<FirstStepAfterMove> first_steps;
   double solves_per_s = 0.0;
   double p50_ms = 0.0, p99_ms = 0.0;  ///< round trip of answered steps
 };

@@ -1,13 +1,17 @@
 // nupmpc-scaleout-probe: the client's view of several replicas behind a balancer, for
 // deploy/scaleout-test.sh. Prints one JSON object: see loadtest/failover_probe.h.
 //
-//   nupmpc-scaleout-probe --server BALANCER --probe streams [--streams 24] [--duration_s 20]
+//   nupmpc-scaleout-probe --server BALANCER --probe streams [--streams 24] [--duration_s 20] [--kinds convex,...]
 //   nupmpc-scaleout-probe --server BALANCER --probe addressed [--sessions 50] [--solves 20]
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "absl/flags/flag.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "cli/program_flags.h"
 #include "client/problem_file.h"
 #include "client/security_flags.h"
@@ -18,7 +22,10 @@ ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json", "instance whose c
 ABSL_FLAG(std::string, probe, "streams", "streams: Control streams through failures; addressed: calls by session id");
 ABSL_FLAG(int, streams, 24, "streams probe: concurrent Control streams, each on its own connection");
 ABSL_FLAG(double, duration_s, 20.0, "streams probe: how long every stream keeps stepping");
-ABSL_FLAG(int, verify_every, 25, "streams probe: check every k-th plan of a stream against the core (0: none)");
+ABSL_FLAG(int, verify_every, 25, "streams probe: check every k-th convex plan of a stream against the core (0: none)");
+ABSL_FLAG(std::string, kinds, "convex",
+          "streams probe: the session kinds the streams take in turn, comma-separated, of: convex, input differences, "
+          "keep-out, binary inputs (loadtest/instances/session_kinds.h)");
 ABSL_FLAG(int, sessions, 50, "addressed probe: sessions created with client-drawn ids");
 ABSL_FLAG(int, solves, 20, "addressed probe: Solve calls by id per session");
 
@@ -46,6 +53,19 @@ int Fail(const std::string& what, const absl::Status& s) {
 
 }  // namespace
 
+// The kinds named in --kinds, in that order, from the instance's spec.
+absl::StatusOr<std::vector<nupmpc::bench::SessionKind>> ChosenKinds(const nupmpc::v1::ProblemSpec& spec) {
+  const std::vector<nupmpc::bench::SessionKind> all = nupmpc::bench::SessionKindsOf(spec);
+  std::vector<nupmpc::bench::SessionKind> chosen;
+  for (absl::string_view name : absl::StrSplit(absl::GetFlag(FLAGS_kinds), ',', absl::SkipEmpty())) {
+    const auto kind = std::find_if(all.begin(), all.end(), [&](const auto& k) { return k.name == name; });
+    if (kind == all.end()) return absl::InvalidArgumentError(absl::StrCat("unknown session kind '", name, "'"));
+    chosen.push_back(*kind);
+  }
+  if (chosen.empty()) return absl::InvalidArgumentError("names no session kind");
+  return chosen;
+}
+
 int main(int argc, char** argv) {
   namespace lt = nupmpc::loadtest;
   if (const char* env = std::getenv("NUPMPC_SERVER"); env != nullptr) absl::SetFlag(&FLAGS_server, env);
@@ -54,7 +74,7 @@ int main(int argc, char** argv) {
   if (!file.ok()) return Fail("--instance", file.status());
   absl::StatusOr<nupmpc::ChannelSecurity> security = nupmpc::ChannelSecurityFromFlags();
   if (!security.ok()) return Fail("security flags", security.status());
-  lt::ProbeWorkload work{absl::GetFlag(FLAGS_server), *security, file->spec, file->closed_loop_states};
+  lt::ProbeWorkload work{absl::GetFlag(FLAGS_server), *security, file->spec, file->closed_loop_states, {}};
   if (work.states.empty()) {
     const auto& mean = file->spec.initial_state().mean();
     work.states.emplace_back(mean.begin(), mean.end());
@@ -65,6 +85,9 @@ int main(int argc, char** argv) {
     config.streams = absl::GetFlag(FLAGS_streams);
     config.duration_s = absl::GetFlag(FLAGS_duration_s);
     config.verify_every = absl::GetFlag(FLAGS_verify_every);
+    absl::StatusOr<std::vector<nupmpc::bench::SessionKind>> kinds = ChosenKinds(work.spec);
+    if (!kinds.ok()) return Fail("--kinds", kinds.status());
+    work.kinds = *std::move(kinds);
     absl::StatusOr<lt::StreamsProbeReport> report = lt::RunStreamsProbe(work, config);
     if (!report.ok()) return Fail("streams probe", report.status());
     std::printf("%s\n", lt::ToJson(*report).c_str());

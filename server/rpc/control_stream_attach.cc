@@ -83,6 +83,14 @@ void ControlStream::AttachAndContinue(v1::ControlRequest first) {
     std::lock_guard<std::mutex> lock(mu_);
     if (!entry.ok()) {
       final_status_ = state_->ToGrpc(Rpc::kControl, entry.status());
+      // An attach by id that found no session is also answered (before the status): a
+      // balancer may turn the end of a stream the client has not half-closed into a bare
+      // RST_STREAM(CANCEL) (HAProxy 2.6 does), and a client reconnecting by id must still
+      // learn that it has to re-create its session.
+      if (first.attach_case() == v1::ControlRequest::kSessionId &&
+          (absl::IsNotFound(entry.status()) || absl::IsFailedPrecondition(entry.status()))) {
+        QueueWriteLocked(ErrorResponse(first.sequence(), final_status_));
+      }
       flow_.End();
     } else {
       entry_ = *std::move(entry);
