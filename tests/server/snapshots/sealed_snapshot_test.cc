@@ -101,7 +101,8 @@ TEST_F(StateDirTest, BadFilesAreMovedAsideAtOpenAndGoodOnesClaimedOnceByTheirOwn
           .count());
   const std::string id = good.session_id();
   ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(id + ".snapshot"), Seal(good, SnapshotKey())).ok());
-  // Corrupt, truncated, a foreign version, readable by others, and one named after another id.
+  // Corrupt, truncated, a foreign version, readable by others, one named after another id,
+  // and one larger than a snapshot may be.
   const std::string sealed = Seal(good, SnapshotKey());
   const std::string corrupt_id(32, 'c'), truncated_id(32, 'd'), foreign_id(32, 'e'), open_id(32, 'f'),
       renamed_id(32, 'a');
@@ -114,6 +115,8 @@ TEST_F(StateDirTest, BadFilesAreMovedAsideAtOpenAndGoodOnesClaimedOnceByTheirOwn
   ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(open_id + ".snapshot"), sealed).ok());
   ASSERT_EQ(chmod(File(open_id + ".snapshot").c_str(), 0644), 0);
   ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(renamed_id + ".snapshot"), sealed).ok());
+  const std::string oversized_id(32, '9');
+  ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(oversized_id + ".snapshot"), std::string(kMax + 1, 'x')).ok());
 
   SnapshotStoreOptions options;
   options.dir = dir_.string();
@@ -122,8 +125,8 @@ TEST_F(StateDirTest, BadFilesAreMovedAsideAtOpenAndGoodOnesClaimedOnceByTheirOwn
   absl::StatusOr<std::unique_ptr<SnapshotStore>> store = SnapshotStore::Open(options);
   ASSERT_TRUE(store.ok()) << store.status();
   EXPECT_EQ((*store)->found_at_start(), 1u);
-  EXPECT_EQ((*store)->refused(), 5u);
-  for (const std::string& bad : {corrupt_id, truncated_id, foreign_id, open_id, renamed_id}) {
+  EXPECT_EQ((*store)->refused(), 6u);
+  for (const std::string& bad : {corrupt_id, truncated_id, foreign_id, open_id, renamed_id, oversized_id}) {
     EXPECT_TRUE(std::filesystem::exists(File(bad + ".snapshot.refused"))) << bad;
     EXPECT_FALSE(std::filesystem::exists(File(bad + ".snapshot"))) << bad;
   }
