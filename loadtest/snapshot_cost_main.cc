@@ -164,7 +164,8 @@ int main(int argc, char** argv) {
     Replica restoring(dir, sessions + 1);
     const auto restore_start = Clock::now();
     int restored = 0;
-    for (const std::string& id : ids) restored += restoring.state.FindOrRestore(id, {}).ok() ? 1 : 0;
+    for (const std::string& id : ids)
+      restored += restoring.state.FindOrRestore(id, {}, /*by_control_stream=*/true).ok() ? 1 : 0;
     const double restore_s = Seconds(Clock::now() - restore_start);
     std::printf("%d %s sessions: written in %.3f s (%.1f us each, %.1f MB), restored %d in %.3f s (%.1f us each)\n",
                 written, kinds.front().name.c_str(), write_s, write_s / std::max(written, 1) * 1e6,

@@ -75,9 +75,11 @@ absl::StatusOr<std::unique_ptr<GrpcServer>> GrpcServer::Start(const ServerOption
       if (!key.ok()) return key.status();
       store.key = *std::move(key);
     }
-    // The spec (one request) and the core's state (within the per-session memory limit).
-    store.max_snapshot_bytes = static_cast<std::size_t>(options.max_message_bytes) +
-                               static_cast<std::size_t>(std::max<long long>(options.size_limits.max_session_bytes, 0));
+    // The spec (one request) and the core's state (within the per-session memory limit),
+    // and never more than protobuf parses (kMaxSnapshotBytes).
+    store.max_snapshot_bytes = std::min<std::size_t>(
+        kMaxSnapshotBytes, static_cast<std::size_t>(options.max_message_bytes) +
+                               static_cast<std::size_t>(std::max<long long>(options.size_limits.max_session_bytes, 0)));
     store.reattach_window_s = options.reattach_window_s;
     absl::StatusOr<std::unique_ptr<SnapshotStore>> opened = SnapshotStore::Open(std::move(store));
     if (!opened.ok()) return opened.status();

@@ -13,7 +13,8 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ControlStream::Attach(const v1::Co
   std::shared_ptr<SessionEntry> entry;
   switch (first.attach_case()) {
     case v1::ControlRequest::kSessionId: {
-      absl::StatusOr<std::shared_ptr<SessionEntry>> found = state_->FindOrRestore(first.session_id(), caller_);
+      absl::StatusOr<std::shared_ptr<SessionEntry>> found =
+          state_->FindOrRestore(first.session_id(), caller_, /*by_control_stream=*/true);
       if (!found.ok()) return found.status();
       entry = *std::move(found);
       // A stream-owned session is attached only by its stream, except one restored from a

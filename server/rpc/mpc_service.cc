@@ -30,7 +30,7 @@ void SolveRestoring(UnaryCall<v1::SolveRequest, v1::SolveResponse>* call, const 
   v1::SolveResult* result = call->response()->mutable_result();
   call->RunOnPool("Solve", result, [state, request, caller, result](const CallContext& context) {
     NUPMPC_ASSIGN_OR_RETURN(const std::shared_ptr<SessionEntry> entry,
-                            state->FindOrRestore(request->session_id(), caller));
+                            state->FindOrRestore(request->session_id(), caller, /*by_control_stream=*/false));
     absl::Status solved = absl::AbortedError("session_id: the session was just restored and is busy; retry");
     SessionStrand::RunNowIfIdle(entry->strand, state->pool, [&] {
       solved = entry->UnaryStepsRefused();
@@ -160,7 +160,8 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
   absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(id, caller);
   if (!entry.ok() && state_->MayRestore(id, caller)) {
     // A session still in the state directory: closing it is discarding its snapshot.
-    call->Reply(state_->snapshots->Claim(id, caller).ok() ? absl::OkStatus() : entry.status());
+    call->Reply(state_->snapshots->Claim(id, caller, /*by_control_stream=*/false).ok() ? absl::OkStatus()
+                                                                                       : entry.status());
     return call;
   }
   if (!entry.ok()) {

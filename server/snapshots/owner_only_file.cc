@@ -61,8 +61,11 @@ absl::StatusOr<std::string> ReadOwnerOnlyFile(const std::string& path, std::size
 
 absl::Status WriteOwnerOnlyFileAtomically(const std::string& path, absl::string_view bytes) {
   const std::string temporary = absl::StrCat(path, ".tmp.", getpid());
+  // A leftover of an earlier process with this pid goes first: created anew (O_EXCL), the
+  // file gets mode 0600 whatever the leftover's was.
+  unlink(temporary.c_str());
   {
-    const Descriptor fd(open(temporary.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, 0600));
+    const Descriptor fd(open(temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0600));
     if (fd.get() < 0) return absl::FailedPreconditionError(absl::StrCat(temporary, ": cannot create: ", Errno()));
     std::size_t done = 0;
     while (done < bytes.size()) {

@@ -4,6 +4,7 @@
 #include <openssl/evp.h>
 #include <openssl/hmac.h>
 
+#include <algorithm>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -59,7 +60,7 @@ std::string Seal(const snapshot::v1::SessionSnapshot& snapshot, const SnapshotKe
 
 absl::StatusOr<snapshot::v1::SessionSnapshot> Unseal(absl::string_view bytes, const SnapshotKey& key,
                                                      std::size_t max_bytes) {
-  if (bytes.size() > max_bytes) {
+  if (bytes.size() > std::min(max_bytes, kMaxSnapshotBytes)) {
     return absl::InvalidArgumentError(
         absl::StrCat("snapshot: ", bytes.size(), " bytes, more than the ", max_bytes, " a session may take"));
   }

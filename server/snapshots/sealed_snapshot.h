@@ -42,10 +42,13 @@ class SnapshotKey {
 };
 
 inline constexpr std::size_t kMinSnapshotKeyBytes = 32;
+// The largest snapshot read at all, whatever the limits: protobuf parses at most 2 GiB, and
+// a server reading one snapshot must not hold more than a fraction of its memory for it.
+inline constexpr std::size_t kMaxSnapshotBytes = std::size_t{1} << 30;
 
 std::string Seal(const snapshot::v1::SessionSnapshot& snapshot, const SnapshotKey& key);
 
-// INVALID_ARGUMENT saying what is wrong (larger than `max_bytes`, not a sealed snapshot,
+// INVALID_ARGUMENT saying what is wrong (larger than `max_bytes` or kMaxSnapshotBytes, not a sealed snapshot,
 // another seal or format version, a key mismatch, a tag that does not match).
 absl::StatusOr<snapshot::v1::SessionSnapshot> Unseal(absl::string_view bytes, const SnapshotKey& key,
                                                      std::size_t max_bytes);

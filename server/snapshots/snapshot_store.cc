@@ -71,9 +71,10 @@ absl::StatusOr<snapshot::v1::SessionSnapshot> SnapshotStore::ReadChecked(const s
         "snapshot: holds session ", QuoteSessionId(snapshot->session_id()), ", not the one its file is named after"));
   }
   if (!snapshot.ok()) {
-    const std::string aside = absl::StrCat(path, ".refused");
-    std::rename(path.c_str(), aside.c_str());
-    spdlog::error("{}: refused, moved to {}: {}", path, aside, std::string(snapshot.status().message()));
+    // Left where it is: in a shared directory it may be another replica's to read (another
+    // key or format version during a rolling update), and an error may be passing (no
+    // descriptor free). Never read as a session, it is only named in the log.
+    spdlog::error("{}: skipped, not restored: {}", path, std::string(snapshot.status().message()));
     std::lock_guard<std::mutex> lock(mu_);
     ++refused_;
     return snapshot.status();
@@ -95,7 +96,8 @@ absl::Status SnapshotStore::Write(const snapshot::v1::SessionSnapshot& snapshot)
   return written;
 }
 
-absl::StatusOr<snapshot::v1::SessionSnapshot> SnapshotStore::Claim(const std::string& id, const Caller& caller) {
+absl::StatusOr<snapshot::v1::SessionSnapshot> SnapshotStore::Claim(const std::string& id, const Caller& caller,
+                                                                   bool by_control_stream) {
   const absl::Status not_found =
       absl::NotFoundError(absl::StrCat("session_id ", QuoteSessionId(id), ": no such session"));
   if (!CheckSessionIdForm(id).ok()) return not_found;
@@ -103,6 +105,7 @@ absl::StatusOr<snapshot::v1::SessionSnapshot> SnapshotStore::Claim(const std::st
   absl::StatusOr<snapshot::v1::SessionSnapshot> snapshot = ReadChecked(path, id);
   if (!snapshot.ok()) return not_found;
   if (!MayUse(caller, SessionOwner{snapshot->owner_principal(), snapshot->owner_connection()})) return not_found;
+  if (snapshot->owned_by_stream() && !by_control_stream) return not_found;
   // The rename is atomic: of replicas claiming the same file at once, one gets it.
   const std::string claimed = absl::StrCat(path, ".claimed.", getpid());
   if (std::rename(path.c_str(), claimed.c_str()) != 0) return not_found;

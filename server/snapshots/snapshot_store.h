@@ -9,8 +9,10 @@
 //
 // A snapshot is kept for `reattach_window_s` after it was written: an older one is not
 // restored (its client has long re-created its session) and is removed when found.
-// Files that fail their checks are renamed `<id>.snapshot.refused` (kept for the operator,
-// never read again) with a log line naming them.
+// Files that fail their checks are skipped with a log line naming them, and left in place:
+// in a shared directory a file this server cannot read may be another replica's (another
+// key or format version during a rolling update), and some errors pass (no descriptor
+// free). Such a file is checked again when its session's client asks for it.
 
 #include <cstddef>
 #include <cstdint>
@@ -35,7 +37,7 @@ struct SnapshotStoreOptions {
 class SnapshotStore {
  public:
   // Creates the directory if missing (0700) and checks every file in it (size, seal,
-  // version), moving aside the ones that fail with a log line each.
+  // version), with a log line for each that fails.
   static absl::StatusOr<std::unique_ptr<SnapshotStore>> Open(SnapshotStoreOptions options);
 
   absl::Status Write(const snapshot::v1::SessionSnapshot& snapshot);
@@ -44,7 +46,10 @@ class SnapshotStore {
   // old, refused, claimed by another replica first, or not the caller's: the same answer,
   // and another caller's file stays). A returned snapshot's file is gone: its session is
   // the caller's to restore (or lose: the client then re-creates it cold).
-  absl::StatusOr<snapshot::v1::SessionSnapshot> Claim(const std::string& id, const Caller& caller);
+  // A stream-owned session's snapshot is for its stream's reconnect only: a unary call
+  // (`by_control_stream` false) gets NOT_FOUND for it, and the file stays.
+  absl::StatusOr<snapshot::v1::SessionSnapshot> Claim(const std::string& id, const Caller& caller,
+                                                      bool by_control_stream = true);
 
   // How many files Open found valid, and since then: written, claimed, refused.
   std::uint64_t found_at_start() const { return found_at_start_; }
@@ -56,7 +61,7 @@ class SnapshotStore {
  private:
   explicit SnapshotStore(SnapshotStoreOptions options) : options_(std::move(options)) {}
   std::string PathOf(const std::string& id) const;
-  // Reads and checks one file; on failure renames it aside and logs why.
+  // Reads and checks one file; on failure logs why.
   absl::StatusOr<snapshot::v1::SessionSnapshot> ReadChecked(const std::string& path, const std::string& id);
   bool TooOld(const snapshot::v1::SessionSnapshot& snapshot) const;
 

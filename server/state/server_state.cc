@@ -70,10 +70,11 @@ bool ServerState::MayRestore(const std::string& id, const Caller& caller) const 
   return snapshots != nullptr && absl::IsNotFound(registry.Find(id, caller).status());
 }
 
-absl::StatusOr<std::shared_ptr<SessionEntry>> ServerState::FindOrRestore(const std::string& id, const Caller& caller) {
+absl::StatusOr<std::shared_ptr<SessionEntry>> ServerState::FindOrRestore(const std::string& id, const Caller& caller,
+                                                                         bool by_control_stream) {
   absl::StatusOr<std::shared_ptr<SessionEntry>> found = registry.Find(id, caller);
   if (snapshots == nullptr || !absl::IsNotFound(found.status())) return found;
-  absl::StatusOr<snapshot::v1::SessionSnapshot> snapshot = snapshots->Claim(id, caller);
+  absl::StatusOr<snapshot::v1::SessionSnapshot> snapshot = snapshots->Claim(id, caller, by_control_stream);
   if (!snapshot.ok()) return found;
   absl::StatusOr<std::shared_ptr<SessionEntry>> restored =
       RestoreSnapshot(*snapshot, options.size_limits, &gp_models, &budget, &registry);

@@ -75,7 +75,9 @@ struct ServerState {
   // The session `id` for `caller`: the registry's, or, when the server has a state
   // directory holding its snapshot, that snapshot restored and registered (the work of
   // creating the session: not on gRPC's threads). NOT_FOUND as Find otherwise.
-  absl::StatusOr<std::shared_ptr<SessionEntry>> FindOrRestore(const std::string& id, const Caller& caller);
+  // `by_control_stream`: a Control stream's attach (only it restores a stream-owned session).
+  absl::StatusOr<std::shared_ptr<SessionEntry>> FindOrRestore(const std::string& id, const Caller& caller,
+                                                              bool by_control_stream);
   // Whether FindOrRestore may have to restore (the registry does not hold `id`).
   bool MayRestore(const std::string& id, const Caller& caller) const;
   // The session snapshots of the sessions that are idle now, written to the state

@@ -93,7 +93,7 @@ class StateDirTest : public ::testing::Test {
   std::filesystem::path dir_;
 };
 
-TEST_F(StateDirTest, BadFilesAreMovedAsideAtOpenAndGoodOnesClaimedOnceByTheirOwnerOnly) {
+TEST_F(StateDirTest, BadFilesAreSkippedAndLeftAndGoodOnesClaimedOnceByTheirOwnerOnly) {
   ASSERT_TRUE(PrepareOwnerOnlyDirectory(dir_.string(), "test").ok());
   snapshot::v1::SessionSnapshot good = Example();
   good.set_written_unix_ms(
@@ -126,9 +126,11 @@ TEST_F(StateDirTest, BadFilesAreMovedAsideAtOpenAndGoodOnesClaimedOnceByTheirOwn
   ASSERT_TRUE(store.ok()) << store.status();
   EXPECT_EQ((*store)->found_at_start(), 1u);
   EXPECT_EQ((*store)->refused(), 6u);
+  // Skipped, never restored, and left for whoever can read them (another replica's key or
+  // version) or for the operator.
   for (const std::string& bad : {corrupt_id, truncated_id, foreign_id, open_id, renamed_id, oversized_id}) {
-    EXPECT_TRUE(std::filesystem::exists(File(bad + ".snapshot.refused"))) << bad;
-    EXPECT_FALSE(std::filesystem::exists(File(bad + ".snapshot"))) << bad;
+    EXPECT_TRUE(std::filesystem::exists(File(bad + ".snapshot"))) << bad;
+    EXPECT_TRUE(absl::IsNotFound((*store)->Claim(bad, Principal("alice")).status())) << bad;
   }
   // Another principal gets NOT_FOUND and the file stays; its owner gets it, once.
   EXPECT_TRUE(absl::IsNotFound((*store)->Claim(id, Principal("bob")).status()));
@@ -138,6 +140,26 @@ TEST_F(StateDirTest, BadFilesAreMovedAsideAtOpenAndGoodOnesClaimedOnceByTheirOwn
   EXPECT_EQ(claimed->core_state(), good.core_state());
   EXPECT_FALSE(std::filesystem::exists(File(id + ".snapshot")));
   EXPECT_TRUE(absl::IsNotFound((*store)->Claim(id, Principal("alice")).status()));
+}
+
+TEST_F(StateDirTest, AStreamOwnedSessionIsClaimedOnlyByAControlStream) {
+  ASSERT_TRUE(PrepareOwnerOnlyDirectory(dir_.string(), "test").ok());
+  snapshot::v1::SessionSnapshot owned = Example();
+  owned.set_owned_by_stream(true);
+  owned.set_written_unix_ms(
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count());
+  ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(owned.session_id() + ".snapshot"), Seal(owned, SnapshotKey())).ok());
+  SnapshotStoreOptions options;
+  options.dir = dir_.string();
+  options.max_snapshot_bytes = kMax;
+  options.reattach_window_s = 60;
+  absl::StatusOr<std::unique_ptr<SnapshotStore>> store = SnapshotStore::Open(options);
+  ASSERT_TRUE(store.ok());
+  EXPECT_TRUE(
+      absl::IsNotFound((*store)->Claim(owned.session_id(), Principal("alice"), /*by_control_stream=*/false).status()));
+  EXPECT_TRUE(std::filesystem::exists(File(owned.session_id() + ".snapshot")));
+  EXPECT_TRUE((*store)->Claim(owned.session_id(), Principal("alice"), /*by_control_stream=*/true).ok());
 }
 
 TEST_F(StateDirTest, ASnapshotOlderThanTheWindowIsRemovedNotRestored) {
