@@ -157,7 +157,7 @@ int main(int argc, char** argv) {
       ids.push_back(entry->id);
     }
     const auto write_start = Clock::now();
-    const int written = draining.state.WriteSnapshots();
+    const int written = draining.state.WriteSnapshots(nupmpc::server::Clock::now() + std::chrono::minutes(10));
     const double write_s = Seconds(Clock::now() - write_start);
     std::uintmax_t total_bytes = 0;
     for (const auto& f : std::filesystem::directory_iterator(dir)) total_bytes += f.file_size();

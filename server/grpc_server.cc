@@ -206,7 +206,10 @@ void GrpcServer::Shutdown() {
   // Before the streams end (and their sessions with them): no step is accepted any more, so
   // every idle session's snapshot is what its next step would start from.
   if (state_->snapshots != nullptr) {
-    const int written = state_->WriteSnapshots();
+    // A solve still running past the grace period gets a second more to finish.
+    const Clock::time_point until =
+        std::max(std::chrono::time_point_cast<Clock::duration>(grace_end), Clock::now()) + std::chrono::seconds(1);
+    const int written = state_->WriteSnapshots(until);
     spdlog::info("wrote {} session snapshots of {} to {}", written, state_->registry.size(), state_->snapshots->dir());
   }
   if (server_ != nullptr) {

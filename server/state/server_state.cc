@@ -1,5 +1,8 @@
 #include "server/state/server_state.h"
 
+#include <condition_variable>
+#include <mutex>
+
 #include "absl/strings/str_cat.h"
 #include "server/observability/log_context.h"
 #include "server/snapshots/session_snapshot.h"
@@ -91,25 +94,45 @@ absl::StatusOr<std::shared_ptr<SessionEntry>> ServerState::FindOrRestore(const s
   return restored;
 }
 
-int ServerState::WriteSnapshots() {
+int ServerState::WriteSnapshots(Clock::time_point until) {
   if (snapshots == nullptr) return 0;
-  int written = 0;
-  for (const std::shared_ptr<SessionEntry>& entry : registry.List()) {
-    const bool idle = SessionStrand::RunNowIfIdle(entry->strand, pool, [&] {
-      if (entry->closed) return;
-      absl::StatusOr<snapshot::v1::SessionSnapshot> snapshot = TakeSnapshot(*entry);
-      const absl::Status status = snapshot.ok() ? snapshots->Write(*snapshot) : snapshot.status();
-      const LogContext log_context(entry->id, entry->owner.principal);
-      if (status.ok()) {
-        ++written;
-      } else {
-        spdlog::error("session {}: no snapshot written: {}", entry->id, std::string(status.message()));
+  // Each on its session's strand, right after a task still in flight there (a solve that
+  // has sent its answer may still be finishing): what its next step would start from.
+  struct Pending {
+    std::mutex mu;
+    std::condition_variable done;
+    std::size_t left = 0;
+    int written = 0;
+  };
+  const auto pending = std::make_shared<Pending>();
+  const std::vector<std::shared_ptr<SessionEntry>> sessions = registry.List();
+  pending->left = sessions.size();
+  for (const std::shared_ptr<SessionEntry>& entry : sessions) {
+    SessionStrand::RunExclusive(entry->strand, pool, [this, entry, pending] {
+      bool ok = false;
+      if (!entry->closed) {
+        absl::StatusOr<snapshot::v1::SessionSnapshot> snapshot = TakeSnapshot(*entry);
+        const absl::Status status = snapshot.ok() ? snapshots->Write(*snapshot) : snapshot.status();
+        ok = status.ok();
+        if (!ok) {
+          const LogContext log_context(entry->id, entry->owner.principal);
+          spdlog::error("session {}: no snapshot written: {}", entry->id, std::string(status.message()));
+        }
       }
+      if (ok) snapshots_written.fetch_add(1, std::memory_order_relaxed);
+      const std::lock_guard<std::mutex> lock(pending->mu);
+      --pending->left;
+      pending->written += ok ? 1 : 0;
+      pending->done.notify_all();
     });
-    if (!idle) spdlog::warn("session {}: still solving, no snapshot written", entry->id);
   }
-  snapshots_written.fetch_add(static_cast<std::uint64_t>(written), std::memory_order_relaxed);
-  return written;
+  std::unique_lock<std::mutex> lock(pending->mu);
+  pending->done.wait_until(lock, until, [&] { return pending->left == 0; });
+  if (pending->left > 0) {
+    spdlog::warn("{} sessions still solving: their snapshots are written only if they finish before the process ends",
+                 pending->left);
+  }
+  return pending->written;
 }
 
 }  // namespace nupmpc::server

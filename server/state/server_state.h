@@ -80,9 +80,10 @@ struct ServerState {
                                                               bool by_control_stream);
   // Whether FindOrRestore may have to restore (the registry does not hold `id`).
   bool MayRestore(const std::string& id, const Caller& caller) const;
-  // The session snapshots of the sessions that are idle now, written to the state
-  // directory (on SIGTERM, once the work in flight is done); returns how many.
-  int WriteSnapshots();
+  // Every session's snapshot, written to the state directory (on SIGTERM, once the work in
+  // flight is done), each right after the task its strand may still run; waits until all
+  // are written or `until`, and returns how many were written by then.
+  int WriteSnapshots(Clock::time_point until);
 };
 
 // The call's deadline on the steady clock the solver measures (none if the client set none).
