@@ -5,6 +5,7 @@
 #include <openssl/hmac.h>
 
 #include <algorithm>
+#include <chrono>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -47,6 +48,11 @@ absl::StatusOr<SnapshotKey> SnapshotKey::FromBytes(std::string secret) {
   SnapshotKey key;
   key.secret_ = std::move(secret);
   return key;
+}
+
+std::int64_t UnixMillisecondsNow() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
 }
 
 std::string Seal(const snapshot::v1::SessionSnapshot& snapshot, const SnapshotKey& key) {

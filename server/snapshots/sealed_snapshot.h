@@ -48,6 +48,9 @@ inline constexpr std::size_t kMaxSnapshotBytes = std::size_t{1} << 30;
 
 std::string Seal(const snapshot::v1::SessionSnapshot& snapshot, const SnapshotKey& key);
 
+// The wall clock snapshots are stamped with (SessionSnapshot.written_unix_ms) and aged by.
+std::int64_t UnixMillisecondsNow();
+
 // INVALID_ARGUMENT saying what is wrong (larger than `max_bytes` or kMaxSnapshotBytes, not a sealed snapshot,
 // another seal or format version, a key mismatch, a tag that does not match).
 absl::StatusOr<snapshot::v1::SessionSnapshot> Unseal(absl::string_view bytes, const SnapshotKey& key,

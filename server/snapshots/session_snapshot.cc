@@ -22,9 +22,7 @@ absl::StatusOr<snapshot::v1::SessionSnapshot> TakeSnapshot(SessionEntry& entry) 
   out.set_owned_by_stream(entry.owned_by_stream);
   *out.mutable_spec() = *entry.spec;
   NUPMPC_RETURN_IF_ERROR(entry.solver->SaveState(out.mutable_core_state()));
-  out.set_written_unix_ms(
-      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-          .count());
+  out.set_written_unix_ms(UnixMillisecondsNow());
   out.set_solves(entry.solves.load());
   out.set_last_solve_ms(entry.last_solve_ms.load());
   out.set_last_solve_cpu_ms(entry.last_solve_cpu_ms.load());

@@ -19,11 +19,6 @@ namespace {
 
 constexpr absl::string_view kSuffix = ".snapshot";
 
-std::int64_t NowUnixMs() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
 // The session ids of the directory's snapshot files (other names are not ours: left alone).
 std::vector<std::string> SnapshotIds(const std::string& dir) {
   std::vector<std::string> ids;
@@ -56,7 +51,7 @@ absl::StatusOr<std::unique_ptr<SnapshotStore>> SnapshotStore::Open(SnapshotStore
 std::string SnapshotStore::PathOf(const std::string& id) const { return absl::StrCat(options_.dir, "/", id, kSuffix); }
 
 bool SnapshotStore::TooOld(const snapshot::v1::SessionSnapshot& snapshot) const {
-  return static_cast<double>(NowUnixMs() - snapshot.written_unix_ms()) > options_.reattach_window_s * 1e3;
+  return static_cast<double>(UnixMillisecondsNow() - snapshot.written_unix_ms()) > options_.reattach_window_s * 1e3;
 }
 
 absl::StatusOr<snapshot::v1::SessionSnapshot> SnapshotStore::ReadChecked(const std::string& path,

@@ -90,15 +90,21 @@ class StateDirTest : public ::testing::Test {
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
   std::string File(const std::string& name) const { return (dir_ / name).string(); }
+  // The store on this directory, unkeyed, with a 60 s re-attach window.
+  absl::StatusOr<std::unique_ptr<SnapshotStore>> OpenStore() const {
+    SnapshotStoreOptions options;
+    options.dir = dir_.string();
+    options.max_snapshot_bytes = kMax;
+    options.reattach_window_s = 60;
+    return SnapshotStore::Open(options);
+  }
   std::filesystem::path dir_;
 };
 
 TEST_F(StateDirTest, BadFilesAreSkippedAndLeftAndGoodOnesClaimedOnceByTheirOwnerOnly) {
   ASSERT_TRUE(PrepareOwnerOnlyDirectory(dir_.string(), "test").ok());
   snapshot::v1::SessionSnapshot good = Example();
-  good.set_written_unix_ms(
-      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-          .count());
+  good.set_written_unix_ms(UnixMillisecondsNow());
   const std::string id = good.session_id();
   ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(id + ".snapshot"), Seal(good, SnapshotKey())).ok());
   // Corrupt, truncated, a foreign version, readable by others, one named after another id,
@@ -118,11 +124,7 @@ TEST_F(StateDirTest, BadFilesAreSkippedAndLeftAndGoodOnesClaimedOnceByTheirOwner
   const std::string oversized_id(32, '9');
   ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(oversized_id + ".snapshot"), std::string(kMax + 1, 'x')).ok());
 
-  SnapshotStoreOptions options;
-  options.dir = dir_.string();
-  options.max_snapshot_bytes = kMax;
-  options.reattach_window_s = 60;
-  absl::StatusOr<std::unique_ptr<SnapshotStore>> store = SnapshotStore::Open(options);
+  absl::StatusOr<std::unique_ptr<SnapshotStore>> store = OpenStore();
   ASSERT_TRUE(store.ok()) << store.status();
   EXPECT_EQ((*store)->found_at_start(), 1u);
   EXPECT_EQ((*store)->refused(), 6u);
@@ -146,15 +148,9 @@ TEST_F(StateDirTest, AStreamOwnedSessionIsClaimedOnlyByAControlStream) {
   ASSERT_TRUE(PrepareOwnerOnlyDirectory(dir_.string(), "test").ok());
   snapshot::v1::SessionSnapshot owned = Example();
   owned.set_owned_by_stream(true);
-  owned.set_written_unix_ms(
-      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-          .count());
+  owned.set_written_unix_ms(UnixMillisecondsNow());
   ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(owned.session_id() + ".snapshot"), Seal(owned, SnapshotKey())).ok());
-  SnapshotStoreOptions options;
-  options.dir = dir_.string();
-  options.max_snapshot_bytes = kMax;
-  options.reattach_window_s = 60;
-  absl::StatusOr<std::unique_ptr<SnapshotStore>> store = SnapshotStore::Open(options);
+  absl::StatusOr<std::unique_ptr<SnapshotStore>> store = OpenStore();
   ASSERT_TRUE(store.ok());
   EXPECT_TRUE(
       absl::IsNotFound((*store)->Claim(owned.session_id(), Principal("alice"), /*by_control_stream=*/false).status()));
@@ -166,11 +162,7 @@ TEST_F(StateDirTest, ASnapshotOlderThanTheWindowIsRemovedNotRestored) {
   ASSERT_TRUE(PrepareOwnerOnlyDirectory(dir_.string(), "test").ok());
   snapshot::v1::SessionSnapshot old = Example();  // written at 1 ms after the epoch
   ASSERT_TRUE(WriteOwnerOnlyFileAtomically(File(old.session_id() + ".snapshot"), Seal(old, SnapshotKey())).ok());
-  SnapshotStoreOptions options;
-  options.dir = dir_.string();
-  options.max_snapshot_bytes = kMax;
-  options.reattach_window_s = 60;
-  absl::StatusOr<std::unique_ptr<SnapshotStore>> store = SnapshotStore::Open(options);
+  absl::StatusOr<std::unique_ptr<SnapshotStore>> store = OpenStore();
   ASSERT_TRUE(store.ok());
   EXPECT_EQ((*store)->found_at_start(), 0u);
   EXPECT_FALSE(std::filesystem::exists(File(old.session_id() + ".snapshot")));
