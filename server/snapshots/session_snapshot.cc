@@ -1,6 +1,5 @@
 #include "server/snapshots/session_snapshot.h"
 
-#include <chrono>
 #include <utility>
 
 #include "absl/strings/str_cat.h"

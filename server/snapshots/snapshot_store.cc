@@ -3,7 +3,6 @@
 #include <dirent.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <cstdio>
 #include <vector>
 
