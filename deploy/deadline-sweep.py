@@ -21,10 +21,13 @@ steps, met, missed by cause, the slack's median and worst percent, and how evenl
 group's streams were served.
 
     deploy/deadline-sweep.py [--levels 0.5,0.9,1.0,1.2] [--seconds 5] [--repeat N] [--json FILE]
+                             [--capacity short=R,long=R]
 
 With --repeat N the whole sweep, calibration included, runs N times and a summary gives
 each figure's median and range: a shared machine's speed drifts within minutes, and a
-level near the capacity is then a little under or over it.
+level near the capacity is then a little under or over it. --capacity short=R,long=R skips
+the calibration and offers the levels of that capacity (as a calibration prints it), to
+compare two builds at the same offered load.
 
 Run by deploy/loadtest.sh; --quick (short runs, two levels) is the ctest smoke
 LoadTest.DeadlineSweepCountsEveryStep, which checks mechanisms, never speed."""
@@ -145,17 +148,22 @@ def paced_capacity(unpaced, server_cpus, client_cpus, seconds):
     return {name: rate * full for name, rate in unpaced.items()}, {"low": [low, share_low], "high": [high, share_high]}
 
 
-def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s, paced=True):
-    unpaced = unpaced_capacity(server_cpus, client_cpus, calibrate_s)
-    print(f"unpaced capacity (steps/s of each group's streams alone, as fast as answers come): "
-          + ", ".join(f"{k} {v:.0f}" for k, v in unpaced.items()), flush=True)
-    if paced:
-        capacity, paced_shares = paced_capacity(unpaced, server_cpus, client_cpus, 2 * calibrate_s)
-        print(f"capacity for the paced mix (steps/s of each group at one full CPU): "
-              + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
+def sweep(levels, seconds, server_cpus, client_cpus, calibrate_s, paced=True, given_capacity=None):
+    unpaced, paced_shares = None, None
+    if given_capacity is not None:
+        capacity = dict(given_capacity)
+        print("capacity given (--capacity): " + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
     else:
-        capacity, paced_shares = dict(unpaced), None
-        print("levels are shares of the unpaced estimate (no paced calibration)", flush=True)
+        unpaced = unpaced_capacity(server_cpus, client_cpus, calibrate_s)
+        print(f"unpaced capacity (steps/s of each group's streams alone, as fast as answers come): "
+              + ", ".join(f"{k} {v:.0f}" for k, v in unpaced.items()), flush=True)
+        if paced:
+            capacity, paced_shares = paced_capacity(unpaced, server_cpus, client_cpus, 2 * calibrate_s)
+            print(f"capacity for the paced mix (steps/s of each group at one full CPU): "
+                  + ", ".join(f"{k} {v:.0f}" for k, v in capacity.items()), flush=True)
+        else:
+            capacity = dict(unpaced)
+            print("levels are shares of the unpaced estimate (no paced calibration)", flush=True)
     runs = []
     for i, level in enumerate(levels):
         flag, periods = groups_at(level, capacity)
@@ -232,12 +240,30 @@ def check(result):
     return problems
 
 
+def parse_capacity(text, parser):
+    """--capacity short=R,long=R: a positive rate (steps/s) for each group."""
+    given = {}
+    for part in text.split(","):
+        name, _, rate = part.partition("=")
+        try:
+            given[name.strip()] = float(rate)
+        except ValueError:
+            parser.error(f"--capacity {text}: '{part}' is not GROUP=RATE")
+    if sorted(given) != sorted(name for name, _, _ in GROUPS) or min(given.values()) <= 0.0:
+        parser.error(f"--capacity {text}: give a positive rate for each of the groups "
+                     + ", ".join(name for name, _, _ in GROUPS))
+    return given
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--levels", default="0.5,0.9,1.0,1.2", help="load levels, shares of the capacity")
     parser.add_argument("--seconds", type=float, default=5.0, help="counted time per run")
     parser.add_argument("--repeat", type=int, default=1, help="run the whole sweep this many times")
     parser.add_argument("--json", help="write every figure to this file")
+    parser.add_argument("--capacity", help="skip the calibration and use this capacity, e.g. short=4600,long=480 "
+                        "(steps/s of each group at one full CPU, as a calibration prints it): two builds "
+                        "or machines compared at the same offered load")
     parser.add_argument("--quick", action="store_true",
                         help="short runs at 0.3 and 1.2 of the unpaced estimate (the ctest smoke)")
     args = parser.parse_args()
@@ -246,7 +272,9 @@ def main():
     server_cpus, client_cpus = cpus()
     # The smoke checks mechanisms, not levels: it skips the paced calibration, which a
     # machine busy with other tests would make meaningless anyway.
-    sweeps = [sweep(levels, seconds, server_cpus, client_cpus, 0.5 if args.quick else 2.0, paced=not args.quick)
+    given = parse_capacity(args.capacity, parser) if args.capacity else None
+    sweeps = [sweep(levels, seconds, server_cpus, client_cpus, 0.5 if args.quick else 2.0, paced=not args.quick,
+                    given_capacity=given)
               for _ in range(max(args.repeat, 1))]
     if len(sweeps) > 1:
         summarize(sweeps)
