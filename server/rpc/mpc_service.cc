@@ -159,9 +159,13 @@ grpc::ServerUnaryReactor* MpcServiceImpl::CloseSession(grpc::CallbackServerConte
   const Caller caller = CallerOf(*context, state_->auth.get());
   absl::StatusOr<std::shared_ptr<SessionEntry>> entry = state_->registry.Find(id, caller);
   if (!entry.ok() && state_->MayRestore(id, caller)) {
-    // A session still in the state directory: closing it is discarding its snapshot.
-    call->Reply(state_->snapshots->Claim(id, caller, /*by_control_stream=*/false).ok() ? absl::OkStatus()
-                                                                                       : entry.status());
+    // A session still in the state directory: closing it is discarding its snapshot. The
+    // claim reads and checks the whole file, so it runs on the pool, not on gRPC's thread.
+    call->RunOnPool("CloseSession", /*solve_result=*/nullptr,
+                    [state = state_, id, caller, not_found = entry.status()](const CallContext&) {
+                      return state->snapshots->Claim(id, caller, /*by_control_stream=*/false).ok() ? absl::OkStatus()
+                                                                                                   : not_found;
+                    });
     return call;
   }
   if (!entry.ok()) {

@@ -2,8 +2,8 @@
 // session kinds (convex, input differences, keep-out, binary inputs) and started again on
 // the same port: each stream's client re-attaches by id, and the next plans are
 // bit-identical, with the same pass counts, to those of a twin server that never
-// restarted. And files in the state directory that fail their checks are moved aside
-// while the server restores the rest.
+// restarted. Files in the state directory that fail their checks are moved aside while
+// the server restores the rest, and closing a session still in the directory discards it.
 #include <signal.h>
 #include <unistd.h>
 
@@ -215,6 +215,49 @@ TEST_F(RestartReattachTest, AnUnknownIdAndAnotherSessionsFileAreNotRestoredAndTh
   ASSERT_TRUE(answer.ok()) << answer.status();
   EXPECT_TRUE(answer->result().has_plan());
   stream.Close();
+  EXPECT_EQ(server->StopWith(SIGTERM), 0);
+}
+
+TEST_F(RestartReattachTest, ClosingASessionLeftInTheStateDirectoryDiscardsItsSnapshot) {
+  const int port = FreeLoopbackPort();
+  std::unique_ptr<ServerProcess> server = Start(port, /*with_state_dir=*/true);
+  const v1::ProblemSpec spec = Masses();
+  std::string id;
+  {
+    // A session of unary calls (a stream's is re-attached only by a stream).
+    auto stub = v1::MpcService::NewStub(OpenChannel(server->target()));
+    grpc::ClientContext create_context;
+    v1::CreateSessionRequest create;
+    *create.mutable_spec() = spec;
+    v1::CreateSessionResponse created;
+    ASSERT_TRUE(stub->CreateSession(&create_context, create, &created).ok());
+    id = created.session_id();
+  }
+  ASSERT_EQ(server->StopWith(SIGTERM), 0);
+  const std::filesystem::path file = state_dir_ / absl::StrCat(id, ".snapshot");
+  ASSERT_TRUE(std::filesystem::exists(file));
+
+  server = Start(port, /*with_state_dir=*/true);
+  auto stub = v1::MpcService::NewStub(OpenChannel(server->target()));
+  const auto close = [&] {
+    grpc::ClientContext context;
+    v1::CloseSessionRequest request;
+    request.set_session_id(id);
+    v1::CloseSessionResponse response;
+    return stub->CloseSession(&context, request, &response);
+  };
+  const grpc::Status closed = close();
+  EXPECT_TRUE(closed.ok()) << closed.error_message();
+  EXPECT_FALSE(std::filesystem::exists(file));
+  // Gone: neither closed again nor solved.
+  EXPECT_EQ(close().error_code(), grpc::StatusCode::NOT_FOUND);
+  grpc::ClientContext solve_context;
+  v1::SolveRequest solve;
+  solve.set_session_id(id);
+  const std::vector<double> x0 = InitialState(spec);
+  solve.mutable_step()->mutable_state()->Assign(x0.begin(), x0.end());
+  v1::SolveResponse solved;
+  EXPECT_EQ(stub->Solve(&solve_context, solve, &solved).error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(server->StopWith(SIGTERM), 0);
 }
 
