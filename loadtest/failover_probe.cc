@@ -103,7 +103,7 @@ StreamOutcome RunOneStream(const ProbeWorkload& work, const StreamsProbeConfig& 
   // The spec as the client keeps it current (client/spec_update.h): what a re-create sends.
   v1::ProblemSpec carried = kind.spec;
   ReconnectStats seen;
-  while (Clock::now() < until) {
+  while (Clock::now() < until && (config.stop == nullptr || !config.stop->load())) {
     const std::vector<double>& state = work.states[next];
     next = (next + 1) % work.states.size();
     const v1::Step step = StepFor(state);

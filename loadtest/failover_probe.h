@@ -13,6 +13,7 @@
 //  * addressed: S sessions created with client-drawn ids and each solved R times by id:
 //    every call must reach its session (no re-creation, each session counts R solves).
 
+#include <atomic>
 #include <cstdint>
 #include <map>
 #include <string>
@@ -35,7 +36,10 @@ struct ProbeWorkload {
 
 struct StreamsProbeConfig {
   int streams = 24;
-  double duration_s = 20.0;
+  double duration_s = 20.0;  ///< the longest the streams step
+  /// When it becomes true, every stream ends after its current step (a script that ends
+  /// the probe when its scenario is done, however slow the machine); null: duration_s only.
+  const std::atomic<bool>* stop = nullptr;
   // Every k-th answered convex step is checked against the core (0: none), and every resent one.
   int verify_every = 25;
 };

@@ -2,8 +2,12 @@
 // deploy/scaleout-test.sh. Prints one JSON object: see loadtest/failover_probe.h.
 //
 //   nupmpc-scaleout-probe --server BALANCER --probe streams [--streams 24] [--duration_s 20] [--kinds convex,...]
+//     (SIGTERM ends the streams probe before its duration: a script stops it when its scenario is done)
 //   nupmpc-scaleout-probe --server BALANCER --probe addressed [--sessions 50] [--solves 20]
+#include <signal.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -21,7 +25,9 @@ ABSL_FLAG(std::string, server, "127.0.0.1:50051", "balancer (or server) address 
 ABSL_FLAG(std::string, instance, "benchmarks/masses_N30.json", "instance whose closed-loop states are sent");
 ABSL_FLAG(std::string, probe, "streams", "streams: Control streams through failures; addressed: calls by session id");
 ABSL_FLAG(int, streams, 24, "streams probe: concurrent Control streams, each on its own connection");
-ABSL_FLAG(double, duration_s, 20.0, "streams probe: how long every stream keeps stepping");
+ABSL_FLAG(double, duration_s, 20.0,
+          "streams probe: the longest every stream keeps stepping; SIGTERM ends them sooner, each after its current "
+          "step, and the report is printed as after the duration");
 ABSL_FLAG(int, verify_every, 25, "streams probe: check every k-th convex plan of a stream against the core (0: none)");
 ABSL_FLAG(std::string, kinds, "convex",
           "streams probe: the session kinds the streams take in turn, comma-separated, of: convex, input differences, "
@@ -30,6 +36,11 @@ ABSL_FLAG(int, sessions, 50, "addressed probe: sessions created with client-draw
 ABSL_FLAG(int, solves, 20, "addressed probe: Solve calls by id per session");
 
 namespace {
+
+// Set by SIGTERM: the streams probe ends after each stream's current step.
+std::atomic<bool> stop_requested{false};
+static_assert(std::atomic<bool>::is_always_lock_free, "set from a signal handler");
+void RequestStop(int /*signal*/) { stop_requested.store(true); }
 
 const nupmpc::cli::ProgramInfo kProgram{
     .name = "nupmpc-scaleout-probe",
@@ -85,6 +96,8 @@ int main(int argc, char** argv) {
     config.streams = absl::GetFlag(FLAGS_streams);
     config.duration_s = absl::GetFlag(FLAGS_duration_s);
     config.verify_every = absl::GetFlag(FLAGS_verify_every);
+    config.stop = &stop_requested;
+    (void)signal(SIGTERM, RequestStop);
     absl::StatusOr<std::vector<nupmpc::bench::SessionKind>> kinds = ChosenKinds(work.spec);
     if (!kinds.ok()) return Fail("--kinds", kinds.status());
     work.kinds = *std::move(kinds);
