@@ -66,9 +66,9 @@ std::string Seal(const snapshot::v1::SessionSnapshot& snapshot, const SnapshotKe
 
 absl::StatusOr<snapshot::v1::SessionSnapshot> Unseal(absl::string_view bytes, const SnapshotKey& key,
                                                      std::size_t max_bytes) {
-  if (bytes.size() > std::min(max_bytes, kMaxSnapshotBytes)) {
+  if (const std::size_t limit = std::min(max_bytes, kMaxSnapshotBytes); bytes.size() > limit) {
     return absl::InvalidArgumentError(
-        absl::StrCat("snapshot: ", bytes.size(), " bytes, more than the ", max_bytes, " a session may take"));
+        absl::StrCat("snapshot: ", bytes.size(), " bytes, more than the ", limit, " a session may take"));
   }
   if (bytes.empty()) return absl::InvalidArgumentError("snapshot: empty (a write that never finished?)");
   snapshot::v1::SealedSnapshot sealed;
